@@ -1,0 +1,166 @@
+#include "clients/plenox/cli_common.h"
+
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "core/common/status_macros.h"
+
+namespace plx::cli {
+
+int ReportError(const std::string& command, const absl::Status& status, bool usage_error) {
+  std::cerr << "plenox " << command << ": " << status.message() << "\n";
+  return usage_error ? kExitUsage : kExitFailure;
+}
+
+bool ParseFlagsOrExit(FlagSet& flags, const std::vector<std::string>& args, int* exit_code) {
+  absl::StatusOr<bool> parsed = flags.Parse(args);
+  if (!parsed.ok()) {
+    std::cerr << "plenox: " << parsed.status().message() << "\n";
+    *exit_code = kExitUsage;
+    return false;
+  }
+  if (!*parsed) {
+    std::cout << flags.Usage();
+    *exit_code = kExitOk;
+    return false;
+  }
+  return true;
+}
+
+ProgressLine::ProgressLine(bool enabled)
+    : enabled_(enabled), tty_(isatty(STDERR_FILENO) != 0),
+      last_print_(std::chrono::steady_clock::now() - std::chrono::hours(1)) {}
+
+void ProgressLine::Update(const std::string& text) {
+  if (!enabled_) return;
+  const auto now = std::chrono::steady_clock::now();
+  if (tty_) {
+    if (now - last_print_ < std::chrono::milliseconds(100)) return;
+    std::string padded = text;
+    if (padded.size() < last_length_) padded.append(last_length_ - padded.size(), ' ');
+    std::cerr << "\r" << padded << std::flush;
+    last_length_ = text.size();
+  } else {
+    if (now - last_print_ < std::chrono::seconds(5)) return;
+    std::cerr << text << "\n" << std::flush;
+  }
+  last_print_ = now;
+}
+
+void ProgressLine::Finish(const std::string& text) {
+  if (!enabled_) return;
+  if (tty_ && last_length_ > 0) {
+    std::string padded = text;
+    if (padded.size() < last_length_) padded.append(last_length_ - padded.size(), ' ');
+    std::cerr << "\r" << padded << "\n" << std::flush;
+  } else {
+    std::cerr << text << "\n" << std::flush;
+  }
+  last_length_ = 0;
+}
+
+JsonObject& JsonObject::Add(const std::string& key, double value) {
+  fields_.emplace_back(key, std::isfinite(value) ? absl::StrFormat("%.6g", value) : "null");
+  return *this;
+}
+
+JsonObject& JsonObject::Add(const std::string& key, int64_t value) {
+  fields_.emplace_back(key, absl::StrCat(value));
+  return *this;
+}
+
+JsonObject& JsonObject::Add(const std::string& key, const std::string& value) {
+  std::string escaped = "\"";
+  for (char c : value) {
+    switch (c) {
+      case '"': escaped += "\\\""; break;
+      case '\\': escaped += "\\\\"; break;
+      case '\n': escaped += "\\n"; break;
+      case '\t': escaped += "\\t"; break;
+      default:
+        if (static_cast<unsigned char>(c) < 0x20) {
+          escaped += absl::StrFormat("\\u%04x", c);
+        } else {
+          escaped += c;
+        }
+    }
+  }
+  escaped += "\"";
+  fields_.emplace_back(key, escaped);
+  return *this;
+}
+
+std::string JsonObject::str() const {
+  std::string out = "{";
+  for (size_t i = 0; i < fields_.size(); ++i) {
+    absl::StrAppend(&out, i ? ", " : "", "\"", fields_[i].first, "\": ", fields_[i].second);
+  }
+  return out + "}";
+}
+
+double PeakRssMb() {
+  struct rusage usage;
+  if (getrusage(RUSAGE_SELF, &usage) != 0) return 0.0;
+  return usage.ru_maxrss / 1024.0;  // Linux reports kilobytes
+}
+
+std::string Megabytes(int64_t bytes) { return absl::StrFormat("%.1f MB", bytes / 1e6); }
+
+void AddDatasetFlags(FlagSet& flags) {
+  flags.Add("dataset", "DIR", "RGB-D sequence folder", std::nullopt, true)
+      .Add("format", "auto|tum|replica|scannet", "dataset layout", "auto")
+      .Add("intrinsics", "\"fx fy cx cy w h\"",
+           "camera intrinsics, overriding the dataset's intrinsics.txt")
+      .Add("depth-scale", "S", "depth units per metre (with --intrinsics; TUM 5000)", "5000");
+}
+
+absl::StatusOr<std::unique_ptr<RgbdDataset>> OpenDatasetFromFlags(const FlagSet& flags) {
+  DatasetOptions options;
+  PLX_ASSIGN_OR_RETURN(options.format, ParseDatasetFormat(flags.GetString("format")));
+  if (!flags.GetString("intrinsics").empty()) {
+    CameraCalibration calibration;
+    PLX_ASSIGN_OR_RETURN(calibration.pinhole, ParsePinholeIntrinsics(flags.GetString("intrinsics")));
+    PLX_ASSIGN_OR_RETURN(calibration.depth_scale, flags.GetDouble("depth-scale", 1e-6, 1e9));
+    options.calibration = calibration;
+  }
+  return OpenDataset(flags.GetString("dataset"), options);
+}
+
+void AddMapperFlags(FlagSet& flags, int default_iterations) {
+  flags.Add("voxel-size", "M", "voxel edge in metres", "0.02")
+      .Add("time-budget", "S", "optimisation time limit in seconds (0 = none)", "0")
+      .Add("iterations", "N", "optimisation iteration limit (0 = none)",
+           std::to_string(default_iterations))
+      .Add("batch", "N", "rays per iteration", "8192")
+      .Add("max-depth", "M", "ignore depth measurements beyond this (metres)", "10")
+      .Add("seed", "N", "random seed for ray sampling", "20200823");
+}
+
+absl::StatusOr<MapperOptions> MapperOptionsFromFlags(const FlagSet& flags) {
+  MapperOptions o;
+  PLX_ASSIGN_OR_RETURN(const double voxel, flags.GetDouble("voxel-size", 0.001, 1.0));
+  o.voxel_size = static_cast<float>(voxel);
+  PLX_ASSIGN_OR_RETURN(o.time_budget_s, flags.GetDouble("time-budget", 0.0, 1e7));
+  PLX_ASSIGN_OR_RETURN(o.max_iterations, flags.GetInt("iterations", 0, 100000000));
+  PLX_ASSIGN_OR_RETURN(o.batch_size, flags.GetInt("batch", 1, 1 << 22));
+  PLX_ASSIGN_OR_RETURN(const double max_depth, flags.GetDouble("max-depth", 0.1, 1000.0));
+  o.allocation.max_depth = static_cast<float>(max_depth);
+  o.fusion.max_depth = static_cast<float>(max_depth);
+  PLX_ASSIGN_OR_RETURN(const int seed, flags.GetInt("seed", 0, 2147483647));
+  o.seed = static_cast<uint32_t>(seed);
+  // Scale the lengths that are naturally "a few voxels" with the voxel size.
+  o.allocation.band = 4.0f * o.voxel_size;
+  o.fusion.truncation = 4.0f * o.voxel_size;
+  o.fusion.ramp = 1.0f * o.voxel_size;
+  o.fusion.color_band = 1.5f * o.voxel_size;
+  PLX_RETURN_IF_ERROR(Mapper::ValidateOptions(o));
+  return o;
+}
+
+}  // namespace plx::cli

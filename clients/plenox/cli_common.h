@@ -1,0 +1,73 @@
+// Pieces shared by the plenox subcommands: terminal progress, JSON output, error reporting,
+// and the flags every dataset-reading command accepts.
+#pragma once
+
+#include <chrono>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "clients/plenox/flags.h"
+#include "core/io/dataset.h"
+#include "core/mapping/mapper.h"
+
+namespace plx::cli {
+
+// Exit codes: 0 success, 1 the work failed, 2 the command line was wrong.
+inline constexpr int kExitOk = 0;
+inline constexpr int kExitFailure = 1;
+inline constexpr int kExitUsage = 2;
+
+// Prints "plenox <command>: <message>" to stderr and returns the exit code for the status
+// (usage errors from flag parsing are kExitUsage).
+int ReportError(const std::string& command, const absl::Status& status, bool usage_error = false);
+
+// Parses flags; on --help prints usage and sets *exit_code to 0; on error prints it and sets 2.
+// Returns true when the command should run.
+bool ParseFlagsOrExit(FlagSet& flags, const std::vector<std::string>& args, int* exit_code);
+
+// One-line progress on stderr: rewritten in place on a terminal, a new line every few seconds
+// otherwise (logs, CI).
+class ProgressLine {
+ public:
+  explicit ProgressLine(bool enabled = true);
+  void Update(const std::string& text);
+  void Finish(const std::string& text);  // final line, always printed
+
+ private:
+  bool enabled_;
+  bool tty_;
+  std::chrono::steady_clock::time_point last_print_;
+  size_t last_length_ = 0;
+};
+
+// A flat JSON object written in insertion order.
+class JsonObject {
+ public:
+  JsonObject& Add(const std::string& key, double value);
+  JsonObject& Add(const std::string& key, int64_t value);
+  JsonObject& Add(const std::string& key, int value) { return Add(key, int64_t{value}); }
+  JsonObject& Add(const std::string& key, const std::string& value);
+  std::string str() const;
+
+ private:
+  std::vector<std::pair<std::string, std::string>> fields_;
+};
+
+// Peak resident set size of this process, MB.
+double PeakRssMb();
+
+// --dataset, --format, --intrinsics, --depth-scale.
+void AddDatasetFlags(FlagSet& flags);
+absl::StatusOr<std::unique_ptr<RgbdDataset>> OpenDatasetFromFlags(const FlagSet& flags);
+
+// --voxel-size, --time-budget, --iterations, --batch, --max-depth, --seed.
+void AddMapperFlags(FlagSet& flags, int default_iterations = 1500);
+absl::StatusOr<MapperOptions> MapperOptionsFromFlags(const FlagSet& flags);
+
+// "12.3 MB"-style text.
+std::string Megabytes(int64_t bytes);
+
+}  // namespace plx::cli

@@ -1,0 +1,32 @@
+#include "clients/plenox/synthetic_flags.h"
+
+#include <string>
+
+#include "core/common/status_macros.h"
+
+namespace plx::cli {
+
+void AddSyntheticFlags(FlagSet& flags, int default_frames) {
+  flags.Add("frames", "N", "frames in the sequence (30 per second)", std::to_string(default_frames))
+      .Add("width", "W", "image width", "320")
+      .Add("height", "H", "image height", "240")
+      .AddSwitch("noise", "add sensor-like depth noise (1.5 mm at 1 m, growing with z^2) and holes")
+      .Add("seed", "N", "seed of the noise", "7");
+}
+
+absl::StatusOr<SyntheticOptions> SyntheticOptionsFromFlags(const FlagSet& flags) {
+  SyntheticOptions o;
+  PLX_ASSIGN_OR_RETURN(o.num_frames, flags.GetInt("frames", 1, 100000));
+  PLX_ASSIGN_OR_RETURN(o.width, flags.GetInt("width", 16, 8192));
+  PLX_ASSIGN_OR_RETURN(o.height, flags.GetInt("height", 16, 8192));
+  PLX_ASSIGN_OR_RETURN(const int seed, flags.GetInt("seed", 0, 2147483647));
+  o.seed = static_cast<uint64_t>(seed);
+  if (flags.GetSwitch("noise")) {
+    o.depth_noise = 0.0015;
+    o.hole_fraction = 0.05;
+  }
+  PLX_RETURN_IF_ERROR(ValidateSyntheticOptions(o));
+  return o;
+}
+
+}  // namespace plx::cli

@@ -1,0 +1,51 @@
+// Rigid transforms. Poses are world_T_camera (camera-to-world); tangent vectors are ordered
+// [translation; rotation] and perturb on the right: T * Exp(xi). See DESIGN.md §4.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+namespace plx {
+
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+
+class SE3 {
+ public:
+  SE3() : rotation_(Eigen::Quaterniond::Identity()), translation_(Eigen::Vector3d::Zero()) {}
+  SE3(const Eigen::Quaterniond& rotation, const Eigen::Vector3d& translation)
+      : rotation_(rotation.normalized()), translation_(translation) {}
+  SE3(const Eigen::Matrix3d& rotation, const Eigen::Vector3d& translation)
+      : rotation_(Eigen::Quaterniond(rotation).normalized()), translation_(translation) {}
+
+  static SE3 Identity() { return SE3(); }
+  // Exponential map of xi = [rho; phi] (closed form with the left Jacobian of SO(3)).
+  static SE3 Exp(const Vector6d& xi);
+  // Inverse of Exp.
+  Vector6d Log() const;
+
+  const Eigen::Quaterniond& rotation() const { return rotation_; }
+  Eigen::Matrix3d rotation_matrix() const { return rotation_.toRotationMatrix(); }
+  const Eigen::Vector3d& translation() const { return translation_; }
+  Eigen::Matrix4d matrix() const;
+
+  SE3 Inverse() const;
+  SE3 operator*(const SE3& other) const;
+  Eigen::Vector3d operator*(const Eigen::Vector3d& point) const {
+    return rotation_ * point + translation_;
+  }
+
+  // True when every component is finite.
+  bool IsFinite() const;
+
+ private:
+  Eigen::Quaterniond rotation_;
+  Eigen::Vector3d translation_;
+};
+
+// Skew-symmetric matrix such that Hat(a) * b = a x b.
+Eigen::Matrix3d Hat(const Eigen::Vector3d& v);
+
+// Rotation angle of `a.Inverse() * b` in radians.
+double RotationAngleBetween(const SE3& a, const SE3& b);
+
+}  // namespace plx

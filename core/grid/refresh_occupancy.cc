@@ -1,0 +1,18 @@
+// RefreshOccupancyIfStale lives here (not in the backend) because it needs the grid's host-side
+// list of active blocks.
+#include "core/grid/sparse_grid.h"
+#include "core/kernels/backend.h"
+
+namespace plx {
+
+void RefreshOccupancyIfStale(Backend& backend, SparseGrid& grid, float sigma_threshold) {
+  if (!grid.occupancy_stale()) return;
+  const std::vector<int64_t>& blocks = grid.active_blocks();
+  if (!blocks.empty()) {
+    backend.RefreshOccupancy(grid.view(), blocks.data(), static_cast<int64_t>(blocks.size()),
+                             sigma_threshold);
+  }
+  grid.set_occupancy_fresh();
+}
+
+}  // namespace plx

@@ -1,0 +1,49 @@
+// The compute backend the algorithms run on (DESIGN.md §3): the kernel drivers of
+// core/kernels/kernel_declarations.inc behind a virtual interface, so mapping, tracking and
+// rendering do not care whether they run on CPU threads or a GPU. Views must point at memory
+// the backend can read (host memory for the CPU backend).
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "core/grid/grid_view.h"
+#include "core/kernels/depth_fusion.h"
+#include "core/kernels/kernel_types.h"
+
+namespace plx {
+
+class Backend {
+ public:
+  virtual ~Backend() = default;
+  virtual std::string name() const = 0;
+  // Threads (CPU) or streaming multiprocessors (GPU) available, for reports.
+  virtual int parallelism() const = 0;
+
+  virtual void RenderPixels(const GridView& grid, const CameraView& camera, const int32_t* pixels,
+                            int64_t count, const RenderOptions& options, float* color,
+                            float* depth, float* opacity, float* median_depth) = 0;
+  virtual void MappingForwardBackward(const GridView& grid, const GridGradView& grad,
+                                      const TrainingRaysView& rays,
+                                      const MappingBatchParams& params,
+                                      MappingRayLoss* losses) = 0;
+  virtual void RmsPropStep(const GridView& grid, const GridGradView& grad,
+                           const OptimizerStateView& state, const RmsPropParams& params) = 0;
+  virtual void FuseDepth(const GridView& grid, int64_t first_vertex, int64_t vertex_count,
+                         const TrainingFrameView* frames, int num_frames,
+                         const FusionParams& params) = 0;
+  virtual void RefreshOccupancy(const GridView& grid, const int64_t* active_blocks, int64_t count,
+                                float threshold) = 0;
+  virtual void AddTvGradient(const GridView& grid, const GridGradView& grad,
+                             int64_t first_vertex, int64_t vertex_count, float lambda_density,
+                             float lambda_sh) = 0;
+};
+
+// Makes the map's cell occupancy exact for its current densities when it is stale.
+class SparseGrid;
+void RefreshOccupancyIfStale(Backend& backend, SparseGrid& grid, float sigma_threshold);
+
+// The multithreaded CPU backend (num_threads <= 0: the process-wide pool, one per core).
+std::unique_ptr<Backend> MakeCpuBackend(int num_threads = 0);
+
+}  // namespace plx

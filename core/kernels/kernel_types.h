@@ -1,0 +1,57 @@
+// Trivially copyable inputs and parameters of the kernel drivers (core/kernels/*_impl.h).
+#pragma once
+
+#include <cstdint>
+
+#include "core/kernels/render_options.h"
+#include "core/math/camera_ray.h"
+
+namespace plx {
+
+// One mapping keyframe on the backend: camera, colour [h*w*3] in [0,1], z-depth [h*w] (m).
+struct TrainingFrameView {
+  CameraView camera;
+  const float* color = nullptr;
+  const float* depth = nullptr;
+};
+
+// All training rays: pixel `ray_pixel[i]` (v * width + u) of frame `ray_frame[i]`, every one
+// with valid depth. Batches draw from these uniformly with replacement.
+struct TrainingRaysView {
+  const TrainingFrameView* frames = nullptr;
+  const uint32_t* ray_frame = nullptr;
+  const uint32_t* ray_pixel = nullptr;
+  int64_t num_rays = 0;
+};
+
+struct MappingBatchParams {
+  uint32_t seed = 0;           // draws this batch's rays (same seed, same rays on every backend)
+  int64_t batch_size = 0;
+  float depth_weight = 1.0f;   // lambda_d of L = mean(|C^ - C|^2 / 3 + lambda_d (D^ - D)^2)
+  float depth_huber = 0.0f;    // metres; > 0 turns the depth term into a Huber loss
+  float sh_min_weight = 0.0f;  // see MappingRayBackward
+  RenderOptions render;
+};
+
+// Per-ray loss terms written by the mapping step, for progress and convergence checks.
+struct MappingRayLoss {
+  float color_sq;  // sum over channels of (C^ - C)^2
+  float depth_abs; // |D^ - D| in metres
+  float opacity;
+};
+
+struct RmsPropParams {
+  float lr_density = 1.0f;
+  float lr_sh = 1e-2f;
+  float beta = 0.95f;
+  float epsilon = 1e-8f;
+  float sigma_threshold = 1e-8f;  // densities crossing it upwards mark their cells occupied
+};
+
+// RMSProp running averages, same slot layout as the grid.
+struct OptimizerStateView {
+  float* rms_density = nullptr;  // [num_vertices]
+  float* rms_sh = nullptr;       // [num_vertices * 27]
+};
+
+}  // namespace plx

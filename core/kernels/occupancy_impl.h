@@ -1,0 +1,22 @@
+// Driver: recompute exact cell occupancy for every active block. Compiled by
+// core/cpu/occupancy_cpu.cc and cuda/occupancy_cuda.cu.
+#pragma once
+
+#include "core/grid/occupancy.h"
+#include "core/kernels/kernel_types.h"
+
+namespace plx::PLX_BACKEND_NS {
+
+void RefreshOccupancy(const ExecContext& ctx, const GridView& grid, const int64_t* active_blocks,
+                      int64_t count, float threshold) {
+  const GridView g = grid;
+  ParallelFor(ctx, count, [=] PLX_HD_LAMBDA(int64_t i) {
+    const int64_t block = active_blocks[i];
+    uint64_t bits[kBrickEdge];
+    ComputeBlockOccupancy(g, block, threshold, bits);
+    uint64_t* out = g.cell_bits + g.block_cells[block];
+    for (int z = 0; z < kBrickEdge; ++z) out[z] = bits[z];
+  });
+}
+
+}  // namespace plx::PLX_BACKEND_NS

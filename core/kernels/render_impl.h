@@ -1,0 +1,32 @@
+// Driver: render a set of pixels. Compiled by core/cpu/render_cpu.cc and cuda/render_cuda.cu.
+#pragma once
+
+#include "core/kernels/kernel_types.h"
+#include "core/kernels/ray_render.h"
+
+namespace plx::PLX_BACKEND_NS {
+
+void RenderPixels(const ExecContext& ctx, const GridView& grid, const CameraView& camera,
+                  const int32_t* pixels, int64_t count, const RenderOptions& options,
+                  float* color, float* depth, float* opacity, float* median_depth) {
+  const GridView g = grid;
+  const CameraView cam = camera;
+  const RenderOptions opt = options;
+  ParallelFor(ctx, count, [=] PLX_HD_LAMBDA(int64_t i) {
+    const int64_t pixel = pixels != nullptr ? pixels[i] : i;
+    const int u = static_cast<int>(pixel % cam.width);
+    const int v = static_cast<int>(pixel / cam.width);
+    Vec3f origin, dir;
+    float range_per_z;
+    PixelRay(cam, u, v, &origin, &dir, &range_per_z);
+    const RayRenderResult<float> r = RenderRay(g, origin, dir, opt);
+    color[3 * i + 0] = r.color[0];
+    color[3 * i + 1] = r.color[1];
+    color[3 * i + 2] = r.color[2];
+    depth[i] = r.depth;
+    opacity[i] = r.opacity;
+    median_depth[i] = r.median_depth;
+  });
+}
+
+}  // namespace plx::PLX_BACKEND_NS

@@ -1,0 +1,68 @@
+// Driver: total-variation regulariser gradients (Plenoxels' TV, DESIGN.md §7) on a run of
+// stored vertices, added to the gradient buffers before the optimiser step. Compiled by
+// core/cpu/tv_cpu.cc and cuda/tv_cuda.cu.
+#pragma once
+
+#include "core/common/atomics.h"
+#include "core/kernels/kernel_types.h"
+
+namespace plx {
+
+// d/dv of lambda * sqrt(dx^2 + dy^2 + dz^2 + eps) for the differences to the +x, +y, +z
+// neighbours of one vertex; `values` are centre, +x, +y, +z; writes the 4 partials.
+PLX_HD void TvGradient(const float values[4], float lambda, float grads[4]) {
+  const float dx = values[1] - values[0], dy = values[2] - values[0], dz = values[3] - values[0];
+  const float norm = sqrtf(dx * dx + dy * dy + dz * dz + 1e-9f);
+  const float s = lambda / norm;
+  grads[1] = s * dx;
+  grads[2] = s * dy;
+  grads[3] = s * dz;
+  grads[0] = -(grads[1] + grads[2] + grads[3]);
+}
+
+}  // namespace plx
+
+namespace plx::PLX_BACKEND_NS {
+
+void AddTvGradient(const ExecContext& ctx, const GridView& grid, const GridGradView& grad,
+                   int64_t first_vertex, int64_t vertex_count, float lambda_density,
+                   float lambda_sh) {
+  const GridView g = grid;
+  const GridGradView gg = grad;
+  const int64_t total = g.num_vertices();
+  ParallelFor(ctx, vertex_count, [=] PLX_HD_LAMBDA(int64_t i) {
+    const int64_t vertex = (first_vertex + i) % total;
+    int v[3];
+    g.VertexCoords(vertex, v);
+    int64_t slots[4] = {vertex, g.VertexSlot(v[0] + 1, v[1], v[2]),
+                        g.VertexSlot(v[0], v[1] + 1, v[2]), g.VertexSlot(v[0], v[1], v[2] + 1)};
+    float values[4], grads[4];
+    if (lambda_density > 0.0f) {
+      // Unstored neighbours read as empty space (zero density).
+      for (int k = 0; k < 4; ++k) values[k] = slots[k] >= 0 ? g.density[slots[k]] : 0.0f;
+      TvGradient(values, lambda_density, grads);
+      for (int k = 0; k < 4; ++k) {
+        if (slots[k] < 0) continue;
+        AtomicAdd(gg.density + slots[k], grads[k]);
+        AtomicSetFlag(gg.touched + slots[k]);
+      }
+    }
+    if (lambda_sh > 0.0f) {
+      // Unstored neighbours take the centre's value: no colour edge at the map's border.
+      for (int j = 0; j < kShCoeffCount; ++j) {
+        for (int k = 0; k < 4; ++k) {
+          values[k] = g.sh[(slots[k] >= 0 ? slots[k] : vertex) * kShCoeffCount + j];
+        }
+        TvGradient(values, lambda_sh, grads);
+        for (int k = 0; k < 4; ++k) {
+          if (slots[k] >= 0) AtomicAdd(gg.sh + slots[k] * kShCoeffCount + j, grads[k]);
+        }
+      }
+      for (int k = 0; k < 4; ++k) {
+        if (slots[k] >= 0) AtomicSetFlag(gg.touched + slots[k]);
+      }
+    }
+  });
+}
+
+}  // namespace plx::PLX_BACKEND_NS

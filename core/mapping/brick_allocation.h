@@ -1,0 +1,25 @@
+// Depth-guided allocation (DESIGN.md §5): the bricks a keyframe's measured surfaces need.
+#pragma once
+
+#include <vector>
+
+#include "core/geometry/image.h"
+#include "core/geometry/intrinsics.h"
+#include "core/geometry/se3.h"
+#include "core/grid/sparse_grid.h"
+
+namespace plx {
+
+struct AllocationOptions {
+  float band = 0.08f;      // metres in front of and behind each measured point along its ray
+  float max_depth = 10.0f; // measurements beyond this are ignored
+  int pixel_stride = 2;    // every n-th pixel per row and column
+};
+
+// Bricks (of a grid with `voxel_size`) crossed by the segment [d - band, d + band] along the ray
+// of every sampled pixel with measured depth d. Unique, in no particular order.
+std::vector<BrickCoord> BricksNearSurface(const DepthImage& depth, const SE3& world_T_camera,
+                                          const PinholeIntrinsics& intrinsics, float voxel_size,
+                                          const AllocationOptions& options);
+
+}  // namespace plx

@@ -1,0 +1,118 @@
+// RGB-D mapping with known poses (DESIGN.md §7): keyframes in, an optimised PlenoxelMap out.
+//   1. bricks are allocated around the surfaces each keyframe's depth measures;
+//   2. their vertices are initialised from the depth and colour (core/kernels/depth_fusion.h);
+//   3. batches of random rays with valid depth refine density and SH with RMSProp on the
+//      colour + depth loss, with log-linear learning-rate decay and optional early TV,
+//      until the iteration or time budget is spent.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/geometry/intrinsics.h"
+#include "core/geometry/rgbd_frame.h"
+#include "core/geometry/se3.h"
+#include "core/grid/plenoxel_map.h"
+#include "core/kernels/backend.h"
+#include "core/kernels/depth_fusion.h"
+#include "core/mapping/brick_allocation.h"
+#include "core/mapping/training_set.h"
+
+namespace plx {
+
+struct MapperOptions {
+  float voxel_size = 0.02f;  // metres
+  AllocationOptions allocation;
+  FusionParams fusion;
+  bool initialize_from_depth = true;  // false: uniform density like the reference (comparison)
+  float initial_density = 0.1f;       // used when initialize_from_depth is false
+
+  // Budget: stop at whichever comes first (0 disables that limit; at least one must be set).
+  int max_iterations = 2000;
+  double time_budget_s = 0.0;
+
+  int batch_size = 8192;
+  float depth_weight = 1.0f;
+  float depth_huber = 0.0f;
+  float sh_min_weight = 1e-4f;
+  float lr_density_start = 10.0f, lr_density_end = 1.0f;
+  float lr_sh_start = 1e-2f, lr_sh_end = 1e-3f;
+  float rmsprop_beta = 0.95f;
+  // Total variation on a random 1% run of vertices per iteration during the first
+  // tv_until fraction of the budget (Plenoxels applies it only before upsampling).
+  float tv_density = 0.0f, tv_sh = 0.0f;
+  float tv_fraction = 0.01f, tv_until = 0.5f;
+
+  uint32_t seed = 20200823;
+  RenderOptions render;
+  int progress_every = 25;  // iterations between progress reports
+};
+
+struct MappingProgress {
+  int iteration = 0;
+  double elapsed_s = 0.0;
+  double progress = 0.0;      // fraction of the budget used
+  double psnr = 0.0;          // on the last batch's training rays, colour clamped to [0,1]
+  double depth_l1_m = 0.0;    // mean |D^ - D| on the last batch (range, metres)
+  double opacity = 0.0;       // mean opacity of the last batch
+};
+
+struct MappingSummary {
+  int keyframes = 0;
+  int64_t training_rays = 0;
+  int iterations = 0;
+  double allocation_s = 0.0;
+  double optimization_s = 0.0;
+  MappingProgress last;
+  GridMemory memory;
+  int64_t optimizer_bytes = 0;  // gradients + RMSProp state
+};
+
+// Return false to stop the optimisation early (cancellation).
+using MappingProgressCallback = std::function<bool(const MappingProgress&)>;
+
+class Mapper {
+ public:
+  // `backend` must outlive the mapper.
+  Mapper(const MapperOptions& options, Backend* backend);
+
+  // Checks options; called by the constructor's users before anything else.
+  static absl::Status ValidateOptions(const MapperOptions& options);
+
+  absl::Status AddKeyframe(RgbdFrame frame, const SE3& world_T_camera,
+                           const PinholeIntrinsics& intrinsics);
+
+  // Allocates and initialises bricks for the keyframes added since the last call.
+  absl::Status AllocateAndInitialize();
+
+  // Runs the optimisation until the budget is spent (or the callback says stop).
+  absl::StatusOr<MappingSummary> Optimize(const MappingProgressCallback& progress = nullptr);
+
+  PlenoxelMap& map() { return *map_; }
+  std::unique_ptr<PlenoxelMap> ReleaseMap() { return std::move(map_); }
+  const TrainingSet& training_set() const { return training_; }
+  const MappingSummary& summary() const { return summary_; }
+
+ private:
+  void ResizeOptimizerBuffers();
+  GridGradView grad_view();
+  OptimizerStateView state_view();
+
+  MapperOptions options_;
+  Backend* backend_;
+  std::unique_ptr<PlenoxelMap> map_;
+  TrainingSet training_;
+  int allocated_frames_ = 0;  // keyframes whose bricks exist
+  int iteration_ = 0;
+  MappingSummary summary_;
+
+  std::vector<float> grad_density_, grad_sh_;
+  std::vector<uint8_t> touched_;
+  std::vector<float> rms_density_, rms_sh_;
+  std::vector<MappingRayLoss> losses_;
+};
+
+}  // namespace plx

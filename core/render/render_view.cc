@@ -1,0 +1,54 @@
+#include "core/render/render_view.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/geometry/kernel_camera.h"
+
+namespace plx {
+
+RenderedPixels RenderPixels(Backend& backend, PlenoxelMap& map, const SE3& world_T_camera,
+                            const PinholeIntrinsics& intrinsics,
+                            const std::vector<int32_t>& pixels) {
+  const int64_t n = pixels.empty() ? static_cast<int64_t>(intrinsics.width) * intrinsics.height
+                                   : static_cast<int64_t>(pixels.size());
+  RenderedPixels out;
+  out.color.resize(3 * n);
+  out.depth.resize(n);
+  out.opacity.resize(n);
+  out.median_depth.resize(n);
+  if (map.grid.num_bricks() == 0) {
+    // Nothing stored: every ray sees the background.
+    for (int64_t i = 0; i < n; ++i) {
+      for (int c = 0; c < 3; ++c) out.color[3 * i + c] = map.render.background[c];
+    }
+    return out;
+  }
+  RefreshOccupancyIfStale(backend, map.grid, map.render.sigma_threshold);
+  backend.RenderPixels(map.grid.view(), ToKernelCamera(world_T_camera, intrinsics),
+                       pixels.empty() ? nullptr : pixels.data(), n, map.render,
+                       out.color.data(), out.depth.data(), out.opacity.data(),
+                       out.median_depth.data());
+  return out;
+}
+
+RenderedView RenderView(Backend& backend, PlenoxelMap& map, const SE3& world_T_camera,
+                        const PinholeIntrinsics& k) {
+  const RenderedPixels px = RenderPixels(backend, map, world_T_camera, k);
+  RenderedView view;
+  view.color = ColorImage(k.width, k.height, 3);
+  view.z_depth = DepthImage(k.width, k.height, 1);
+  view.opacity = Image<float>(k.width, k.height, 1);
+  for (int v = 0; v < k.height; ++v) {
+    for (int u = 0; u < k.width; ++u) {
+      const int64_t i = static_cast<int64_t>(v) * k.width + u;
+      for (int c = 0; c < 3; ++c) view.color.data[3 * i + c] = std::clamp(px.color[3 * i + c], 0.0f, 1.0f);
+      const double x = (u + 0.5 - k.cx) / k.fx, y = (v + 0.5 - k.cy) / k.fy;
+      view.z_depth.data[i] = static_cast<float>(px.RenderedRange(i) / std::sqrt(x * x + y * y + 1.0));
+      view.opacity.data[i] = px.opacity[i];
+    }
+  }
+  return view;
+}
+
+}  // namespace plx

@@ -1,0 +1,45 @@
+// Rendering whole views or pixel subsets of a map from a camera pose, with the conversions
+// users want (z-depth images, "did the map render anything here").
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "core/geometry/image.h"
+#include "core/geometry/intrinsics.h"
+#include "core/geometry/se3.h"
+#include "core/grid/plenoxel_map.h"
+#include "core/kernels/backend.h"
+
+namespace plx {
+
+// A pixel counts as rendered when the map's opacity along its ray reaches this.
+inline constexpr float kRenderedOpacity = 0.5f;
+
+struct RenderedPixels {
+  std::vector<float> color;    // [n * 3], unclamped
+  std::vector<float> depth;    // [n], expected range sum_i w_i t_i (not normalised)
+  std::vector<float> opacity;  // [n]
+  std::vector<float> median_depth;  // [n], range where the transmittance reaches 1/2
+
+  // The surface range of pixel i, or 0 when the pixel is not rendered.
+  float RenderedRange(int64_t i) const {
+    return opacity[i] >= kRenderedOpacity ? median_depth[i] : 0.0f;
+  }
+};
+
+// Renders the given pixel ids (v * width + u); all pixels in order when `pixels` is empty.
+RenderedPixels RenderPixels(Backend& backend, PlenoxelMap& map, const SE3& world_T_camera,
+                            const PinholeIntrinsics& intrinsics,
+                            const std::vector<int32_t>& pixels = {});
+
+struct RenderedView {
+  ColorImage color;    // clamped to [0, 1]
+  DepthImage z_depth;  // metres along the optical axis; 0 where nothing is rendered
+  Image<float> opacity;
+};
+
+RenderedView RenderView(Backend& backend, PlenoxelMap& map, const SE3& world_T_camera,
+                        const PinholeIntrinsics& intrinsics);
+
+}  // namespace plx

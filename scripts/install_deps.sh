@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# Installs the Debian 12 packages plenoxd builds and tests with (run as root).
+#   scripts/install_deps.sh          build + test dependencies
+#   scripts/install_deps.sh --bench  also the benchmark's peer (Open3D) and Python packages
+# Packages already present are not fetched again, so a second run takes seconds.
+set -euo pipefail
+
+packages=(cmake ninja-build g++ pkg-config ccache
+          libeigen3-dev libopencv-dev libabsl-dev libgtest-dev libgmock-dev libbenchmark-dev)
+if [[ "${1:-}" == "--bench" ]]; then
+  packages+=(python3-open3d python3-numpy python3-opencv)
+fi
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if (( ${#missing[@]} == 0 )); then
+  echo "install_deps: all ${#packages[@]} packages present"
+  exit 0
+fi
+if [[ $(id -u) -ne 0 ]]; then
+  echo "install_deps: run as root (or with sudo) to install: ${missing[*]}" >&2
+  exit 1
+fi
+echo "install_deps: installing ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+apt-get update -qq
+apt-get install -y -qq --no-install-recommends "${missing[@]}" > /dev/null
+echo "install_deps: done"
