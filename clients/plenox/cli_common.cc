@@ -143,9 +143,8 @@ void AddMapperFlags(FlagSet& flags, int default_iterations) {
 }
 
 absl::StatusOr<MapperOptions> MapperOptionsFromFlags(const FlagSet& flags) {
-  MapperOptions o;
   PLX_ASSIGN_OR_RETURN(const double voxel, flags.GetDouble("voxel-size", 0.001, 1.0));
-  o.voxel_size = static_cast<float>(voxel);
+  MapperOptions o = MapperOptionsForVoxelSize(static_cast<float>(voxel));
   PLX_ASSIGN_OR_RETURN(o.time_budget_s, flags.GetDouble("time-budget", 0.0, 1e7));
   PLX_ASSIGN_OR_RETURN(o.max_iterations, flags.GetInt("iterations", 0, 100000000));
   PLX_ASSIGN_OR_RETURN(o.batch_size, flags.GetInt("batch", 1, 1 << 22));
@@ -154,11 +153,6 @@ absl::StatusOr<MapperOptions> MapperOptionsFromFlags(const FlagSet& flags) {
   o.fusion.max_depth = static_cast<float>(max_depth);
   PLX_ASSIGN_OR_RETURN(const int seed, flags.GetInt("seed", 0, 2147483647));
   o.seed = static_cast<uint32_t>(seed);
-  // Scale the lengths that are naturally "a few voxels" with the voxel size.
-  o.allocation.band = 4.0f * o.voxel_size;
-  o.fusion.truncation = 4.0f * o.voxel_size;
-  o.fusion.ramp = 1.0f * o.voxel_size;
-  o.fusion.color_band = 1.5f * o.voxel_size;
   PLX_RETURN_IF_ERROR(Mapper::ValidateOptions(o));
   return o;
 }

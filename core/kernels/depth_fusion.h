@@ -7,16 +7,24 @@
 
 #include "core/common/host_device.h"
 #include "core/kernels/kernel_types.h"
+#include "core/math/depth_noise.h"
 #include "core/math/spherical_harmonics.h"
 #include "core/math/vec3.h"
 
 namespace plx {
 
 struct FusionParams {
-  float truncation = 0.08f;   // metres; signed distances are clamped to +truncation
+  // Signed distances are clamped to +truncation(z) and observations further behind the surface
+  // than that are ignored, with truncation(z) = max(min_truncation, sigmas * noise.Sigma(z)).
+  float min_truncation = 0.08f;  // metres
+  float truncation_sigmas = 3.0f;
+  DepthNoiseModel noise;
+  // Weight of an observation that sees past the vertex (free space) relative to one that sees a
+  // surface at it. Below 1, a surface a few keyframes measured survives views that disagree.
+  float free_space_weight = 1.0f;
   float ramp = 0.02f;         // metres over which density rises from 0 to sigma_max
   float sigma_max = 200.0f;   // density (1/m) given to vertices behind the surface
-  float color_band = 0.03f;   // metres; colour is averaged from observations this close
+  float color_band = 0.03f;   // metres (+ noise sigma); colour comes from observations this close
   float min_depth = 0.05f;
   float max_depth = 10.0f;
 };
@@ -30,7 +38,7 @@ struct VertexFusion {
 
 PLX_HD VertexFusion FuseVertex(const Vec3f& p, const TrainingFrameView* frames, int num_frames,
                                const FusionParams& params) {
-  float sdf_sum = 0.0f, sdf_count = 0.0f;
+  float sdf_sum = 0.0f, sdf_count = 0.0f, tsdf_scale_sum = 0.0f;
   float color_sum[3] = {0.0f, 0.0f, 0.0f};
   float color_count = 0.0f;
   for (int f = 0; f < num_frames; ++f) {
@@ -49,10 +57,16 @@ PLX_HD VertexFusion FuseVertex(const Vec3f& p, const TrainingFrameView* frames, 
     const float measured = frames[f].depth[pixel];
     if (measured <= 0.0f || measured > params.max_depth) continue;
     const float sdf = measured - pc.z;
-    if (sdf < -params.truncation) continue;  // hidden behind the observed surface
-    sdf_sum += sdf < params.truncation ? sdf : params.truncation;
-    sdf_count += 1.0f;
-    if (fabsf(sdf) < params.color_band) {
+    const float sigma = params.noise.Sigma(measured);
+    float truncation = params.truncation_sigmas * sigma;
+    truncation = truncation > params.min_truncation ? truncation : params.min_truncation;
+    if (sdf < -truncation) continue;  // hidden behind the observed surface
+    // Truncated distances in units of the truncation, so near and far observations weigh alike.
+    const float weight = sdf < truncation ? 1.0f : params.free_space_weight;
+    sdf_sum += weight * (sdf < truncation ? sdf : truncation) / truncation;
+    sdf_count += weight;
+    tsdf_scale_sum += weight * truncation;
+    if (fabsf(sdf) < params.color_band + sigma) {
       const float* c = frames[f].color + 3 * pixel;
       color_sum[0] += c[0];
       color_sum[1] += c[1];
@@ -62,7 +76,7 @@ PLX_HD VertexFusion FuseVertex(const Vec3f& p, const TrainingFrameView* frames, 
   }
   VertexFusion out{0.0f, {0.5f, 0.5f, 0.5f}, sdf_count > 0.0f, color_count > 0.0f};
   if (out.observed) {
-    const float tsdf = sdf_sum / sdf_count;
+    const float tsdf = sdf_sum / sdf_count * (tsdf_scale_sum / sdf_count);  // metres
     float occupancy = 0.5f - tsdf / params.ramp;
     occupancy = occupancy < 0.0f ? 0.0f : (occupancy > 1.0f ? 1.0f : occupancy);
     out.density = params.sigma_max * occupancy;

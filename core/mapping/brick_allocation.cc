@@ -25,7 +25,8 @@ std::vector<BrickCoord> BricksNearSurface(const DepthImage& depth, const SE3& wo
       const Eigen::Vector3d dc((u + 0.5 - k.cx) / k.fx, (v + 0.5 - k.cy) / k.fy, 1.0);
       const double range = z * dc.norm();
       const Eigen::Vector3d dir = R * dc.normalized();
-      const double t0 = std::max(0.0, range - options.band), t1 = range + options.band;
+      const double band = std::max(options.min_band, options.band_sigmas * options.noise.Sigma(z));
+      const double t0 = std::max(0.0, range - band), t1 = range + band;
       BrickCoord last{INT32_MIN, INT32_MIN, INT32_MIN};
       for (double t = t0; t <= t1; t += step) {
         const Eigen::Vector3d p = origin + t * dir;

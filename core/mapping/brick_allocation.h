@@ -7,11 +7,16 @@
 #include "core/geometry/intrinsics.h"
 #include "core/geometry/se3.h"
 #include "core/grid/sparse_grid.h"
+#include "core/math/depth_noise.h"
 
 namespace plx {
 
 struct AllocationOptions {
-  float band = 0.08f;      // metres in front of and behind each measured point along its ray
+  // Metres in front of and behind each measured point along its ray:
+  // max(min_band, band_sigmas * noise.Sigma(z)).
+  float min_band = 0.08f;
+  float band_sigmas = 3.0f;
+  DepthNoiseModel noise;
   float max_depth = 10.0f; // measurements beyond this are ignored
   int pixel_stride = 2;    // every n-th pixel per row and column
 };

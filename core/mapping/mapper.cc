@@ -20,6 +20,16 @@ double Seconds(std::chrono::steady_clock::time_point since) {
 
 }  // namespace
 
+MapperOptions MapperOptionsForVoxelSize(float voxel_size) {
+  MapperOptions o;
+  o.voxel_size = voxel_size;
+  o.allocation.min_band = 4.0f * voxel_size;
+  o.fusion.min_truncation = 4.0f * voxel_size;
+  o.fusion.ramp = 1.0f * voxel_size;
+  o.fusion.color_band = 1.5f * voxel_size;
+  return o;
+}
+
 Mapper::Mapper(const MapperOptions& options, Backend* backend)
     : options_(options), backend_(backend),
       map_(std::make_unique<PlenoxelMap>(options.voxel_size)) {
@@ -40,7 +50,7 @@ absl::Status Mapper::ValidateOptions(const MapperOptions& o) {
   if (o.batch_size <= 0 || o.batch_size > (1 << 24)) {
     return absl::InvalidArgumentError(absl::StrCat("batch size out of range: ", o.batch_size));
   }
-  if (!(o.allocation.max_depth > 0) || !(o.allocation.band > 0)) {
+  if (!(o.allocation.max_depth > 0) || !(o.allocation.min_band > 0)) {
     return absl::InvalidArgumentError("allocation band and max depth must be positive");
   }
   return absl::OkStatus();

@@ -51,6 +51,9 @@ struct MapperOptions {
   int progress_every = 25;  // iterations between progress reports
 };
 
+// Defaults for a voxel size: the lengths that are naturally "a few voxels" scale with it.
+MapperOptions MapperOptionsForVoxelSize(float voxel_size);
+
 struct MappingProgress {
   int iteration = 0;
   double elapsed_s = 0.0;
