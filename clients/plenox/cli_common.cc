@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <filesystem>
 #include <cstdio>
 #include <iostream>
 
@@ -21,7 +22,7 @@ int ReportError(const std::string& command, const absl::Status& status, bool usa
 bool ParseFlagsOrExit(FlagSet& flags, const std::vector<std::string>& args, int* exit_code) {
   absl::StatusOr<bool> parsed = flags.Parse(args);
   if (!parsed.ok()) {
-    std::cerr << "plenox: " << parsed.status().message() << "\n";
+    std::cerr << "plenox " << flags.command() << ": " << parsed.status().message() << "\n";
     *exit_code = kExitUsage;
     return false;
   }
@@ -120,7 +121,7 @@ void AddDatasetFlags(FlagSet& flags) {
       .Add("depth-scale", "S", "depth units per metre (with --intrinsics; TUM 5000)", "5000");
 }
 
-absl::StatusOr<std::unique_ptr<RgbdDataset>> OpenDatasetFromFlags(const FlagSet& flags) {
+absl::StatusOr<DatasetOptions> DatasetOptionsFromFlags(const FlagSet& flags) {
   DatasetOptions options;
   PLX_ASSIGN_OR_RETURN(options.format, ParseDatasetFormat(flags.GetString("format")));
   if (!flags.GetString("intrinsics").empty()) {
@@ -128,8 +129,22 @@ absl::StatusOr<std::unique_ptr<RgbdDataset>> OpenDatasetFromFlags(const FlagSet&
     PLX_ASSIGN_OR_RETURN(calibration.pinhole, ParsePinholeIntrinsics(flags.GetString("intrinsics")));
     PLX_ASSIGN_OR_RETURN(calibration.depth_scale, flags.GetDouble("depth-scale", 1e-6, 1e9));
     options.calibration = calibration;
+  } else if (flags.GetString("depth-scale") != "5000") {
+    return absl::InvalidArgumentError("--depth-scale only applies together with --intrinsics");
   }
+  return options;
+}
+
+absl::StatusOr<std::unique_ptr<RgbdDataset>> OpenDatasetFromFlags(const FlagSet& flags,
+                                                                   const DatasetOptions& options) {
   return OpenDataset(flags.GetString("dataset"), options);
+}
+
+absl::Status CheckOutputDirectory(const std::string& path) {
+  const std::filesystem::path parent = std::filesystem::path(path).parent_path();
+  if (parent.empty() || std::filesystem::is_directory(parent)) return absl::OkStatus();
+  return absl::NotFoundError(absl::StrCat("cannot write ", path, ": folder ", parent.string(),
+                                          " does not exist"));
 }
 
 void AddMapperFlags(FlagSet& flags, int default_iterations) {

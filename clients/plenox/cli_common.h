@@ -61,7 +61,14 @@ double PeakRssMb();
 
 // --dataset, --format, --intrinsics, --depth-scale.
 void AddDatasetFlags(FlagSet& flags);
-absl::StatusOr<std::unique_ptr<RgbdDataset>> OpenDatasetFromFlags(const FlagSet& flags);
+// Checks the dataset flags (errors here are usage errors) ...
+absl::StatusOr<DatasetOptions> DatasetOptionsFromFlags(const FlagSet& flags);
+// ... and opens the dataset with them (errors here are failures).
+absl::StatusOr<std::unique_ptr<RgbdDataset>> OpenDatasetFromFlags(const FlagSet& flags,
+                                                                   const DatasetOptions& options);
+
+// NotFound when the folder that would hold `path` does not exist (checked before long work).
+absl::Status CheckOutputDirectory(const std::string& path);
 
 // --voxel-size, --time-budget, --iterations, --batch, --max-depth, --seed.
 void AddMapperFlags(FlagSet& flags, int default_iterations = 1500);

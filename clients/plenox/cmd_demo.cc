@@ -23,7 +23,7 @@ int RunDemo(const std::vector<std::string>& args) {
                 "10th frame with known poses, scores the map on the held-out frames in between\n"
                 "(PSNR, depth L1, coverage) and writes the sequence, the map and renders to --out.");
   flags.Add("out", "DIR", "output folder", "plenox_demo");
-  AddSyntheticFlags(flags, 90);
+  AddSyntheticFlags(flags, 90, /*noise_by_default=*/true);
   AddMapperFlags(flags, /*default_iterations=*/400);
   flags.Add("every", "N", "map every N-th frame", "10")
       .Add("threads", "N", "CPU threads (0 = all cores)", "0")
@@ -32,16 +32,20 @@ int RunDemo(const std::vector<std::string>& args) {
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
   absl::StatusOr<SyntheticOptions> synth = SyntheticOptionsFromFlags(flags);
   if (!synth.ok()) return ReportError("demo", synth.status(), true);
-  if (!flags.GetSwitch("noise")) {  // the demo is sensor-like unless asked otherwise
-    synth->depth_noise = 0.0015;
-    synth->hole_fraction = 0.05;
-  }
   absl::StatusOr<MapperOptions> options = MapperOptionsFromFlags(flags);
   if (!options.ok()) return ReportError("demo", options.status(), true);
   absl::StatusOr<int> every = flags.GetInt("every", 1, 1000);
   absl::StatusOr<int> threads = flags.GetInt("threads", 0, 4096);
   if (!every.ok()) return ReportError("demo", every.status(), true);
   if (!threads.ok()) return ReportError("demo", threads.status(), true);
+  if (HeldOutFrames(synth->num_frames, *every).empty()) {
+    return ReportError("demo",
+                       absl::InvalidArgumentError(absl::StrFormat(
+                           "--frames %d with --every %d leaves no held-out frame to score (need "
+                           "at least %d frames)",
+                           synth->num_frames, *every, *every / 2 + 1)),
+                       true);
+  }
 
   const std::filesystem::path out = flags.GetString("out");
   std::error_code ec;

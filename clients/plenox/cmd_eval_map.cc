@@ -35,9 +35,13 @@ int RunEvalMap(const std::vector<std::string>& args) {
     if (!s.ok()) return ReportError("eval-map", s, true);
   }
 
+  absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);
+  if (!dataset_options.ok()) return ReportError("eval-map", dataset_options.status(), true);
+
   absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(flags.GetString("map"));
   if (!map.ok()) return ReportError("eval-map", map.status());
-  absl::StatusOr<std::unique_ptr<RgbdDataset>> dataset = OpenDatasetFromFlags(flags);
+  absl::StatusOr<std::unique_ptr<RgbdDataset>> dataset =
+      OpenDatasetFromFlags(flags, *dataset_options);
   if (!dataset.ok()) return ReportError("eval-map", dataset.status());
   const std::vector<int> held_out = HeldOutFrames((*dataset)->size(), *every, *frames);
   if (held_out.empty()) {

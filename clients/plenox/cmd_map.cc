@@ -31,8 +31,13 @@ int RunMap(const std::vector<std::string>& args) {
   if (!threads.ok()) return ReportError("map", threads.status(), true);
   absl::StatusOr<MapperOptions> options = MapperOptionsFromFlags(flags);
   if (!options.ok()) return ReportError("map", options.status(), true);
+  absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);
+  if (!dataset_options.ok()) return ReportError("map", dataset_options.status(), true);
+  const std::string out = flags.GetString("out");
+  if (absl::Status s = CheckOutputDirectory(out); !s.ok()) return ReportError("map", s);
 
-  absl::StatusOr<std::unique_ptr<RgbdDataset>> dataset = OpenDatasetFromFlags(flags);
+  absl::StatusOr<std::unique_ptr<RgbdDataset>> dataset =
+      OpenDatasetFromFlags(flags, *dataset_options);
   if (!dataset.ok()) return ReportError("map", dataset.status());
   const std::vector<int> keyframes = KeyframeIndices((*dataset)->size(), *every);
 
@@ -43,7 +48,6 @@ int RunMap(const std::vector<std::string>& args) {
   if (!result.ok()) return ReportError("map", result.status());
   line.Finish(MappingSummaryText(result->summary));
 
-  const std::string out = flags.GetString("out");
   if (absl::Status s = SaveMap(*result->map, out); !s.ok()) return ReportError("map", s);
 
   const MappingSummary& sum = result->summary;

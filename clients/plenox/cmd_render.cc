@@ -1,5 +1,12 @@
 // plenox render: colour and depth images of a map from a given camera.
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
 #include <iostream>
+#include <utility>
+#include <vector>
 
 #include "absl/strings/str_format.h"
 #include "clients/plenox/cli_common.h"
@@ -37,18 +44,42 @@ int RunRender(const std::vector<std::string>& args) {
   absl::StatusOr<int> threads = flags.GetInt("threads", 0, 4096);
   if (!threads.ok()) return ReportError("render", threads.status(), true);
 
+  for (const std::string& path : {color_path, depth_path}) {
+    if (path.empty()) continue;
+    if (absl::Status s = CheckOutputDirectory(path); !s.ok()) return ReportError("render", s);
+  }
+
   absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(flags.GetString("map"));
   if (!map.ok()) return ReportError("render", map.status());
   std::unique_ptr<Backend> backend = MakeCpuBackend(*threads);
   const RenderedView view = RenderView(*backend, **map, *pose, *k);
+  // Both images go to temporary names first and are renamed only when both were written, so a
+  // failed render leaves no output behind.
+  const std::string suffix = absl::StrFormat(".tmp.%d.png", static_cast<int>(getpid()));
+  std::vector<std::pair<std::string, std::string>> written;  // temp -> final
+  auto cleanup = [&] {
+    for (const auto& [temp, final_path] : written) std::remove(temp.c_str());
+  };
   if (!color_path.empty()) {
-    if (absl::Status s = WriteColorImage(color_path, view.color); !s.ok()) {
+    written.emplace_back(color_path + suffix, color_path);
+    if (absl::Status s = WriteColorImage(written.back().first, view.color); !s.ok()) {
+      cleanup();
       return ReportError("render", s);
     }
   }
   if (!depth_path.empty()) {
-    if (absl::Status s = WriteDepthImage(depth_path, view.z_depth, 1000.0); !s.ok()) {
+    written.emplace_back(depth_path + suffix, depth_path);
+    if (absl::Status s = WriteDepthImage(written.back().first, view.z_depth, 1000.0); !s.ok()) {
+      cleanup();
       return ReportError("render", s);
+    }
+  }
+  for (const auto& [temp, final_path] : written) {
+    if (std::rename(temp.c_str(), final_path.c_str()) != 0) {
+      const std::string reason = std::strerror(errno);
+      cleanup();
+      return ReportError("render", absl::InternalError(absl::StrFormat(
+                                       "cannot write %s: %s", final_path, reason)));
     }
   }
   int64_t rendered = 0;

@@ -13,7 +13,7 @@ int RunSynth(const std::vector<std::string>& args) {
                 "Writes the procedural synthetic room sequence (exact ground-truth poses) to a\n"
                 "folder in the TUM layout, readable by every other command.");
   flags.Add("out", "DIR", "folder to write", std::nullopt, true);
-  AddSyntheticFlags(flags, 60);
+  AddSyntheticFlags(flags, 60, /*noise_by_default=*/false);
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
   absl::StatusOr<SyntheticOptions> options = SyntheticOptionsFromFlags(flags);

@@ -1,6 +1,8 @@
 #include "clients/plenox/flags.h"
 
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -8,16 +10,25 @@
 
 namespace plx::cli {
 
+void FlagSet::Declare(const std::string& name) {
+  if (flags_.count(name)) {
+    // A programming error: two pieces of one command claim the same flag.
+    std::fprintf(stderr, "plenox %s: flag --%s declared twice\n", command_.c_str(), name.c_str());
+    std::abort();
+  }
+  order_.push_back(name);
+}
+
 FlagSet& FlagSet::Add(const std::string& name, const std::string& value_name,
                       const std::string& help, std::optional<std::string> default_value,
                       bool required) {
-  order_.push_back(name);
+  Declare(name);
   flags_[name] = Flag{value_name, help, std::move(default_value), required, false};
   return *this;
 }
 
 FlagSet& FlagSet::AddSwitch(const std::string& name, const std::string& help) {
-  order_.push_back(name);
+  Declare(name);
   flags_[name] = Flag{"", help, std::nullopt, false, true};
   return *this;
 }

@@ -35,7 +35,11 @@ class FlagSet {
                                    double max_value) const;
   bool GetSwitch(const std::string& name) const;
 
+  const std::string& command() const { return command_; }
+
  private:
+  void Declare(const std::string& name);  // aborts on a second declaration of `name`
+
   struct Flag {
     std::string value_name;
     std::string help;

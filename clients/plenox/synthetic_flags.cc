@@ -6,12 +6,16 @@
 
 namespace plx::cli {
 
-void AddSyntheticFlags(FlagSet& flags, int default_frames) {
+void AddSyntheticFlags(FlagSet& flags, int default_frames, bool noise_by_default) {
   flags.Add("frames", "N", "frames in the sequence (30 per second)", std::to_string(default_frames))
       .Add("width", "W", "image width", "320")
-      .Add("height", "H", "image height", "240")
-      .AddSwitch("noise", "add sensor-like depth noise (1.5 mm at 1 m, growing with z^2) and holes")
-      .Add("seed", "N", "seed of the noise", "7");
+      .Add("height", "H", "image height", "240");
+  if (noise_by_default) {
+    flags.AddSwitch("no-noise", "exact depth instead of sensor-like noise and holes");
+  } else {
+    flags.AddSwitch("noise", "add sensor-like depth noise (1.5 mm at 1 m, growing with z^2) and holes");
+  }
+  flags.Add("noise-seed", "N", "seed of the depth noise", "7");
 }
 
 absl::StatusOr<SyntheticOptions> SyntheticOptionsFromFlags(const FlagSet& flags) {
@@ -19,9 +23,9 @@ absl::StatusOr<SyntheticOptions> SyntheticOptionsFromFlags(const FlagSet& flags)
   PLX_ASSIGN_OR_RETURN(o.num_frames, flags.GetInt("frames", 1, 100000));
   PLX_ASSIGN_OR_RETURN(o.width, flags.GetInt("width", 16, 8192));
   PLX_ASSIGN_OR_RETURN(o.height, flags.GetInt("height", 16, 8192));
-  PLX_ASSIGN_OR_RETURN(const int seed, flags.GetInt("seed", 0, 2147483647));
+  PLX_ASSIGN_OR_RETURN(const int seed, flags.GetInt("noise-seed", 0, 2147483647));
   o.seed = static_cast<uint64_t>(seed);
-  if (flags.GetSwitch("noise")) {
+  if (flags.GetSwitch("noise") || (flags.Has("no-noise") && !flags.GetSwitch("no-noise"))) {
     o.depth_noise = 0.0015;
     o.hole_fraction = 0.05;
   }

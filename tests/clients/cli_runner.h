@@ -12,6 +12,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <filesystem>
@@ -34,12 +35,12 @@ inline constexpr char kPlenoxBinary[] = PLENOX_BINARY;
 #endif
 
 struct CommandResult {
-  int exit_code = -1;       // the process's exit status; 128 + signal when it was killed
-  bool signaled = false;    // ended by a signal (a crash, or our timeout kill)
-  bool timed_out = false;   // we killed it at the deadline
+  int exit_code = -1;      // the process's exit status; 128 + signal when it was killed
+  bool signaled = false;   // ended by a signal (a crash, or our timeout kill)
+  bool timed_out = false;  // we killed it at the deadline
   bool spawn_failed = false;
-  std::string out;          // everything written to stdout
-  std::string err;          // everything written to stderr
+  std::string out;  // everything written to stdout
+  std::string err;  // everything written to stderr
   double seconds = 0.0;
   std::string command_line;  // for failure messages
 
@@ -93,8 +94,11 @@ inline CommandResult RunCommand(const std::string& binary, const std::vector<std
     return result;
   }
   if (pid == 0) {
+    // Its own process group, so the timeout can kill whatever it started as well (a child
+    // still holding the pipes would keep us reading forever).
+    ::setpgid(0, 0);
     if (!cwd.empty() && ::chdir(cwd.c_str()) != 0) ::_exit(127);
-    const int null_fd = ::open("/dev/null", O_RDONLY);
+    const int null_fd = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
     if (null_fd < 0 || ::dup2(null_fd, 0) < 0 || ::dup2(out_pipe[1], 1) < 0 ||
         ::dup2(err_pipe[1], 2) < 0) {
       ::_exit(127);
@@ -102,29 +106,30 @@ inline CommandResult RunCommand(const std::string& binary, const std::vector<std
     ::execv(argv[0], argv.data());
     ::_exit(127);
   }
+  // Also from this side, so the group exists even if we must kill it before the child ran.
+  ::setpgid(pid, pid);
   ::close(out_pipe[1]);
   ::close(err_pipe[1]);
 
-  const auto deadline =
-      start + std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000.0));
+  const auto deadline = start + std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000.0));
   struct pollfd fds[2] = {{out_pipe[0], POLLIN, 0}, {err_pipe[0], POLLIN, 0}};
   std::string* sinks[2] = {&result.out, &result.err};
   int open_fds = 2;
   char buffer[65536];
+  // After the kill, what is still in the pipes is read for at most this long.
+  const auto drain_grace = std::chrono::seconds(2);
   while (open_fds > 0) {
-    int wait_ms = -1;
-    if (!result.timed_out) {
-      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
-          deadline - std::chrono::steady_clock::now());
-      if (left.count() <= 0) {
-        // Killing the child closes its pipe ends, so the loop then drains and ends.
-        ::kill(pid, SIGKILL);
-        result.timed_out = true;
-      } else {
-        wait_ms = static_cast<int>(left.count());
-      }
+    const auto now = std::chrono::steady_clock::now();
+    if (!result.timed_out && now >= deadline) {
+      // Killing the group closes its pipe ends, so the loop then drains and ends.
+      ::kill(-pid, SIGKILL);
+      ::kill(pid, SIGKILL);  // in case setpgid failed
+      result.timed_out = true;
     }
-    const int ready = ::poll(fds, 2, wait_ms);
+    const auto until = result.timed_out ? deadline + drain_grace : deadline;
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(until - now);
+    if (result.timed_out && left.count() <= 0) break;
+    const int ready = ::poll(fds, 2, static_cast<int>(std::max<int64_t>(left.count(), 0)));
     if (ready < 0) {
       if (errno == EINTR) continue;
       break;
@@ -153,8 +158,7 @@ inline CommandResult RunCommand(const std::string& binary, const std::vector<std
     result.signaled = true;
     result.exit_code = 128 + WTERMSIG(status);
   }
-  result.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
 }
 
@@ -212,8 +216,8 @@ using FlatJson = std::map<std::string, JsonValue>;
 inline std::optional<FlatJson> ParseFlatJson(const std::string& text) {
   size_t i = 0;
   const auto skip_space = [&] {
-    while (i < text.size() && (text[i] == ' ' || text[i] == '\t' || text[i] == '\r' ||
-                               text[i] == '\n')) {
+    while (i < text.size() &&
+           (text[i] == ' ' || text[i] == '\t' || text[i] == '\r' || text[i] == '\n')) {
       ++i;
     }
   };

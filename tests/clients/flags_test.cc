@@ -246,12 +246,10 @@ TEST(FlagSetTest, UsageListsEveryFlagWithDefaultsAndRequired) {
     if (at == std::string::npos) return "";
     return usage.substr(at, usage.find('\n', at) - at);
   };
-  EXPECT_THAT(line_of("dataset"),
-              AllOf(HasSubstr("DIR"), HasSubstr("input folder"), HasSubstr("(required)"),
-                    Not(HasSubstr("default"))));
-  EXPECT_THAT(line_of("every"),
-              AllOf(HasSubstr("N"), HasSubstr("use every N-th frame"), HasSubstr("[default: 10]"),
-                    Not(HasSubstr("required"))));
+  EXPECT_THAT(line_of("dataset"), AllOf(HasSubstr("DIR"), HasSubstr("input folder"),
+                                        HasSubstr("(required)"), Not(HasSubstr("default"))));
+  EXPECT_THAT(line_of("every"), AllOf(HasSubstr("N"), HasSubstr("use every N-th frame"),
+                                      HasSubstr("[default: 10]"), Not(HasSubstr("required"))));
   EXPECT_THAT(line_of("scale"), HasSubstr("[default: 0.5]"));
   EXPECT_THAT(line_of("name"), AllOf(HasSubstr("TEXT"), HasSubstr("an optional label"),
                                      Not(HasSubstr("default")), Not(HasSubstr("required"))));
