@@ -147,21 +147,32 @@ absl::Status CheckOutputDirectory(const std::string& path) {
                                           " does not exist"));
 }
 
-void AddMapperFlags(FlagSet& flags, int default_iterations) {
+void AddMapperFlags(FlagSet& flags) {
   flags.Add("voxel-size", "M", "voxel edge in metres", "0.02")
       .Add("time-budget", "S", "optimisation time limit in seconds (0 = none)", "0")
-      .Add("iterations", "N", "optimisation iteration limit (0 = none)",
-           std::to_string(default_iterations))
+      .Add("iterations", "N",
+           absl::StrCat("optimisation iteration limit (0 = none) [default: ",
+                        kIterationsPerKeyframe, " per keyframe]"),
+           "")
       .Add("batch", "N", "rays per iteration", "8192")
       .Add("max-depth", "M", "ignore depth measurements beyond this (metres)", "10")
       .Add("seed", "N", "random seed for ray sampling", "20200823");
 }
 
-absl::StatusOr<MapperOptions> MapperOptionsFromFlags(const FlagSet& flags) {
+void SetIterationBudget(const FlagSet& flags, int keyframes, MapperOptions* options) {
+  if (!flags.IsSet("iterations")) {
+    options->max_iterations = std::max(1, kIterationsPerKeyframe * keyframes);
+  }
+}
+
+absl::StatusOr<MapperOptions> MapperOptionsFromFlags(const FlagSet& flags, int keyframes) {
   PLX_ASSIGN_OR_RETURN(const double voxel, flags.GetDouble("voxel-size", 0.001, 1.0));
   MapperOptions o = MapperOptionsForVoxelSize(static_cast<float>(voxel));
   PLX_ASSIGN_OR_RETURN(o.time_budget_s, flags.GetDouble("time-budget", 0.0, 1e7));
-  PLX_ASSIGN_OR_RETURN(o.max_iterations, flags.GetInt("iterations", 0, 100000000));
+  if (flags.IsSet("iterations")) {
+    PLX_ASSIGN_OR_RETURN(o.max_iterations, flags.GetInt("iterations", 0, 100000000));
+  }
+  SetIterationBudget(flags, keyframes, &o);
   PLX_ASSIGN_OR_RETURN(o.batch_size, flags.GetInt("batch", 1, 1 << 22));
   PLX_ASSIGN_OR_RETURN(const double max_depth, flags.GetDouble("max-depth", 0.1, 1000.0));
   o.allocation.max_depth = static_cast<float>(max_depth);

@@ -70,9 +70,14 @@ absl::StatusOr<std::unique_ptr<RgbdDataset>> OpenDatasetFromFlags(const FlagSet&
 // NotFound when the folder that would hold `path` does not exist (checked before long work).
 absl::Status CheckOutputDirectory(const std::string& path);
 
-// --voxel-size, --time-budget, --iterations, --batch, --max-depth, --seed.
-void AddMapperFlags(FlagSet& flags, int default_iterations = 1500);
-absl::StatusOr<MapperOptions> MapperOptionsFromFlags(const FlagSet& flags);
+// --voxel-size, --time-budget, --iterations, --batch, --max-depth, --seed. Without
+// --iterations the budget is kIterationsPerKeyframe per keyframe.
+inline constexpr int kIterationsPerKeyframe = 50;
+void AddMapperFlags(FlagSet& flags);
+// The iteration budget is set for `keyframes` keyframes; call again (or SetIterationBudget) once
+// the real count is known.
+absl::StatusOr<MapperOptions> MapperOptionsFromFlags(const FlagSet& flags, int keyframes);
+void SetIterationBudget(const FlagSet& flags, int keyframes, MapperOptions* options);
 
 // "12.3 MB"-style text.
 std::string Megabytes(int64_t bytes);

@@ -24,7 +24,7 @@ int RunDemo(const std::vector<std::string>& args) {
                 "(PSNR, depth L1, coverage) and writes the sequence, the map and renders to --out.");
   flags.Add("out", "DIR", "output folder", "plenox_demo");
   AddSyntheticFlags(flags, 90, /*noise_by_default=*/true);
-  AddMapperFlags(flags, /*default_iterations=*/400);
+  AddMapperFlags(flags);
   flags.Add("every", "N", "map every N-th frame", "10")
       .Add("threads", "N", "CPU threads (0 = all cores)", "0")
       .AddSwitch("json", "print the metrics as JSON on the last line of stdout");
@@ -32,7 +32,10 @@ int RunDemo(const std::vector<std::string>& args) {
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
   absl::StatusOr<SyntheticOptions> synth = SyntheticOptionsFromFlags(flags);
   if (!synth.ok()) return ReportError("demo", synth.status(), true);
-  absl::StatusOr<MapperOptions> options = MapperOptionsFromFlags(flags);
+  absl::StatusOr<int> every_flag = flags.GetInt("every", 1, 1000);
+  const int demo_keyframes =
+      every_flag.ok() ? static_cast<int>(KeyframeIndices(synth->num_frames, *every_flag).size()) : 1;
+  absl::StatusOr<MapperOptions> options = MapperOptionsFromFlags(flags, demo_keyframes);
   if (!options.ok()) return ReportError("demo", options.status(), true);
   absl::StatusOr<int> every = flags.GetInt("every", 1, 1000);
   absl::StatusOr<int> threads = flags.GetInt("threads", 0, 4096);

@@ -29,7 +29,7 @@ int RunMap(const std::vector<std::string>& args) {
   if (!every.ok()) return ReportError("map", every.status(), true);
   absl::StatusOr<int> threads = flags.GetInt("threads", 0, 4096);
   if (!threads.ok()) return ReportError("map", threads.status(), true);
-  absl::StatusOr<MapperOptions> options = MapperOptionsFromFlags(flags);
+  absl::StatusOr<MapperOptions> options = MapperOptionsFromFlags(flags, /*keyframes=*/1);
   if (!options.ok()) return ReportError("map", options.status(), true);
   absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);
   if (!dataset_options.ok()) return ReportError("map", dataset_options.status(), true);
@@ -40,6 +40,7 @@ int RunMap(const std::vector<std::string>& args) {
       OpenDatasetFromFlags(flags, *dataset_options);
   if (!dataset.ok()) return ReportError("map", dataset.status());
   const std::vector<int> keyframes = KeyframeIndices((*dataset)->size(), *every);
+  SetIterationBudget(flags, static_cast<int>(keyframes.size()), &*options);
 
   std::unique_ptr<Backend> backend = MakeCpuBackend(*threads);
   ProgressLine line(!flags.GetSwitch("quiet"));

@@ -29,6 +29,7 @@ class FlagSet {
   std::string Usage() const;
 
   bool Has(const std::string& name) const;  // given on the command line or has a default
+  bool IsSet(const std::string& name) const { return values_.count(name) > 0; }  // given
   std::string GetString(const std::string& name) const;
   absl::StatusOr<int> GetInt(const std::string& name, int min_value, int max_value) const;
   absl::StatusOr<double> GetDouble(const std::string& name, double min_value,

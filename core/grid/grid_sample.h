@@ -104,11 +104,13 @@ PLX_HD void AccumulateVertexGrad(GridGradViewT<T> grad, int64_t slot, T d_densit
       if (d_sh[j] != T(0)) AtomicAdd(dst + j, scale * d_sh[j]);
     }
   }
-  AtomicSetFlag(grad.touched + slot);
+  grad.MarkTouched(slot);
 #else
   std::atomic_ref<uint8_t> flag(grad.touched[slot]);
-  while (flag.fetch_or(uint8_t{2}, std::memory_order_acquire) & 2) {
+  uint8_t before;
+  while ((before = flag.fetch_or(uint8_t{2}, std::memory_order_acquire)) & 2) {
   }
+  if ((before & 1) == 0) AtomicSetFlag(grad.brick_touched + slot / kBrickVertices);
   grad.density[slot] += d_density;
   if (d_sh != nullptr) {
     T* dst = grad.sh + slot * kShCoeffCount;

@@ -105,7 +105,14 @@ template <typename T>
 struct GridGradViewT {
   T* density = nullptr;        // [num_vertices]
   T* sh = nullptr;             // [num_vertices * 27]
-  uint8_t* touched = nullptr;  // [num_vertices]
+  uint8_t* touched = nullptr;        // [num_vertices]
+  uint8_t* brick_touched = nullptr;  // [num_bricks]: some vertex of the brick is touched
+
+  // Flags vertex `slot` (and its brick) as having gradient. Thread-safe.
+  PLX_HD void MarkTouched(int64_t slot) const {
+    AtomicSetFlag(touched + slot);
+    AtomicSetFlag(brick_touched + slot / kBrickVertices);
+  }
 };
 
 using GridGradView = GridGradViewT<float>;

@@ -16,6 +16,32 @@ PLX_HD float RmsPropUpdate(float* value, float* rms, float g, float lr, float be
   return avg;
 }
 
+// Updates the density and SH of one touched vertex and clears its gradients.
+PLX_HD void UpdateVertex(const GridView& g, const GridGradView& gg, const OptimizerStateView& s,
+                         const RmsPropParams& p, int64_t i) {
+  const float before = g.density[i];
+  RmsPropUpdate(g.density + i, s.rms_density + i, gg.density[i], p.lr_density, p.beta, p.epsilon);
+  gg.density[i] = 0.0f;
+  if (before <= p.sigma_threshold && g.density[i] > p.sigma_threshold) {
+    int v[3];
+    g.VertexCoords(i, v);
+    g.MarkCellsAroundVertex(v[0], v[1], v[2]);
+  }
+  float* sh = g.sh + i * kShCoeffCount;
+  float* sh_grad = gg.sh + i * kShCoeffCount;
+  float* sh_rms = s.rms_sh + i * kShCoeffCount;
+  // Branch-free so the compiler vectorises it: a coefficient without gradient (a clamped colour
+  // channel, or a sample too faint for SH gradients) keeps its value and its running average.
+  for (int j = 0; j < kShCoeffCount; ++j) {
+    const float g = sh_grad[j], rms = sh_rms[j];
+    const float seeded = rms == 0.0f ? g * g : p.beta * rms + (1.0f - p.beta) * g * g;
+    const float avg = g == 0.0f ? rms : seeded;
+    sh_rms[j] = avg;
+    sh[j] -= g == 0.0f ? 0.0f : p.lr_sh * g / (sqrtf(avg) + p.epsilon);
+    sh_grad[j] = 0.0f;
+  }
+}
+
 }  // namespace plx
 
 namespace plx::PLX_BACKEND_NS {
@@ -26,27 +52,17 @@ void RmsPropStep(const ExecContext& ctx, const GridView& grid, const GridGradVie
   const GridGradView gg = grad;
   const OptimizerStateView s = state;
   const RmsPropParams p = params;
-  ParallelFor(ctx, g.num_vertices(), [=] PLX_HD_LAMBDA(int64_t i) {
-    if (gg.touched[i] == 0) return;
-    gg.touched[i] = 0;
-    const float before = g.density[i];
-    RmsPropUpdate(g.density + i, s.rms_density + i, gg.density[i], p.lr_density, p.beta,
-                  p.epsilon);
-    gg.density[i] = 0.0f;
-    if (before <= p.sigma_threshold && g.density[i] > p.sigma_threshold) {
-      int v[3];
-      g.VertexCoords(i, v);
-      g.MarkCellsAroundVertex(v[0], v[1], v[2]);
-    }
-    float* sh = g.sh + i * kShCoeffCount;
-    float* sh_grad = gg.sh + i * kShCoeffCount;
-    float* sh_rms = s.rms_sh + i * kShCoeffCount;
-    for (int j = 0; j < kShCoeffCount; ++j) {
-      if (sh_grad[j] == 0.0f) continue;  // e.g. a clamped colour channel
-      RmsPropUpdate(sh + j, sh_rms + j, sh_grad[j], p.lr_sh, p.beta, p.epsilon);
-      sh_grad[j] = 0.0f;
+  // One work item per brick: most bricks receive no gradient in a batch and are skipped whole.
+  ParallelFor(ctx, g.num_bricks, [=] PLX_HD_LAMBDA(int64_t brick) {
+    if (gg.brick_touched[brick] == 0) return;
+    gg.brick_touched[brick] = 0;
+    for (int64_t i = brick * kBrickVertices; i < (brick + 1) * kBrickVertices; ++i) {
+      if (gg.touched[i] == 0) continue;
+      gg.touched[i] = 0;
+      UpdateVertex(g, gg, s, p, i);
     }
   });
 }
+
 
 }  // namespace plx::PLX_BACKEND_NS

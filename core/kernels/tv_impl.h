@@ -29,7 +29,7 @@ void AddTvGradient(const ExecContext& ctx, const GridView& grid, const GridGradV
       for (int k = 0; k < 4; ++k) {
         if (slots[k] < 0) continue;
         AtomicAdd(gg.density + slots[k], grads[k]);
-        AtomicSetFlag(gg.touched + slots[k]);
+        gg.MarkTouched(slots[k]);
       }
     }
     if (lambda_sh > 0.0f) {
@@ -44,7 +44,7 @@ void AddTvGradient(const ExecContext& ctx, const GridView& grid, const GridGradV
         }
       }
       for (int k = 0; k < 4; ++k) {
-        if (slots[k] >= 0) AtomicSetFlag(gg.touched + slots[k]);
+        if (slots[k] >= 0) gg.MarkTouched(slots[k]);
       }
     }
   });

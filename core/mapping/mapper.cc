@@ -67,12 +67,14 @@ void Mapper::ResizeOptimizerBuffers() {
   grad_density_.resize(n, 0.0f);
   grad_sh_.resize(n * kShCoeffCount, 0.0f);
   touched_.resize(n, 0);
+  brick_touched_.resize(static_cast<size_t>(map_->grid.num_bricks()), 0);
   rms_density_.resize(n, 0.0f);
   rms_sh_.resize(n * kShCoeffCount, 0.0f);
 }
 
 GridGradView Mapper::grad_view() {
-  return GridGradView{grad_density_.data(), grad_sh_.data(), touched_.data()};
+  return GridGradView{grad_density_.data(), grad_sh_.data(), touched_.data(),
+                      brick_touched_.data()};
 }
 
 OptimizerStateView Mapper::state_view() {
@@ -187,7 +189,7 @@ absl::StatusOr<MappingSummary> Mapper::Optimize(const MappingProgressCallback& p
   summary_.optimizer_bytes = static_cast<int64_t>(
       (grad_density_.size() + grad_sh_.size() + rms_density_.size() + rms_sh_.size()) *
           sizeof(float) +
-      touched_.size());
+      touched_.size() + brick_touched_.size());
   return summary_;
 }
 

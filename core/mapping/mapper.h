@@ -113,7 +113,7 @@ class Mapper {
   MappingSummary summary_;
 
   std::vector<float> grad_density_, grad_sh_;
-  std::vector<uint8_t> touched_;
+  std::vector<uint8_t> touched_, brick_touched_;
   std::vector<float> rms_density_, rms_sh_;
   std::vector<MappingRayLoss> losses_;
 };

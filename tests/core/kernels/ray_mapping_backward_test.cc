@@ -56,8 +56,8 @@ TEST_F(MappingBackwardTest, GradientsMatchCentralDifferences) {
   ASSERT_GT(fwd.samples, 10);
   ASSERT_GT(fwd.opacity, 0.5);
   std::vector<double> gd(density_.size(), 0.0), gs(sh_.size(), 0.0);
-  std::vector<uint8_t> touched(density_.size(), 0);
-  GridGradViewT<double> grad{gd.data(), gs.data(), touched.data()};
+  std::vector<uint8_t> touched(density_.size(), 0), brick_touched(grid_.num_bricks(), 0);
+  GridGradViewT<double> grad{gd.data(), gs.data(), touched.data(), brick_touched.data()};
   MappingRayBackward(g, grad, origin_, dir_, options_, fwd, a_, b_, 0.0);
 
   int checked_density = 0, checked_sh = 0;
@@ -89,6 +89,9 @@ TEST_F(MappingBackwardTest, GradientsMatchCentralDifferences) {
     }
   }
   EXPECT_GT(checked_density, 20);
+  for (size_t i = 0; i < touched.size(); ++i) {
+    if (touched[i]) EXPECT_EQ(brick_touched[i / kBrickVertices], 1) << "vertex " << i;
+  }
   EXPECT_GT(checked_sh, 100);
 }
 
