@@ -156,7 +156,9 @@ void AddMapperFlags(FlagSet& flags) {
            "")
       .Add("batch", "N", "rays per iteration", "8192")
       .Add("max-depth", "M", "ignore depth measurements beyond this (metres)", "10")
-      .Add("seed", "N", "random seed for ray sampling", "20200823");
+      .Add("seed", "N", "random seed for ray sampling", "20200823")
+      .AddSwitch("coarse-to-fine",
+                 "optimise at twice the voxel size for the first half, then upsample");
 }
 
 void SetIterationBudget(const FlagSet& flags, int keyframes, MapperOptions* options) {
@@ -179,6 +181,7 @@ absl::StatusOr<MapperOptions> MapperOptionsFromFlags(const FlagSet& flags, int k
   o.fusion.max_depth = static_cast<float>(max_depth);
   PLX_ASSIGN_OR_RETURN(const int seed, flags.GetInt("seed", 0, 2147483647));
   o.seed = static_cast<uint32_t>(seed);
+  o.coarse_to_fine = flags.GetSwitch("coarse-to-fine");
   PLX_RETURN_IF_ERROR(Mapper::ValidateOptions(o));
   return o;
 }

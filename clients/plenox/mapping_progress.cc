@@ -24,10 +24,10 @@ std::function<bool(const MapDatasetProgress&)> MappingProgressPrinter(ProgressLi
 std::string MappingSummaryText(const MappingSummary& s) {
   return absl::StrFormat(
       "mapped %d keyframes (%d rays) in %.1f s (init %.1f s): %d iterations, %d bricks, "
-      "%.1f MB map + %.1f MB optimiser state; last batch PSNR %.2f dB, depth L1 %.2f cm",
+      "%.1f MB map + %.1f MB optimiser state%s; last batch PSNR %.2f dB, depth L1 %.2f cm",
       s.keyframes, s.training_rays, s.allocation_s + s.optimization_s, s.allocation_s,
       s.iterations, s.memory.bricks, s.memory.total_bytes() / 1e6, s.optimizer_bytes / 1e6,
-      s.last.psnr, 100.0 * s.last.depth_l1_m);
+      s.upsampled ? " (coarse-to-fine)" : "", s.last.psnr, 100.0 * s.last.depth_l1_m);
 }
 
 }  // namespace plx::cli

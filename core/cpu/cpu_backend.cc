@@ -43,6 +43,9 @@ class CpuBackend final : public Backend {
                         float threshold) override {
     cpu::RefreshOccupancy(ctx_, grid, active_blocks, count, threshold);
   }
+  void ResampleGrid(const GridView& target, const GridView& source) override {
+    cpu::ResampleGrid(ctx_, target, source);
+  }
   void AddTvGradient(const GridView& grid, const GridGradView& grad, int64_t first_vertex,
                      int64_t vertex_count, float lambda_density, float lambda_sh) override {
     cpu::AddTvGradient(ctx_, grid, grad, first_vertex, vertex_count, lambda_density, lambda_sh);

@@ -34,6 +34,7 @@ class Backend {
                          const FusionParams& params) = 0;
   virtual void RefreshOccupancy(const GridView& grid, const int64_t* active_blocks, int64_t count,
                                 float threshold) = 0;
+  virtual void ResampleGrid(const GridView& target, const GridView& source) = 0;
   virtual void AddTvGradient(const GridView& grid, const GridGradView& grad,
                              int64_t first_vertex, int64_t vertex_count, float lambda_density,
                              float lambda_sh) = 0;

@@ -31,8 +31,8 @@ MapperOptions MapperOptionsForVoxelSize(float voxel_size) {
 }
 
 Mapper::Mapper(const MapperOptions& options, Backend* backend)
-    : options_(options), backend_(backend),
-      map_(std::make_unique<PlenoxelMap>(options.voxel_size)) {
+    : options_(options), backend_(backend), coarse_(options.coarse_to_fine),
+      map_(std::make_unique<PlenoxelMap>(options.voxel_size * (options.coarse_to_fine ? 2 : 1))) {
   map_->render = options.render;
 }
 
@@ -49,6 +49,9 @@ absl::Status Mapper::ValidateOptions(const MapperOptions& o) {
   }
   if (o.batch_size <= 0 || o.batch_size > (1 << 24)) {
     return absl::InvalidArgumentError(absl::StrCat("batch size out of range: ", o.batch_size));
+  }
+  if (o.coarse_to_fine && !(o.upsample_at > 0.0f && o.upsample_at < 1.0f)) {
+    return absl::InvalidArgumentError("upsample_at must be inside (0, 1)");
   }
   if (!(o.allocation.max_depth > 0) || !(o.allocation.min_band > 0)) {
     return absl::InvalidArgumentError("allocation band and max depth must be positive");
@@ -81,17 +84,22 @@ OptimizerStateView Mapper::state_view() {
   return OptimizerStateView{rms_density_.data(), rms_sh_.data()};
 }
 
+absl::Status Mapper::AllocateFrames(int first_frame, PlenoxelMap& map, float voxel_size) {
+  const float init = options_.initialize_from_depth ? 0.0f : options_.initial_density;
+  for (int f = first_frame; f < training_.num_frames(); ++f) {
+    const std::vector<BrickCoord> bricks =
+        BricksNearSurface(training_.frame(f).depth, training_.pose(f), training_.intrinsics(f),
+                          voxel_size, options_.allocation);
+    PLX_ASSIGN_OR_RETURN(int64_t added, map.grid.AllocateBricks(bricks, init));
+    (void)added;
+  }
+  return absl::OkStatus();
+}
+
 absl::Status Mapper::AllocateAndInitialize() {
   const auto start = std::chrono::steady_clock::now();
   const int64_t first_new_vertex = map_->grid.num_vertices();
-  for (int f = allocated_frames_; f < training_.num_frames(); ++f) {
-    const std::vector<BrickCoord> bricks =
-        BricksNearSurface(training_.frame(f).depth, training_.pose(f), training_.intrinsics(f),
-                          options_.voxel_size, options_.allocation);
-    const float init = options_.initialize_from_depth ? 0.0f : options_.initial_density;
-    PLX_ASSIGN_OR_RETURN(int64_t added, map_->grid.AllocateBricks(bricks, init));
-    (void)added;
-  }
+  PLX_RETURN_IF_ERROR(AllocateFrames(allocated_frames_, *map_, map_->grid.voxel_size()));
   allocated_frames_ = training_.num_frames();
   const int64_t new_vertices = map_->grid.num_vertices() - first_new_vertex;
   if (options_.initialize_from_depth && new_vertices > 0) {
@@ -105,6 +113,23 @@ absl::Status Mapper::AllocateAndInitialize() {
   summary_.keyframes = training_.num_frames();
   summary_.training_rays = training_.num_rays();
   summary_.memory = map_->grid.Memory();
+  return absl::OkStatus();
+}
+
+absl::Status Mapper::Upsample() {
+  auto fine = std::make_unique<PlenoxelMap>(options_.voxel_size);
+  fine->render = map_->render;
+  PLX_RETURN_IF_ERROR(AllocateFrames(0, *fine, options_.voxel_size));
+  RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold);
+  backend_->ResampleGrid(fine->grid.view(), map_->grid.view());
+  map_ = std::move(fine);
+  RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold);
+  for (auto* buffer : {&grad_density_, &grad_sh_, &rms_density_, &rms_sh_}) buffer->clear();
+  touched_.clear();
+  brick_touched_.clear();
+  ResizeOptimizerBuffers();
+  coarse_ = false;
+  summary_.upsampled = true;
   return absl::OkStatus();
 }
 
@@ -130,7 +155,7 @@ absl::StatusOr<MappingSummary> Mapper::Optimize(const MappingProgressCallback& p
   RmsPropParams rms;
   rms.beta = options_.rmsprop_beta;
   rms.sigma_threshold = map_->render.sigma_threshold;
-  const int64_t tv_count = std::max<int64_t>(
+  int64_t tv_count = std::max<int64_t>(
       1, static_cast<int64_t>(options_.tv_fraction * map_->grid.num_vertices()));
 
   MappingProgress last;
@@ -141,6 +166,11 @@ absl::StatusOr<MappingSummary> Mapper::Optimize(const MappingProgressCallback& p
     if (options_.max_iterations > 0) fraction = double(done) / options_.max_iterations;
     if (options_.time_budget_s > 0) fraction = std::max(fraction, elapsed / options_.time_budget_s);
     if (fraction >= 1.0) break;
+    if (coarse_ && fraction >= options_.upsample_at) {
+      PLX_RETURN_IF_ERROR(Upsample());
+      tv_count = std::max<int64_t>(
+          1, static_cast<int64_t>(options_.tv_fraction * map_->grid.num_vertices()));
+    }
 
     const GridView grid = map_->grid.view();
     const GridGradView grad = grad_view();

@@ -46,6 +46,11 @@ struct MapperOptions {
   float tv_density = 0.0f, tv_sh = 0.0f;
   float tv_fraction = 0.01f, tv_until = 0.5f;
 
+  // Coarse-to-fine: optimise at twice the voxel size until `upsample_at` of the budget, then
+  // resample onto the final voxel size and continue (Plenoxels' 256^3 -> 512^3 schedule).
+  bool coarse_to_fine = false;
+  float upsample_at = 0.5f;
+
   uint32_t seed = 20200823;
   RenderOptions render;
   int progress_every = 25;  // iterations between progress reports
@@ -72,6 +77,7 @@ struct MappingSummary {
   MappingProgress last;
   GridMemory memory;
   int64_t optimizer_bytes = 0;  // gradients + RMSProp state
+  bool upsampled = false;       // coarse-to-fine switched to the final voxel size
 };
 
 // Return false to stop the optimisation early (cancellation).
@@ -100,6 +106,10 @@ class Mapper {
   const MappingSummary& summary() const { return summary_; }
 
  private:
+  // Builds the final-resolution map from the keyframes' depth, fills it from the current
+  // (coarse) map and restarts the optimiser state.
+  absl::Status Upsample();
+  absl::Status AllocateFrames(int first_frame, PlenoxelMap& map, float voxel_size);
   void ResizeOptimizerBuffers();
   GridGradView grad_view();
   OptimizerStateView state_view();
@@ -109,6 +119,7 @@ class Mapper {
   std::unique_ptr<PlenoxelMap> map_;
   TrainingSet training_;
   int allocated_frames_ = 0;  // keyframes whose bricks exist
+  bool coarse_ = false;       // the map is at twice the final voxel size
   int iteration_ = 0;
   MappingSummary summary_;
 
