@@ -9,7 +9,9 @@ namespace plx::cli {
 
 int RunMap(const std::vector<std::string>& args);
 int RunEvalMap(const std::vector<std::string>& args);
+int RunEvalTraj(const std::vector<std::string>& args);
 int RunRender(const std::vector<std::string>& args);
+int RunTrack(const std::vector<std::string>& args);
 int RunSynth(const std::vector<std::string>& args);
 int RunDemo(const std::vector<std::string>& args);
 

@@ -11,9 +11,11 @@ constexpr char kUsage[] =
     "usage: plenox <command> [flags]   (plenox <command> --help for its flags)\n"
     "\n"
     "commands:\n"
-    "  demo       generate a synthetic RGB-D sequence, map it, score held-out views\n"
+    "  demo       generate a synthetic RGB-D sequence, map it, score held-out views, track it\n"
     "  map        build a map from a dataset with known poses\n"
+    "  track      localise every frame of a dataset in a map (writes a TUM trajectory)\n"
     "  eval-map   score a map on a dataset's held-out frames (PSNR, depth L1, coverage)\n"
+    "  eval-traj  compare an estimated trajectory with ground truth (ATE, RPE)\n"
     "  render     render colour and depth images of a map from a pose\n"
     "  synth      write the synthetic RGB-D sequence to a folder (TUM layout)\n";
 
@@ -33,6 +35,8 @@ int main(int argc, char** argv) {
   args.erase(args.begin());
   if (command == "map") return plx::cli::RunMap(args);
   if (command == "eval-map") return plx::cli::RunEvalMap(args);
+  if (command == "eval-traj") return plx::cli::RunEvalTraj(args);
+  if (command == "track") return plx::cli::RunTrack(args);
   if (command == "render") return plx::cli::RunRender(args);
   if (command == "synth") return plx::cli::RunSynth(args);
   if (command == "demo") return plx::cli::RunDemo(args);

@@ -43,6 +43,15 @@ class CpuBackend final : public Backend {
                         float threshold) override {
     cpu::RefreshOccupancy(ctx_, grid, active_blocks, count, threshold);
   }
+  void ComputeTrackingTerms(const GridView& grid, const TrainingFrameView& frame,
+                            const int32_t* pixels, int64_t count, const TrackingParams& params,
+                            TrackingRayTerm* terms) override {
+    cpu::ComputeTrackingTerms(ctx_, grid, frame, pixels, count, params, terms);
+  }
+  TrackingSums ReduceTrackingTerms(const TrackingRayTerm* terms, int64_t count, TrackingLoss loss,
+                                   float huber_k, const float scale[2]) override {
+    return cpu::ReduceTrackingTerms(ctx_, terms, count, loss, huber_k, scale);
+  }
   void ResampleGrid(const GridView& target, const GridView& source) override {
     cpu::ResampleGrid(ctx_, target, source);
   }

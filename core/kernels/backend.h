@@ -10,6 +10,7 @@
 #include "core/grid/grid_view.h"
 #include "core/kernels/depth_fusion.h"
 #include "core/kernels/kernel_types.h"
+#include "core/tracking/tracking_terms.h"
 
 namespace plx {
 
@@ -34,6 +35,12 @@ class Backend {
                          const FusionParams& params) = 0;
   virtual void RefreshOccupancy(const GridView& grid, const int64_t* active_blocks, int64_t count,
                                 float threshold) = 0;
+  virtual void ComputeTrackingTerms(const GridView& grid, const TrainingFrameView& frame,
+                                    const int32_t* pixels, int64_t count,
+                                    const TrackingParams& params, TrackingRayTerm* terms) = 0;
+  virtual TrackingSums ReduceTrackingTerms(const TrackingRayTerm* terms, int64_t count,
+                                           TrackingLoss loss, float huber_k,
+                                           const float scale[2]) = 0;
   virtual void ResampleGrid(const GridView& target, const GridView& source) = 0;
   virtual void AddTvGradient(const GridView& grid, const GridGradView& grad,
                              int64_t first_vertex, int64_t vertex_count, float lambda_density,

@@ -5,6 +5,7 @@
 
 #include "core/kernels/render_options.h"
 #include "core/math/camera_ray.h"
+#include "core/math/depth_noise.h"
 
 namespace plx {
 
@@ -27,8 +28,15 @@ struct TrainingRaysView {
 struct MappingBatchParams {
   uint32_t seed = 0;           // draws this batch's rays (same seed, same rays on every backend)
   int64_t batch_size = 0;
-  float depth_weight = 1.0f;   // lambda_d of L = mean(|C^ - C|^2 / 3 + lambda_d (D^ - D)^2)
-  float depth_huber = 0.0f;    // metres; > 0 turns the depth term into a Huber loss
+  // L = mean( |C^ - C|^2 / 3 + depth_weight * color_sigma^2 * rho((D^ - D) / sigma(z)) ):
+  // depth residuals count in units of the sensor's noise at that depth, relative to a colour
+  // noise of color_sigma, so near, precise depth constrains geometry and far, noisy depth does
+  // not drown the colour. rho is the square, or Huber with threshold depth_huber (in sigmas).
+  float depth_weight = 1.0f;
+  float color_sigma = 0.1f;
+  DepthNoiseModel depth_noise;
+  float depth_sigma_floor = 0.001f;  // metres
+  float depth_huber = 3.0f;          // noise sigmas; 0 = pure square
   float sh_min_weight = 0.0f;  // see MappingRayBackward
   RenderOptions render;
 };

@@ -38,12 +38,16 @@ void MappingForwardBackward(const ExecContext& ctx, const GridView& grid, const 
       color_sq += e * e;
       dL_dcolor[c] = 2.0f * e * inv_batch / 3.0f;
     }
-    float e_depth = fwd.depth - target_range;
+    const float e_depth = fwd.depth - target_range;
     const float abs_depth = fabsf(e_depth);
-    if (p.depth_huber > 0.0f && abs_depth > p.depth_huber) {
-      e_depth = e_depth > 0.0f ? p.depth_huber : -p.depth_huber;
+    float sigma = p.depth_noise.Sigma(frame.depth[pixel]);
+    sigma = sigma > p.depth_sigma_floor ? sigma : p.depth_sigma_floor;
+    float scaled = e_depth / sigma;  // d rho / d scaled is 2 scaled, clipped by the Huber bound
+    if (p.depth_huber > 0.0f && fabsf(scaled) > p.depth_huber) {
+      scaled = scaled > 0.0f ? p.depth_huber : -p.depth_huber;
     }
-    const float dL_ddepth = 2.0f * p.depth_weight * e_depth * inv_batch;
+    const float dL_ddepth =
+        2.0f * p.depth_weight * p.color_sigma * p.color_sigma * scaled / sigma * inv_batch;
     MappingRayBackward(g, gg, origin, dir, p.render, fwd, dL_dcolor, dL_ddepth, p.sh_min_weight);
     losses[i] = MappingRayLoss{color_sq, abs_depth, fwd.opacity};
   });

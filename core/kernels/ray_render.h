@@ -20,6 +20,7 @@ struct RayRenderResult {
   // sensor would report. Unlike the expected range it does not blend the two sides of a
   // silhouette, so depth images and depth metrics use it.
   T median_depth;
+  T depth_sq;    // sum_i w_i t_i^2, for the spread of depth along the ray
   int samples;   // samples that contributed (density above threshold)
 };
 
@@ -40,7 +41,7 @@ PLX_HD RayRenderResult<T> RenderRay(const GridViewT<T>& grid, const Vec3<T>& ori
   T basis[kShBasisCount];
   EvalShBasis(dir, basis);
   const T step = opt.step_voxels * grid.voxel_size;
-  RayRenderResult<T> out = {{T(0), T(0), T(0)}, T(0), T(0), T(0), 0};
+  RayRenderResult<T> out = {{T(0), T(0), T(0)}, T(0), T(0), T(0), T(0), 0};
   T transmittance = T(1);
   MarchRay(grid, origin, dir, opt.near, opt.far, step, [&](T t, const CellSample<T>& s) {
     const T sigma = SampleDensity(grid, s);
@@ -56,6 +57,7 @@ PLX_HD RayRenderResult<T> RenderRay(const GridViewT<T>& grid, const Vec3<T>& ori
     }
     for (int c = 0; c < 3; ++c) out.color[c] += w * color[c];
     out.depth += w * t;
+    out.depth_sq += w * t * t;
     ++out.samples;
     return transmittance >= opt.stop_transmittance;
   });

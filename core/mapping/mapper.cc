@@ -150,6 +150,7 @@ absl::StatusOr<MappingSummary> Mapper::Optimize(const MappingProgressCallback& p
   batch.batch_size = options_.batch_size;
   batch.depth_weight = options_.depth_weight;
   batch.depth_huber = options_.depth_huber;
+  batch.depth_noise = options_.fusion.noise;
   batch.sh_min_weight = options_.sh_min_weight;
   batch.render = map_->render;
   RmsPropParams rms;

@@ -35,8 +35,9 @@ struct MapperOptions {
   double time_budget_s = 0.0;
 
   int batch_size = 8192;
+  // Depth term of the loss, see MappingBatchParams (noise model shared with allocation/fusion).
   float depth_weight = 1.0f;
-  float depth_huber = 0.0f;
+  float depth_huber = 3.0f;
   float sh_min_weight = 1e-4f;
   float lr_density_start = 10.0f, lr_density_end = 1.0f;
   float lr_sh_start = 1e-2f, lr_sh_end = 1e-3f;

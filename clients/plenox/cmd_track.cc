@@ -1,0 +1,106 @@
+// plenox track: localise every frame of a dataset in a map.
+#include <iostream>
+
+#include "absl/strings/str_format.h"
+#include "clients/plenox/cli_common.h"
+#include "clients/plenox/commands.h"
+#include "core/io/map_file.h"
+#include "core/io/trajectory_file.h"
+#include "core/tracking/track_dataset.h"
+
+namespace plx::cli {
+
+int RunTrack(const std::vector<std::string>& args) {
+  FlagSet flags("track",
+                "Tracks every frame of a dataset against a map (frozen), starting from frame 0's\n"
+                "ground-truth pose when the dataset has one, and writes the trajectory in TUM\n"
+                "format (timestamp tx ty tz qx qy qz qw, camera-to-world). Frames the tracker\n"
+                "reports LOST keep the predicted pose and are counted.");
+  flags.Add("map", "MAP", "map file", std::nullopt, true);
+  AddDatasetFlags(flags);
+  flags.Add("out", "TRAJ.txt", "trajectory to write", std::nullopt, true)
+      .Add("mode", "gn|adam", "Gauss-Newton/LM, or Adam as in the paper", "gn")
+      .Add("rays", "N", "rays per frame (adam: per step) [default: gn 4096, adam 4096]", "")
+      .Add("iterations", "N", "iterations per frame [default: gn 8, adam 90]", "")
+      .Add("threads", "N", "CPU threads (0 = all cores)", "0")
+      .AddSwitch("json", "print a JSON summary on the last line of stdout")
+      .AddSwitch("quiet", "no progress on stderr");
+  int exit_code = 0;
+  if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
+
+  TrackerOptions options;
+  const std::string mode = flags.GetString("mode");
+  if (mode == "adam") {
+    options.mode = TrackingMode::kAdam;
+    options.iterations = 90;
+  } else if (mode != "gn") {
+    return ReportError("track", absl::InvalidArgumentError(absl::StrFormat(
+                                    "--mode must be gn or adam, got \"%s\"", mode)), true);
+  }
+  if (flags.IsSet("rays")) {
+    absl::StatusOr<int> rays = flags.GetInt("rays", 16, 1 << 22);
+    if (!rays.ok()) return ReportError("track", rays.status(), true);
+    options.rays = *rays;
+  }
+  if (flags.IsSet("iterations")) {
+    absl::StatusOr<int> iterations = flags.GetInt("iterations", 1, 10000);
+    if (!iterations.ok()) return ReportError("track", iterations.status(), true);
+    options.iterations = *iterations;
+  }
+  absl::StatusOr<int> threads = flags.GetInt("threads", 0, 4096);
+  if (!threads.ok()) return ReportError("track", threads.status(), true);
+  absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);
+  if (!dataset_options.ok()) return ReportError("track", dataset_options.status(), true);
+  const std::string out = flags.GetString("out");
+  if (absl::Status s = CheckOutputDirectory(out); !s.ok()) return ReportError("track", s);
+
+  absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(flags.GetString("map"));
+  if (!map.ok()) return ReportError("track", map.status());
+  absl::StatusOr<std::unique_ptr<RgbdDataset>> dataset =
+      OpenDatasetFromFlags(flags, *dataset_options);
+  if (!dataset.ok()) return ReportError("track", dataset.status());
+
+  std::unique_ptr<Backend> backend = MakeCpuBackend(*threads);
+  ProgressLine line(!flags.GetSwitch("quiet"));
+  const int total = (*dataset)->size();
+  int lost = 0;
+  absl::StatusOr<TrackDatasetResult> result = TrackDataset(
+      **dataset, **map, *backend, options, [&](int i, const TrackingResult& r) {
+        lost += r.state == TrackingState::kLost;
+        line.Update(absl::StrFormat("tracking %d/%d  %s  %.0f ms  rays %d/%d  lost %d%s%s", i + 1,
+                                    total, TrackingStateName(r.state), r.milliseconds,
+                                    r.valid_rays, r.rays, lost, r.reason.empty() ? "" : "  ",
+                                    r.reason));
+        return true;
+      });
+  if (!result.ok()) return ReportError("track", result.status());
+  if (absl::Status s = WriteTumTrajectory(
+          out, result->trajectory,
+          absl::StrFormat("plenox track: %s on map %s (mode %s)", (*dataset)->name(),
+                          flags.GetString("map"), mode));
+      !s.ok()) {
+    return ReportError("track", s);
+  }
+  line.Finish(absl::StrFormat(
+      "tracked %d frames: median %.1f ms, p95 %.1f ms per frame, %d lost, %d degraded%s", total,
+      result->ms_per_frame_median, result->ms_per_frame_p95, result->lost, result->degraded,
+      result->started_from_ground_truth ? "" : " (no ground truth: started at the identity)"));
+  if (flags.GetSwitch("json")) {
+    JsonObject json;
+    json.Add("frames", total)
+        .Add("ms_per_frame_median", result->ms_per_frame_median)
+        .Add("ms_per_frame_p95", result->ms_per_frame_p95)
+        .Add("lost", result->lost)
+        .Add("degraded", result->degraded)
+        .Add("mode", mode)
+        .Add("rays", options.rays)
+        .Add("iterations", options.iterations)
+        .Add("trajectory", out);
+    std::cout << json.str() << "\n";
+  } else {
+    std::cout << absl::StrFormat("wrote %s (%d poses)\n", out, total);
+  }
+  return kExitOk;
+}
+
+}  // namespace plx::cli

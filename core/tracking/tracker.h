@@ -1,0 +1,110 @@
+// Frame-to-model tracking against a frozen map (DESIGN.md §8). Each frame's pose is found by
+// Gauss-Newton / Levenberg-Marquardt on the 6x6 normal equations of robust (Huber), noise-scaled
+// colour and depth residuals, coarse-to-fine over the number of rays, starting from a
+// constant-velocity prediction. An Adam mode follows the paper's tracker for comparison.
+// Every result says whether it can be trusted (OK / DEGRADED / LOST) and why.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/geometry/intrinsics.h"
+#include "core/geometry/rgbd_frame.h"
+#include "core/geometry/se3.h"
+#include "core/grid/plenoxel_map.h"
+#include "core/kernels/backend.h"
+#include "core/tracking/tracking_terms.h"
+
+namespace plx {
+
+enum class TrackingState { kOk, kDegraded, kLost };
+const char* TrackingStateName(TrackingState state);
+
+enum class TrackingMode { kGaussNewton, kAdam };
+
+struct TrackerOptions {
+  TrackingMode mode = TrackingMode::kGaussNewton;
+  int rays = 4096;       // rays per frame (GN: at the fine level; Adam: per iteration)
+  int iterations = 8;    // GN: total over both levels; Adam: steps (paper: 90)
+  // GN coarse level: rays / coarse_divisor for the first half of the iterations, aligning depth
+  // only: colour residuals linearise well only within a texture's width of the optimum, depth
+  // residuals on surfaces much further out, so geometry brings the pose in and colour refines.
+  int coarse_divisor = 4;
+  bool coarse_depth_only = true;
+  float huber_k = 2.0f;  // in noise-scale units
+  // Stretch the noise scales to the robust spread of the current residuals (never below 1).
+  bool adaptive_scale = true;
+  float converged_translation = 1e-4f;  // metres: stop when a step is smaller than this ...
+  float converged_rotation = 1e-4f;     // ... and this (radians)
+  bool constant_velocity = true;
+  TrackingParams params;
+
+  // Adam (paper's setting: lr 1e-3, decayed by 0.8 every 10 steps).
+  float adam_lr = 1e-3f;
+  int adam_decay_every = 10;
+  float adam_decay = 0.8f;
+
+  // Trust. Fractions are of the rays asked for; RMS is of the noise-scaled residuals.
+  float lost_valid_fraction = 0.1f;
+  float degraded_valid_fraction = 0.3f;
+  float degraded_rms = 2.5f;
+  float lost_rms = 6.0f;
+  float lost_translation = 0.5f;  // metres away from the prediction
+  float lost_rotation = 0.5f;     // radians away from the prediction
+
+  uint32_t seed = 20230606;
+};
+
+struct TrackingResult {
+  SE3 pose;                 // world_T_camera; for LOST frames the prediction, not an estimate
+  TrackingState state = TrackingState::kLost;
+  std::string reason;       // why DEGRADED or LOST
+  int iterations = 0;
+  int rays = 0;             // asked for
+  int valid_rays = 0;       // rendered by the map with a valid measurement
+  double residual_rms = 0;  // noise-scaled
+  double milliseconds = 0;
+};
+
+class Tracker {
+ public:
+  // `map` and `backend` must outlive the tracker; the map is only read.
+  Tracker(PlenoxelMap* map, Backend* backend, const TrackerOptions& options);
+
+  static absl::Status ValidateOptions(const TrackerOptions& options);
+
+  // Starts from a known pose (e.g. the first frame's ground truth) at `timestamp`.
+  void Reset(const SE3& world_T_camera, double timestamp);
+
+  // Tracks one frame. `prior` (e.g. a headset's VIO pose) replaces the constant-velocity
+  // prediction as the initial guess.
+  TrackingResult Track(const RgbdFrame& frame, const PinholeIntrinsics& intrinsics,
+                       const std::optional<SE3>& prior = std::nullopt);
+
+ private:
+  SE3 Predict(double timestamp) const;
+  void SamplePixels(const RgbdFrame& frame, int count);
+  TrackingSums Evaluate(const SE3& pose, const RgbdFrame& frame, const PinholeIntrinsics& k,
+                        int rays, TrackingLoss loss);
+  void RunGaussNewton(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* pose,
+                      TrackingResult* result, TrackingSums* last);
+  void RunAdam(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* pose,
+               TrackingResult* result, TrackingSums* last);
+  void RobustScales(int rays, float scale[2]);
+  void Classify(const SE3& predicted, const TrackingSums& last, TrackingResult* result) const;
+
+  PlenoxelMap* map_;
+  Backend* backend_;
+  TrackerOptions options_;
+  SE3 last_pose_;
+  double last_timestamp_ = 0.0;
+  std::optional<Vector6d> velocity_;  // tangent of the last motion, per second
+  uint32_t frame_counter_ = 0;
+  std::vector<int32_t> valid_pixels_;
+  std::vector<int32_t> pixels_;
+  std::vector<TrackingRayTerm> terms_;
+  std::vector<float> scratch_;
+};
+
+}  // namespace plx
