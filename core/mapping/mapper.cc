@@ -36,6 +36,18 @@ Mapper::Mapper(const MapperOptions& options, Backend* backend)
   map_->render = options.render;
 }
 
+Mapper::Mapper(const MapperOptions& options, Backend* backend, std::unique_ptr<PlenoxelMap> map)
+    : options_(options), backend_(backend), map_(std::move(map)) {
+  options_.voxel_size = map_->grid.voxel_size();
+  options_.coarse_to_fine = false;
+  ResizeOptimizerBuffers();
+}
+
+std::unique_ptr<PlenoxelMap> Mapper::Snapshot() {
+  RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold);
+  return std::make_unique<PlenoxelMap>(*map_);
+}
+
 absl::Status Mapper::ValidateOptions(const MapperOptions& o) {
   if (!(o.voxel_size >= 0.001f && o.voxel_size <= 1.0f)) {
     return absl::InvalidArgumentError(
@@ -133,7 +145,8 @@ absl::Status Mapper::Upsample() {
   return absl::OkStatus();
 }
 
-absl::StatusOr<MappingSummary> Mapper::Optimize(const MappingProgressCallback& progress) {
+absl::StatusOr<MappingSummary> Mapper::Optimize(const MappingProgressCallback& progress,
+                                                int max_new_iterations) {
   PLX_RETURN_IF_ERROR(ValidateOptions(options_));
   if (allocated_frames_ != training_.num_frames()) PLX_RETURN_IF_ERROR(AllocateAndInitialize());
   if (training_.num_rays() == 0) {
@@ -163,10 +176,15 @@ absl::StatusOr<MappingSummary> Mapper::Optimize(const MappingProgressCallback& p
   int done = 0;
   for (;;) {
     const double elapsed = Seconds(start);
+    // The budget counts every iteration and second spent by earlier calls too, so a map that is
+    // optimised in chunks (the daemon) follows one learning-rate schedule.
     double fraction = 0.0;
-    if (options_.max_iterations > 0) fraction = double(done) / options_.max_iterations;
-    if (options_.time_budget_s > 0) fraction = std::max(fraction, elapsed / options_.time_budget_s);
+    if (options_.max_iterations > 0) fraction = double(iteration_) / options_.max_iterations;
+    if (options_.time_budget_s > 0) {
+      fraction = std::max(fraction, (summary_.optimization_s + elapsed) / options_.time_budget_s);
+    }
     if (fraction >= 1.0) break;
+    if (max_new_iterations > 0 && done >= max_new_iterations) break;
     if (coarse_ && fraction >= options_.upsample_at) {
       PLX_RETURN_IF_ERROR(Upsample());
       tv_count = std::max<int64_t>(

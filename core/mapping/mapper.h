@@ -88,6 +88,8 @@ class Mapper {
  public:
   // `backend` must outlive the mapper.
   Mapper(const MapperOptions& options, Backend* backend);
+  // Continues an existing map (its voxel size wins; no coarse-to-fine).
+  Mapper(const MapperOptions& options, Backend* backend, std::unique_ptr<PlenoxelMap> map);
 
   // Checks options; called by the constructor's users before anything else.
   static absl::Status ValidateOptions(const MapperOptions& options);
@@ -98,8 +100,21 @@ class Mapper {
   // Allocates and initialises bricks for the keyframes added since the last call.
   absl::Status AllocateAndInitialize();
 
-  // Runs the optimisation until the budget is spent (or the callback says stop).
-  absl::StatusOr<MappingSummary> Optimize(const MappingProgressCallback& progress = nullptr);
+  // Runs the optimisation until the budget is spent (or the callback says stop), or for at most
+  // `max_new_iterations` iterations when that is positive. The budget is cumulative over calls.
+  absl::StatusOr<MappingSummary> Optimize(const MappingProgressCallback& progress = nullptr,
+                                          int max_new_iterations = 0);
+
+  // Raises or lowers the total iteration budget (e.g. as keyframes stream in).
+  void set_max_iterations(int iterations) { options_.max_iterations = iterations; }
+  int iterations_done() const { return iteration_; }
+  bool budget_spent() const {
+    return options_.max_iterations > 0 && iteration_ >= options_.max_iterations;
+  }
+
+  // A copy of the current map with exact cell occupancy, for readers that must not see
+  // the optimiser's writes (the daemon's published versions).
+  std::unique_ptr<PlenoxelMap> Snapshot();
 
   PlenoxelMap& map() { return *map_; }
   std::unique_ptr<PlenoxelMap> ReleaseMap() { return std::move(map_); }

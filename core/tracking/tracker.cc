@@ -82,7 +82,8 @@ void Tracker::SamplePixels(const RgbdFrame& frame, int count) {
 }
 
 TrackingSums Tracker::Evaluate(const SE3& pose, const RgbdFrame& frame,
-                               const PinholeIntrinsics& k, int rays, TrackingLoss loss) {
+                               const PinholeIntrinsics& k, int rays, TrackingLoss loss,
+                               float scale[2], bool estimate_scale) {
   TrainingFrameView view;
   view.camera = ToKernelCamera(pose, k);
   view.color = frame.color.data.data();
@@ -90,8 +91,7 @@ TrackingSums Tracker::Evaluate(const SE3& pose, const RgbdFrame& frame,
   terms_.resize(static_cast<size_t>(rays));
   backend_->ComputeTrackingTerms(map_->grid.view(), view, pixels_.data(), rays, options_.params,
                                  terms_.data());
-  float scale[2] = {1.0f, 1.0f};
-  if (loss == TrackingLoss::kHuber && options_.adaptive_scale) RobustScales(rays, scale);
+  if (estimate_scale) RobustScales(rays, scale);
   return backend_->ReduceTrackingTerms(terms_.data(), rays, loss, options_.huber_k, scale);
 }
 
@@ -124,16 +124,16 @@ void Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrinsics& k,
     const int rays = level == 0 ? coarse_rays : total;
     const int budget = level == 0 ? coarse_iterations : options_.iterations - coarse_iterations;
     if (budget <= 0) continue;
-    const bool saved_use_color = options_.params.use_color;
-    if (level == 0 && options_.coarse_depth_only && options_.params.use_depth) {
-      options_.params.use_color = false;
-    }
+    const float color_stretch = level == 0 ? options_.coarse_color_scale : 1.0f;
+    float scale[2] = {color_stretch, 1.0f};
     SE3 accepted = *pose;
     TrackingSums accepted_sums;
     bool have_accepted = false;
     double lambda = 1e-4;
     for (int it = 0; it < budget; ++it, ++iteration) {
-      TrackingSums sums = Evaluate(*pose, frame, k, rays, TrackingLoss::kHuber);
+      TrackingSums sums = Evaluate(*pose, frame, k, rays, TrackingLoss::kHuber, scale,
+                                   options_.adaptive_scale && it == 0);
+      scale[0] = std::max(scale[0], color_stretch);
       const double cost = sums.valid_rays > 0 ? sums.cost / sums.residual_count : HUGE_VAL;
       const double accepted_cost =
           have_accepted ? accepted_sums.cost / accepted_sums.residual_count : HUGE_VAL;
@@ -142,7 +142,6 @@ void Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrinsics& k,
         if (!have_accepted) {
           *last = sums;
           result->iterations = iteration + 1;
-          options_.params.use_color = saved_use_color;
           return;
         }
         *pose = accepted;
@@ -167,7 +166,6 @@ void Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrinsics& k,
         break;
       }
     }
-    options_.params.use_color = saved_use_color;
   }
   result->iterations = iteration;
 }
@@ -181,8 +179,9 @@ void Tracker::RunAdam(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* p
   for (int it = 0; it < options_.iterations; ++it) {
     SamplePixels(frame, options_.rays);  // the reference draws new rays every step
     ++frame_counter_;
-    const TrackingSums sums =
-        Evaluate(*pose, frame, k, static_cast<int>(pixels_.size()), TrackingLoss::kL1);
+    float unit[2] = {1.0f, 1.0f};
+    const TrackingSums sums = Evaluate(*pose, frame, k, static_cast<int>(pixels_.size()),
+                                       TrackingLoss::kL1, unit, false);
     *last = sums;
     if (sums.valid_rays < kPoseDim) break;
     const Vector6d g = Eigen::Map<const Eigen::Matrix<double, 6, 1>>(sums.g) / sums.valid_rays;
@@ -199,7 +198,9 @@ void Tracker::RunAdam(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* p
   options_.params = saved;
   // Score the final pose with the Gauss-Newton residuals so states mean the same in both modes.
   SamplePixels(frame, options_.rays);
-  *last = Evaluate(*pose, frame, k, static_cast<int>(pixels_.size()), TrackingLoss::kHuber);
+  float unit[2] = {1.0f, 1.0f};
+  *last = Evaluate(*pose, frame, k, static_cast<int>(pixels_.size()), TrackingLoss::kHuber, unit,
+                   false);
 }
 
 void Tracker::Classify(const SE3& predicted, const TrackingSums& last,

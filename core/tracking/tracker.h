@@ -27,13 +27,16 @@ struct TrackerOptions {
   TrackingMode mode = TrackingMode::kGaussNewton;
   int rays = 4096;       // rays per frame (GN: at the fine level; Adam: per iteration)
   int iterations = 8;    // GN: total over both levels; Adam: steps (paper: 90)
-  // GN coarse level: rays / coarse_divisor for the first half of the iterations, aligning depth
-  // only: colour residuals linearise well only within a texture's width of the optimum, depth
-  // residuals on surfaces much further out, so geometry brings the pose in and colour refines.
+  // GN coarse level: rays / coarse_divisor for the first half of the iterations, with the colour
+  // noise scale multiplied by coarse_color_scale: colour residuals linearise well only within a
+  // texture's width of the optimum, depth residuals much further out, so geometry brings the pose
+  // in while the down-weighted colour still pins the directions depth cannot see (sliding along
+  // a wall); the fine level then weighs both at their noise.
   int coarse_divisor = 4;
-  bool coarse_depth_only = true;
+  float coarse_color_scale = 4.0f;
   float huber_k = 2.0f;  // in noise-scale units
-  // Stretch the noise scales to the robust spread of the current residuals (never below 1).
+  // Stretch the noise scales to the robust spread of the residuals at the start of each level
+  // (never below 1), and keep them for that level so the cost stays comparable between steps.
   bool adaptive_scale = true;
   float converged_translation = 1e-4f;  // metres: stop when a step is smaller than this ...
   float converged_rotation = 1e-4f;     // ... and this (radians)
@@ -85,8 +88,10 @@ class Tracker {
  private:
   SE3 Predict(double timestamp) const;
   void SamplePixels(const RgbdFrame& frame, int count);
+  // Computes the per-ray terms at `pose` and sums them with the noise stretched by `scale`
+  // (colour, depth); when `estimate_scale` is set, first replaces `scale` by the robust spread.
   TrackingSums Evaluate(const SE3& pose, const RgbdFrame& frame, const PinholeIntrinsics& k,
-                        int rays, TrackingLoss loss);
+                        int rays, TrackingLoss loss, float scale[2], bool estimate_scale);
   void RunGaussNewton(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* pose,
                       TrackingResult* result, TrackingSums* last);
   void RunAdam(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* pose,
