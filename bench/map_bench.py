@@ -14,131 +14,24 @@ See bench/README.md for the protocol and what each column means.
 """
 
 import argparse
-import collections
 import datetime
-import json
-import math
 import os
-import platform
-import signal
-import subprocess
 import sys
 import tempfile
-import threading
-import time
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-PEER = os.path.join(REPO, "bench", "peers", "open3d_tsdf.py")
-PEER_PYTHON = "/usr/bin/python3"  # Debian's interpreter: python3-open3d, python3-opencv
-STDERR_TAIL = 3000  # characters of a failed command's stderr kept for the report
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_common import (PEER_PYTHON, PEERS_DIR, REPO, CommandError, cell,  # noqa: E402
+                          check_keys, copy_keys, git_commit, list_sequences, log,
+                          machine_line, make_synthetic, peer_env, render_table, run_json,
+                          set_log_prefix, write_report)
+
+PEER = os.path.join(PEERS_DIR, "open3d_tsdf.py")
 
 MAP_KEYS = ("keyframes", "seconds", "seconds_per_keyframe", "map_mb", "peak_rss_mb",
             "iterations")
 EVAL_KEYS = ("psnr", "depth_l1_m", "depth_l1_median_m", "coverage", "frames", "pixels")
 PEER_KEYS = ("keyframes", "heldout_frames", "seconds_per_keyframe", "psnr", "depth_l1_m",
              "depth_l1_median_m", "coverage", "map_mb", "peak_rss_mb")
-
-
-def log(msg):
-    print("[map_bench] " + msg, file=sys.stderr, flush=True)
-
-
-class CommandError(Exception):
-    pass
-
-
-def run_cmd(label, cmd, timeout, env=None):
-    """Runs cmd, passing its stderr through live, and returns (stdout, stderr tail).
-    Raises CommandError with the stderr tail when it cannot start, times out or fails."""
-    log("%s: %s" % (label, " ".join(cmd)))
-    tail = collections.deque()
-    tail_len = [0]
-    out_chunks = []
-
-    def pump_stderr(pipe):
-        while True:
-            chunk = os.read(pipe.fileno(), 65536)
-            if not chunk:
-                break
-            sys.stderr.buffer.write(chunk)
-            sys.stderr.buffer.flush()
-            tail.append(chunk)
-            tail_len[0] += len(chunk)
-            while tail_len[0] - len(tail[0]) > STDERR_TAIL:
-                tail_len[0] -= len(tail.popleft())
-
-    def pump_stdout(pipe):
-        out_chunks.append(pipe.read())
-
-    def stderr_tail():
-        text = b"".join(tail).decode("utf-8", "replace")[-STDERR_TAIL:]
-        return text.replace("\r", "\n").strip()
-
-    start = time.monotonic()
-    try:
-        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, env=env, start_new_session=True)
-    except OSError as exc:
-        raise CommandError("%s: cannot start %s: %s" % (label, cmd[0], exc))
-    threads = [threading.Thread(target=pump_stderr, args=(proc.stderr,), daemon=True),
-               threading.Thread(target=pump_stdout, args=(proc.stdout,), daemon=True)]
-    for t in threads:
-        t.start()
-    timed_out = False
-    try:
-        proc.wait(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        timed_out = True
-    except KeyboardInterrupt:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
-        raise
-    if timed_out:
-        os.killpg(proc.pid, signal.SIGKILL)  # the session we started for this command
-        proc.wait()
-    for t in threads:
-        t.join(timeout=10)
-    elapsed = time.monotonic() - start
-    stdout = (out_chunks[0] if out_chunks else b"").decode("utf-8", "replace")
-
-    if timed_out:
-        raise CommandError("%s: timed out after %.0f s\n--- stderr tail ---\n%s"
-                           % (label, timeout, stderr_tail()))
-    if proc.returncode != 0:
-        raise CommandError("%s: exit status %d after %.1f s\n--- stderr tail ---\n%s"
-                           % (label, proc.returncode, elapsed, stderr_tail()))
-    log("%s: done in %.1f s" % (label, elapsed))
-    return stdout, stderr_tail()
-
-
-def run_json(label, cmd, timeout, env=None):
-    """run_cmd, then the JSON object on the last non-empty stdout line (the lines before it
-    are shown on stderr). Raises CommandError on any failure."""
-    stdout, tail = run_cmd(label, cmd, timeout, env)
-    lines = [l for l in stdout.splitlines() if l.strip()]
-    for line in lines[:-1]:  # human-readable output: show it, it is not parsed
-        print(line, file=sys.stderr, flush=True)
-    try:
-        obj = json.loads(lines[-1]) if lines else None
-    except ValueError:
-        obj = None
-    if not isinstance(obj, dict):
-        raise CommandError("%s: the last stdout line is not a JSON object: %r\n"
-                           "--- stderr tail ---\n%s"
-                           % (label, lines[-1][-300:] if lines else "(no output)", tail))
-    return obj
-
-
-def copy_keys(src, dst, keys):
-    """Copies the keys src has; a key it lacks stays absent, so its cell says 'failed'."""
-    for k in keys:
-        if k in src:
-            dst[k] = src[k]
-
-
-def check_keys(label, obj, keys):
-    missing = [k for k in keys if k not in obj]
-    return ["%s: JSON lacks %s" % (label, ", ".join(missing))] if missing else []
 
 
 # ----------------------------------------------------------------------------------------
@@ -185,10 +78,8 @@ def run_peer(args, name, dataset):
     if args.voxel_size is not None:
         cmd += ["--voxel-size", repr(args.voxel_size)]
     cmd.append("--json")
-    env = dict(os.environ)
-    env["OMP_WAIT_POLICY"] = "passive"  # Open3D: OpenMP x TBB oversubscription otherwise
     try:
-        p = run_json("%s open3d_tsdf" % name, cmd, args.timeout, env=env)
+        p = run_json("%s open3d_tsdf" % name, cmd, args.timeout, env=peer_env())
     except CommandError as exc:
         return row, [str(exc)]
     problems += check_keys("%s open3d_tsdf" % name, p, PEER_KEYS)
@@ -202,120 +93,31 @@ def run_peer(args, name, dataset):
 # Report
 # ----------------------------------------------------------------------------------------
 
-def cell(row, key, spec, scale=1.0):
-    """Formats row[key]; 'failed' when the system did not report it, 'n/a' when it reported
-    null (e.g. depth error with zero coverage)."""
-    if key not in row:
-        return "failed"
-    v = row[key]
-    if v is None:
-        return "n/a"
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return "failed"
-    if isinstance(v, float) and math.isinf(v):
-        return "inf"
-    if isinstance(v, float) and math.isnan(v):
-        return "failed"
-    return spec % (v * scale)
-
-
-def machine_line():
-    model = None
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    model = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    cores = os.cpu_count()
-    try:
-        usable = len(os.sched_getaffinity(0))
-    except AttributeError:
-        usable = cores
-    try:
-        load = "%.2f" % os.getloadavg()[0]
-    except OSError:
-        load = "?"
-    return "%s, %s logical cores (%s usable), %s; 1-min load average at start %s" % (
-        model or platform.processor() or "unknown CPU", cores, usable, platform.system(),
-        load)
-
-
-def git_commit():
-    try:
-        r = subprocess.run(["git", "-C", REPO, "rev-parse", "--short", "HEAD"],
-                           capture_output=True, text=True, timeout=10)
-        return r.stdout.strip() if r.returncode == 0 else None
-    except (OSError, subprocess.SubprocessError):
-        return None
-
-
-def render_table(rows, header_lines, notes):
+def table(rows, header_lines, notes):
     cols = ["sequence", "system", "keyframes", "held-out", "s/keyframe", "PSNR (dB)",
             "depth L1 mean (cm)", "depth L1 median (cm)", "coverage", "map MB",
             "peak RSS MB"]
-    out = list(header_lines) + [""]
-    out.append("| " + " | ".join(cols) + " |")
-    out.append("|" + "|".join(" --- " for _ in cols) + "|")
+    body = []
     for seq, system, row in rows:
-        vals = [seq, system,
-                cell(row, "keyframes", "%d"),
-                cell(row, "heldout_frames", "%d"),
-                cell(row, "seconds_per_keyframe", "%.3f"),
-                cell(row, "psnr", "%.2f"),
-                cell(row, "depth_l1_m", "%.2f", 100.0),
-                cell(row, "depth_l1_median_m", "%.2f", 100.0),
-                cell(row, "coverage", "%.3f"),
-                cell(row, "map_mb", "%.1f"),
-                cell(row, "peak_rss_mb", "%.0f")]
-        out.append("| " + " | ".join(vals) + " |")
-    if notes:
-        out.append("")
-        out.append("Notes:")
-        out.append("")
-        for n in notes:
-            lines = n.rstrip().splitlines()
-            if len(lines) == 1:
-                out.append("- " + lines[0])
-            else:
-                out.append("- " + lines[0])
-                out.append("")
-                out.append("  ```")
-                out.extend("  " + l for l in lines[1:])
-                out.append("  ```")
-    return "\n".join(out) + "\n"
+        body.append([seq, system,
+                     cell(row, "keyframes", "%d"),
+                     cell(row, "heldout_frames", "%d"),
+                     cell(row, "seconds_per_keyframe", "%.3f"),
+                     cell(row, "psnr", "%.2f"),
+                     cell(row, "depth_l1_m", "%.2f", 100.0),
+                     cell(row, "depth_l1_median_m", "%.2f", 100.0),
+                     cell(row, "coverage", "%.3f"),
+                     cell(row, "map_mb", "%.1f"),
+                     cell(row, "peak_rss_mb", "%.0f")])
+    return render_table(cols, body, header_lines, notes)
 
 
 # ----------------------------------------------------------------------------------------
 # Main
 # ----------------------------------------------------------------------------------------
 
-def list_sequences(data_dir, wanted, notes):
-    if not os.path.isdir(data_dir):
-        notes.append("data folder %s does not exist; no dataset sequences were run" % data_dir)
-        return []
-    seqs = []
-    for name in sorted(os.listdir(data_dir)):
-        path = os.path.join(data_dir, name)
-        if not os.path.isdir(path):
-            continue
-        if wanted is not None and name not in wanted:
-            continue
-        if not os.path.exists(os.path.join(path, "intrinsics.txt")):
-            notes.append("%s skipped: no intrinsics.txt (not a TUM-layout sequence)" % name)
-            continue
-        seqs.append((name, path))
-    if wanted is not None:
-        found = {s[0] for s in seqs}
-        for w in wanted:
-            if w not in found and not os.path.isdir(os.path.join(data_dir, w)):
-                notes.append("sequence %s not found under %s" % (w, data_dir))
-    return seqs
-
-
 def main():
+    set_log_prefix("map_bench")
     ap = argparse.ArgumentParser(
         description="Mapping benchmark: plenox vs an Open3D TSDF peer (bench/README.md).")
     ap.add_argument("--plenox", default=os.path.join(REPO, "build", "clients", "plenox",
@@ -357,17 +159,8 @@ def main():
     with tempfile.TemporaryDirectory(prefix="map_bench_") as tmp:
         if args.synthetic:
             synth_dir = os.path.join(tmp, "synthetic")
-            cmd = [args.plenox, "synth", "--out", synth_dir]
             try:
-                if not os.access(args.plenox, os.X_OK):
-                    raise CommandError("plenox binary not found or not executable: %s"
-                                       % args.plenox)
-                stdout, _ = run_cmd("synthetic synth", cmd, args.timeout)
-                if stdout.strip():
-                    sys.stderr.write(stdout)
-                if not os.path.exists(os.path.join(synth_dir, "intrinsics.txt")):
-                    raise CommandError("%s has no intrinsics.txt after `plenox synth`"
-                                       % synth_dir)
+                make_synthetic(args.plenox, synth_dir, args.timeout)
                 seqs.append(("synthetic", synth_dir))
             except CommandError as exc:
                 notes.append("synthetic: `plenox synth` failed: %s" % exc)
@@ -413,15 +206,8 @@ def main():
         "- settings: %s" % settings,
         "- plenox: %s%s" % (args.plenox, " (commit %s)" % commit if commit else ""),
     ]
-    text = render_table(rows, header, notes)
-    sys.stdout.write("\n" + text)
-    sys.stdout.flush()
-    if args.out:
-        out = os.path.abspath(args.out)
-        os.makedirs(os.path.dirname(out), exist_ok=True)
-        with open(out, "w") as f:
-            f.write(text)
-        log("wrote %s" % out)
+    text = table(rows, header, notes)
+    write_report(text, args.out)
     return 1 if any_failed else 0
 
 

@@ -14,7 +14,6 @@ The last stdout line is one JSON object when --json is given. Progress goes to s
 """
 
 import argparse
-import bisect
 import json
 import math
 import os
@@ -30,14 +29,20 @@ os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 import numpy as np  # noqa: E402
 
 try:
-    import cv2  # noqa: E402
+    import cv2  # noqa: E402,F401  (bench_common.load_rgbd decodes with it)
     import open3d as o3d  # noqa: E402
 except ImportError as exc:  # pragma: no cover - depends on the interpreter
-    sys.exit("open3d_tsdf.py: %s. Run it with /usr/bin/python3 (Debian's python3-open3d, "
-             "python3-opencv)." % exc)
+    sys.exit("%s: %s. Run it with /usr/bin/python3 (Debian's python3-open3d, "
+             "python3-opencv)." % (os.path.basename(sys.argv[0]), exc))
 
-ASSOC_MAX_DT = 0.02   # s, rgb<->depth association and GT look-up tolerance
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from bench_common import (ASSOC_MAX_DT, GroundTruth, load_rgbd, read_frames,  # noqa: E402
+                          read_intrinsics)
+
 VALID_DEPTH_MAX = 10.0  # m, protocol: pixels with 0 < z <= 10 m are scored
+BLOCK_RES = 16  # voxels per block edge
+ATTR_CHANNELS = (1, 1, 3)  # tsdf, weight, colour; all float32
+BYTES_PER_VOXEL = 4 * sum(ATTR_CHANNELS)
 
 
 def log(msg):
@@ -45,136 +50,85 @@ def log(msg):
 
 
 # ----------------------------------------------------------------------------------------
-# TUM-layout dataset reading
+# TSDF map (also used by open3d_f2m.py, the frame-to-model tracking peer)
 # ----------------------------------------------------------------------------------------
 
-def read_rows(path):
-    """Whitespace-split, non-empty, non-comment lines of a TUM text file."""
-    rows = []
-    with open(path) as f:
-        for line in f:
-            line = line.strip()
-            if line and not line.startswith("#"):
-                rows.append(line.split())
-    return rows
+def intrinsic_tensor(intr):
+    return o3d.core.Tensor(np.array([[intr["fx"], 0.0, intr["cx"]],
+                                     [0.0, intr["fy"], intr["cy"]],
+                                     [0.0, 0.0, 1.0]]), o3d.core.Dtype.Float64)
 
 
-def read_intrinsics(dataset):
-    rows = read_rows(os.path.join(dataset, "intrinsics.txt"))
-    if not rows or len(rows[0]) < 7:
-        raise ValueError("intrinsics.txt: expected 'fx fy cx cy width height depth_scale ...'")
-    v = rows[0]
-    return {
-        "fx": float(v[0]), "fy": float(v[1]), "cx": float(v[2]), "cy": float(v[3]),
-        "width": int(float(v[4])), "height": int(float(v[5])), "depth_scale": float(v[6]),
-    }
+def make_grid(voxel_size, block_count, device):
+    o3c = o3d.core
+    return o3d.t.geometry.VoxelBlockGrid(
+        attr_names=["tsdf", "weight", "color"], attr_dtypes=[o3c.float32] * 3,
+        attr_channels=[[c] for c in ATTR_CHANNELS], voxel_size=voxel_size,
+        block_resolution=BLOCK_RES, block_count=block_count, device=device)
 
 
-def associate(rgb_rows, depth_rows, max_dt):
-    """Pair rgb and depth stamps one-to-one, closest pairs first (TUM associate.py logic)."""
-    rgb = sorted((float(r[0]), r[1]) for r in rgb_rows)
-    depth = sorted((float(r[0]), r[1]) for r in depth_rows)
-    dstamps = [d[0] for d in depth]
-    cands = []
-    for i, (t, _) in enumerate(rgb):
-        lo = bisect.bisect_left(dstamps, t - max_dt)
-        hi = bisect.bisect_right(dstamps, t + max_dt)
-        for j in range(lo, hi):
-            cands.append((abs(dstamps[j] - t), i, j))
-    cands.sort()
-    used_r, used_d, pairs = set(), set(), []
-    for _, i, j in cands:
-        if i in used_r or j in used_d:
-            continue
-        used_r.add(i)
-        used_d.add(j)
-        pairs.append((rgb[i][0], rgb[i][1], depth[j][0], depth[j][1]))
-    pairs.sort()
-    return pairs
+def build_tsdf(frames, key_ids, poses, intr, voxel_size, depth_max, trunc_voxel_multiplier,
+               block_count=0, log=log):
+    """Integrates frames[key_ids] at poses (camera-to-world 4x4) into a new VoxelBlockGrid on
+    CPU:0. block_count <= 0 sizes the hash map with an untimed pre-pass (see below).
+    Returns (grid, {"block_count", "integrate_seconds", "load_seconds"})."""
+    o3c = o3d.core
+    device = o3c.Device("CPU:0")
+    K_t = intrinsic_tensor(intr)
+    ds = intr["depth_scale"]
+
+    # --- capacity ------------------------------------------------------------------------
+    # Open3D allocates and zero-fills block_count blocks up front (and doubles the capacity
+    # with a rehash when it runs out). The pre-pass finds the exact set of blocks the keyframes
+    # will touch, so the grid neither rehashes nor holds gigabytes it never uses. It is not
+    # timed: it only sizes a buffer.
+    if block_count <= 0:
+        scratch = make_grid(voxel_size, 1024, device)  # this call does not insert
+        seen, max_frame = set(), 0
+        for i in key_ids:
+            depth, _ = load_rgbd(frames[i], intr)
+            coords = scratch.compute_unique_block_coordinates(
+                o3d.t.geometry.Image(o3c.Tensor(depth)), K_t,
+                o3c.Tensor(np.linalg.inv(poses[i]), o3c.Dtype.Float64), ds, depth_max,
+                trunc_voxel_multiplier).numpy()
+            seen.update(map(tuple, coords.tolist()))
+            max_frame = max(max_frame, len(coords))
+        del scratch
+        # Open3D's insert rehashes (doubling, and slowly) when size + the number of keys
+        # passed in would exceed the capacity, even if most keys are already there.
+        block_count = max(1024, int(1.1 * (len(seen) + max_frame)) + 64)
+        log("pre-pass: keyframes touch %d blocks (at most %d per frame); capacity %d blocks "
+            "(%.0f MB)" % (len(seen), max_frame, block_count,
+                           block_count * BLOCK_RES ** 3 * BYTES_PER_VOXEL / 1e6))
+    vbg = make_grid(voxel_size, block_count, device)
+
+    # --- mapping -------------------------------------------------------------------------
+    # Timed: building the Open3D images from decoded arrays, block allocation, integration.
+    # Not timed: PNG decoding (disk I/O), as it is the same work for every system.
+    integrate_s, load_s = 0.0, 0.0
+    for n, i in enumerate(key_ids):
+        t0 = time.perf_counter()
+        depth, rgb = load_rgbd(frames[i], intr)
+        t1 = time.perf_counter()
+        extrinsic = o3c.Tensor(np.linalg.inv(poses[i]), o3c.Dtype.Float64)
+        d_img = o3d.t.geometry.Image(o3c.Tensor(depth))
+        c_img = o3d.t.geometry.Image(o3c.Tensor(rgb))
+        blocks = vbg.compute_unique_block_coordinates(
+            d_img, K_t, extrinsic, ds, depth_max, trunc_voxel_multiplier)
+        vbg.integrate(blocks, d_img, c_img, K_t, extrinsic, ds, depth_max,
+                      trunc_voxel_multiplier)
+        t2 = time.perf_counter()
+        load_s += t1 - t0
+        integrate_s += t2 - t1
+        log("integrated keyframe %d (%d/%d) in %.3f s, %d blocks"
+            % (i, n + 1, len(key_ids), t2 - t1, vbg.hashmap().size()))
+    return vbg, {"block_count": block_count, "integrate_seconds": integrate_s,
+                 "load_seconds": load_s}
 
 
-def read_frames(dataset):
-    """Frame list in associations.txt order: (t_rgb, rgb_path, t_depth, depth_path)."""
-    assoc = os.path.join(dataset, "associations.txt")
-    if os.path.exists(assoc):
-        frames = [(float(r[0]), r[1], float(r[2]), r[3]) for r in read_rows(assoc)]
-    else:
-        frames = associate(read_rows(os.path.join(dataset, "rgb.txt")),
-                           read_rows(os.path.join(dataset, "depth.txt")), ASSOC_MAX_DT)
-    return [(tr, os.path.join(dataset, pr), td, os.path.join(dataset, pd))
-            for tr, pr, td, pd in frames]
-
-
-def quat_slerp(q0, q1, a):
-    q0 = q0 / np.linalg.norm(q0)
-    q1 = q1 / np.linalg.norm(q1)
-    d = float(np.dot(q0, q1))
-    if d < 0.0:  # take the short way round
-        q1, d = -q1, -d
-    if d > 0.9995:
-        q = q0 + a * (q1 - q0)
-    else:
-        th = math.acos(min(1.0, d))
-        q = (math.sin((1.0 - a) * th) * q0 + math.sin(a * th) * q1) / math.sin(th)
-    return q / np.linalg.norm(q)
-
-
-def quat_to_rot(q):
-    x, y, z, w = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
-
-
-class GroundTruth:
-    """groundtruth.txt ('t tx ty tz qx qy qz qw', camera-to-world) with interpolation."""
-
-    def __init__(self, path):
-        rows = sorted((float(r[0]), [float(x) for x in r[1:8]]) for r in read_rows(path))
-        if not rows:
-            raise ValueError("%s has no poses" % path)
-        self.t = [r[0] for r in rows]
-        self.p = [np.array(r[1]) for r in rows]
-
-    def pose(self, t, max_dt=ASSOC_MAX_DT):
-        """4x4 camera-to-world at time t, or None when t is off the ends by more than max_dt."""
-        i = bisect.bisect_left(self.t, t)
-        if i < len(self.t) and self.t[i] == t:
-            tr, q = self.p[i][:3], self.p[i][3:]
-        elif i == 0 or i == len(self.t):
-            j = 0 if i == 0 else len(self.t) - 1
-            if abs(self.t[j] - t) > max_dt:
-                return None
-            tr, q = self.p[j][:3], self.p[j][3:]
-        else:
-            t0, t1 = self.t[i - 1], self.t[i]
-            a = (t - t0) / (t1 - t0)
-            p0, p1 = self.p[i - 1], self.p[i]
-            tr = (1.0 - a) * p0[:3] + a * p1[:3]
-            q = quat_slerp(p0[3:], p1[3:], a)
-        T = np.eye(4)
-        T[:3, :3] = quat_to_rot(np.asarray(q) / np.linalg.norm(q))
-        T[:3, 3] = tr
-        return T
-
-
-def load_rgbd(frame, intr):
-    _, rgb_path, _, depth_path = frame
-    depth = cv2.imread(depth_path, cv2.IMREAD_UNCHANGED)
-    bgr = cv2.imread(rgb_path, cv2.IMREAD_COLOR)
-    if depth is None or bgr is None:
-        raise IOError("cannot read %s or %s" % (depth_path, rgb_path))
-    if depth.dtype != np.uint16 or depth.ndim != 2:
-        raise ValueError("%s: expected 16-bit single-channel depth, got %s %s"
-                         % (depth_path, depth.dtype, depth.shape))
-    want = (intr["height"], intr["width"])
-    if depth.shape != want or bgr.shape[:2] != want:
-        raise ValueError("%s: image size %s / %s does not match intrinsics.txt %s"
-                         % (rgb_path, bgr.shape[:2], depth.shape, want))
-    rgb = np.ascontiguousarray(bgr[:, :, ::-1])
-    return depth, rgb
+def active_block_coords(vbg):
+    hashmap = vbg.hashmap()
+    return hashmap.key_tensor()[hashmap.active_buf_indices().to(o3d.core.int64)]
 
 
 # ----------------------------------------------------------------------------------------
@@ -285,74 +239,17 @@ def main():
     # Open3D prints its warnings (e.g. range-map reallocation in ray_cast) on stdout.
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
     o3c = o3d.core
-    device = o3c.Device("CPU:0")
-    K_t = o3c.Tensor(np.array([[intr["fx"], 0.0, intr["cx"]],
-                               [0.0, intr["fy"], intr["cy"]],
-                               [0.0, 0.0, 1.0]]), o3c.Dtype.Float64)
+    K_t = intrinsic_tensor(intr)
     ds = intr["depth_scale"]
-    attr_dtypes = [o3c.float32, o3c.float32, o3c.float32]
-    attr_channels = [1, 1, 3]
-    bytes_per_voxel = 4 * sum(attr_channels)
-    block_res = 16
+    vbg, built = build_tsdf(frames, key_ids, poses, intr, args.voxel_size, args.depth_max,
+                            args.trunc_voxel_multiplier, args.block_count)
+    block_count = built["block_count"]
+    integrate_s, load_s = built["integrate_seconds"], built["load_seconds"]
 
-    def make_grid(block_count):
-        return o3d.t.geometry.VoxelBlockGrid(
-            attr_names=["tsdf", "weight", "color"], attr_dtypes=attr_dtypes,
-            attr_channels=[[c] for c in attr_channels], voxel_size=args.voxel_size,
-            block_resolution=block_res, block_count=block_count, device=device)
-
-    # --- capacity ------------------------------------------------------------------------
-    # Open3D allocates and zero-fills block_count blocks up front (and doubles the capacity
-    # with a rehash when it runs out). The pre-pass finds the exact set of blocks the keyframes
-    # will touch, so the grid neither rehashes nor holds gigabytes it never uses. It is not
-    # timed: it only sizes a buffer.
-    block_count = args.block_count
-    if block_count <= 0:
-        scratch = make_grid(1024)  # compute_unique_block_coordinates does not insert
-        seen, max_frame = set(), 0
-        for i in key_ids:
-            depth, _ = load_rgbd(frames[i], intr)
-            coords = scratch.compute_unique_block_coordinates(
-                o3d.t.geometry.Image(o3c.Tensor(depth)), K_t,
-                o3c.Tensor(np.linalg.inv(poses[i]), o3c.Dtype.Float64), ds, args.depth_max,
-                args.trunc_voxel_multiplier).numpy()
-            seen.update(map(tuple, coords.tolist()))
-            max_frame = max(max_frame, len(coords))
-        del scratch
-        # Open3D's insert rehashes (doubling, and slowly) when size + the number of keys
-        # passed in would exceed the capacity, even if most keys are already there.
-        block_count = max(1024, int(1.1 * (len(seen) + max_frame)) + 64)
-        log("pre-pass: keyframes touch %d blocks (at most %d per frame); capacity %d blocks "
-            "(%.0f MB)" % (len(seen), max_frame, block_count,
-                           block_count * block_res ** 3 * bytes_per_voxel / 1e6))
-    vbg = make_grid(block_count)
-
-    # --- mapping -------------------------------------------------------------------------
-    # Timed: building the Open3D images from decoded arrays, block allocation, integration.
-    # Not timed: PNG decoding (disk I/O), as it is the same work for every system.
-    integrate_s, load_s = 0.0, 0.0
-    for n, i in enumerate(key_ids):
-        t0 = time.perf_counter()
-        depth, rgb = load_rgbd(frames[i], intr)
-        t1 = time.perf_counter()
-        extrinsic = o3c.Tensor(np.linalg.inv(poses[i]), o3c.Dtype.Float64)
-        d_img = o3d.t.geometry.Image(o3c.Tensor(depth))
-        c_img = o3d.t.geometry.Image(o3c.Tensor(rgb))
-        blocks = vbg.compute_unique_block_coordinates(
-            d_img, K_t, extrinsic, ds, args.depth_max, args.trunc_voxel_multiplier)
-        vbg.integrate(blocks, d_img, c_img, K_t, extrinsic, ds, args.depth_max,
-                      args.trunc_voxel_multiplier)
-        t2 = time.perf_counter()
-        load_s += t1 - t0
-        integrate_s += t2 - t1
-        log("integrated keyframe %d (%d/%d) in %.3f s, %d blocks"
-            % (i, n + 1, len(key_ids), t2 - t1, vbg.hashmap().size()))
-
-    hashmap = vbg.hashmap()
-    active_blocks = int(hashmap.size())
-    block_coords = hashmap.key_tensor()[hashmap.active_buf_indices().to(o3c.int64)]
+    active_blocks = int(vbg.hashmap().size())
+    block_coords = active_block_coords(vbg)
     # 1e6 bytes, like `plenox map` (peak RSS is ru_maxrss KiB / 1024, also like plenox).
-    map_mb = active_blocks * block_res ** 3 * bytes_per_voxel / 1e6
+    map_mb = active_blocks * BLOCK_RES ** 3 * BYTES_PER_VOXEL / 1e6
 
     # --- held-out evaluation -------------------------------------------------------------
     factor = range_factor(intr)

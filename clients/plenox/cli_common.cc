@@ -22,7 +22,7 @@ int ReportError(const std::string& command, const absl::Status& status, bool usa
 bool ParseFlagsOrExit(FlagSet& flags, const std::vector<std::string>& args, int* exit_code) {
   absl::StatusOr<bool> parsed = flags.Parse(args);
   if (!parsed.ok()) {
-    std::cerr << "plenox " << flags.command() << ": " << parsed.status().message() << "\n";
+    std::cerr << flags.command() << ": " << parsed.status().message() << "\n";
     *exit_code = kExitUsage;
     return false;
   }

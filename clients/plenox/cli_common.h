@@ -9,7 +9,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "clients/plenox/flags.h"
+#include "core/common/flags.h"
 #include "core/io/dataset.h"
 #include "core/mapping/mapper.h"
 

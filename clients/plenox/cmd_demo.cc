@@ -21,7 +21,7 @@
 namespace plx::cli {
 
 int RunDemo(const std::vector<std::string>& args) {
-  FlagSet flags("demo",
+  FlagSet flags("plenox demo",
                 "Generates a synthetic RGB-D sequence with sensor-like depth noise, maps every\n"
                 "10th frame with known poses, scores the map on the held-out frames in between\n"
                 "(PSNR, depth L1, coverage), tracks every frame in the map (ATE), and writes the\n"

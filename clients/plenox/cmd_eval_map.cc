@@ -10,7 +10,7 @@
 namespace plx::cli {
 
 int RunEvalMap(const std::vector<std::string>& args) {
-  FlagSet flags("eval-map",
+  FlagSet flags("plenox eval-map",
                 "Renders a map at the ground-truth poses of the frames held out from mapping\n"
                 "(index % every == every / 2) and compares with their measured colour and\n"
                 "depth: PSNR, depth L1 (range vs range, metres) and coverage (fraction of valid\n"

@@ -55,7 +55,7 @@ void PrintSummary(const TrajectoryEvalResult& r, const TrajectoryEvalOptions& op
 }  // namespace
 
 int RunEvalTraj(const std::vector<std::string>& args) {
-  FlagSet flags(kCommand,
+  FlagSet flags("plenox eval-traj",
                 "Compares an estimated trajectory with ground truth, as evo_ape / evo_rpe do.\n"
                 "Both files are TUM trajectories (\"timestamp tx ty tz qx qy qz qw\" per line,\n"
                 "world_T_camera); a TUM groundtruth.txt works as it is. Each estimated pose is\n"

@@ -12,7 +12,7 @@
 namespace plx::cli {
 
 int RunMap(const std::vector<std::string>& args) {
-  FlagSet flags("map",
+  FlagSet flags("plenox map",
                 "Builds a Plenoxel map from every N-th frame of a dataset, using the dataset's\n"
                 "ground-truth poses, and saves it to a map file.");
   AddDatasetFlags(flags);

@@ -19,7 +19,7 @@
 namespace plx::cli {
 
 int RunRender(const std::vector<std::string>& args) {
-  FlagSet flags("render",
+  FlagSet flags("plenox render",
                 "Renders a map from a camera pose. The colour image is 8-bit RGB; the depth\n"
                 "image is a 16-bit PNG of z-depth in millimetres, 0 where the map renders\n"
                 "nothing (opacity below 0.5).");

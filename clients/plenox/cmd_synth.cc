@@ -9,7 +9,7 @@
 namespace plx::cli {
 
 int RunSynth(const std::vector<std::string>& args) {
-  FlagSet flags("synth",
+  FlagSet flags("plenox synth",
                 "Writes the procedural synthetic room sequence (exact ground-truth poses) to a\n"
                 "folder in the TUM layout, readable by every other command.");
   flags.Add("out", "DIR", "folder to write", std::nullopt, true);

@@ -11,7 +11,7 @@
 namespace plx::cli {
 
 int RunTrack(const std::vector<std::string>& args) {
-  FlagSet flags("track",
+  FlagSet flags("plenox track",
                 "Tracks every frame of a dataset against a map (frozen), starting from frame 0's\n"
                 "ground-truth pose when the dataset has one, and writes the trajectory in TUM\n"
                 "format (timestamp tx ty tz qx qy qz qw, camera-to-world). Frames the tracker\n"

@@ -2,7 +2,7 @@
 #pragma once
 
 #include "absl/status/statusor.h"
-#include "clients/plenox/flags.h"
+#include "core/common/flags.h"
 #include "core/io/synthetic_sequence.h"
 
 namespace plx::cli {

@@ -84,12 +84,8 @@ absl::Status CheckImageShape(const std::string& path, int width, int height, int
   return absl::OkStatus();
 }
 
-}  // namespace
-
-std::string SizeString(int width, int height) { return absl::StrCat(width, "x", height); }
-
-absl::StatusOr<cv::Mat> DecodeColorFile(const std::string& path) {
-  PLX_ASSIGN_OR_RETURN(cv::Mat image, ReadRaw(path));
+// 8-bit grey, BGR or BGRA as decoded by OpenCV -> RGB8; `what` names the source in errors.
+absl::StatusOr<cv::Mat> ToRgb8(const cv::Mat& image, const std::string& path) {
   if (image.depth() != CV_8U) {
     return absl::InvalidArgumentError(absl::StrCat(
         path, ": colour images must be 8-bit with 1, 3 or 4 channels, got ", Describe(image)));
@@ -118,13 +114,108 @@ absl::StatusOr<cv::Mat> DecodeColorFile(const std::string& path) {
   return rgb;
 }
 
-absl::StatusOr<cv::Mat> DecodeDepthFile(const std::string& path) {
-  PLX_ASSIGN_OR_RETURN(cv::Mat image, ReadRaw(path));
+absl::StatusOr<cv::Mat> CheckDepth16(const cv::Mat& image, const std::string& path) {
   if (image.type() != CV_16UC1) {
     return absl::InvalidArgumentError(absl::StrCat(
         path, ": depth images must be 16-bit unsigned with 1 channel, got ", Describe(image)));
   }
   return image;
+}
+
+absl::StatusOr<cv::Mat> DecodeBuffer(const std::string& bytes, const std::string& what) {
+  if (bytes.empty()) return absl::InvalidArgumentError(absl::StrCat(what, ": empty image"));
+  cv::Mat image;
+  try {
+    const cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8UC1,
+                         const_cast<char*>(bytes.data()));
+    image = cv::imdecode(buffer, cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& e) {
+    return absl::InvalidArgumentError(absl::StrCat(what, ": cannot decode image: ", e.what()));
+  }
+  if (image.empty()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(what, ": cannot decode image (corrupt or not a PNG/JPEG)"));
+  }
+  return image;
+}
+
+cv::Mat ColorImageToBgr8(const ColorImage& image) {
+  cv::Mat bgr(image.height, image.width, CV_8UC3);
+  for (int v = 0; v < image.height; ++v) {
+    uint8_t* dst = bgr.ptr<uint8_t>(v);
+    for (int u = 0; u < image.width; ++u) {
+      const float* rgb = image.pixel(u, v);
+      for (int c = 0; c < 3; ++c) {
+        const float value = std::isfinite(rgb[c]) ? rgb[c] : 0.0f;
+        dst[3 * u + (2 - c)] =
+            static_cast<uint8_t>(std::lround(std::clamp(value, 0.0f, 1.0f) * 255.0f));
+      }
+    }
+  }
+  return bgr;
+}
+
+cv::Mat DepthImageToU16(const DepthImage& image, double depth_scale) {
+  cv::Mat raw(image.height, image.width, CV_16UC1);
+  for (int v = 0; v < image.height; ++v) {
+    uint16_t* dst = raw.ptr<uint16_t>(v);
+    const float* src = image.pixel(0, v);
+    for (int u = 0; u < image.width; ++u) {
+      const double z = src[u];
+      dst[u] = (std::isfinite(z) && z > 0)
+                   ? static_cast<uint16_t>(std::min(std::round(z * depth_scale), 65535.0))
+                   : 0;
+    }
+  }
+  return raw;
+}
+
+absl::StatusOr<std::string> EncodeMat(const cv::Mat& image, const std::string& extension) {
+  std::vector<uint8_t> bytes;
+  try {
+    if (!cv::imencode(extension, image, bytes)) {
+      return absl::InternalError(absl::StrCat("cannot encode image as ", extension));
+    }
+  } catch (const cv::Exception& e) {
+    return absl::InternalError(absl::StrCat("cannot encode image as ", extension, ": ", e.what()));
+  }
+  return std::string(bytes.begin(), bytes.end());
+}
+
+}  // namespace
+
+std::string SizeString(int width, int height) { return absl::StrCat(width, "x", height); }
+
+absl::StatusOr<cv::Mat> DecodeColorFile(const std::string& path) {
+  PLX_ASSIGN_OR_RETURN(cv::Mat image, ReadRaw(path));
+  return ToRgb8(image, path);
+}
+
+absl::StatusOr<cv::Mat> DecodeDepthFile(const std::string& path) {
+  PLX_ASSIGN_OR_RETURN(cv::Mat image, ReadRaw(path));
+  return CheckDepth16(image, path);
+}
+
+absl::StatusOr<cv::Mat> DecodeColorBuffer(const std::string& bytes, const std::string& what) {
+  PLX_ASSIGN_OR_RETURN(cv::Mat image, DecodeBuffer(bytes, what));
+  return ToRgb8(image, what);
+}
+
+absl::StatusOr<cv::Mat> DecodeDepthBuffer(const std::string& bytes, const std::string& what) {
+  PLX_ASSIGN_OR_RETURN(cv::Mat image, DecodeBuffer(bytes, what));
+  return CheckDepth16(image, what);
+}
+
+absl::StatusOr<std::string> EncodeColorImage(const ColorImage& image, const std::string& extension) {
+  PLX_RETURN_IF_ERROR(
+      CheckImageShape("colour image", image.width, image.height, image.channels, image.data.size(), 3));
+  return EncodeMat(ColorImageToBgr8(image), extension);
+}
+
+absl::StatusOr<std::string> EncodeDepthImage(const DepthImage& image, double depth_scale) {
+  PLX_RETURN_IF_ERROR(
+      CheckImageShape("depth image", image.width, image.height, image.channels, image.data.size(), 1));
+  return EncodeMat(DepthImageToU16(image, depth_scale), ".png");
 }
 
 ColorImage ColorImageFromMat(const cv::Mat& rgb8) {
@@ -166,20 +257,7 @@ absl::StatusOr<DepthImage> ReadDepthImage(const std::string& path, double depth_
 absl::Status WriteColorImage(const std::string& path, const ColorImage& image) {
   PLX_RETURN_IF_ERROR(
       CheckImageShape(path, image.width, image.height, image.channels, image.data.size(), 3));
-  // Stored in OpenCV's BGR order.
-  cv::Mat bgr(image.height, image.width, CV_8UC3);
-  for (int v = 0; v < image.height; ++v) {
-    uint8_t* dst = bgr.ptr<uint8_t>(v);
-    for (int u = 0; u < image.width; ++u) {
-      const float* rgb = image.pixel(u, v);
-      for (int c = 0; c < 3; ++c) {
-        const float value = std::isfinite(rgb[c]) ? rgb[c] : 0.0f;
-        dst[3 * u + (2 - c)] =
-            static_cast<uint8_t>(std::lround(std::clamp(value, 0.0f, 1.0f) * 255.0f));
-      }
-    }
-  }
-  return WriteMat(path, bgr);
+  return WriteMat(path, ColorImageToBgr8(image));  // OpenCV's BGR order
 }
 
 absl::Status WriteDepthImage(const std::string& path, const DepthImage& image, double depth_scale) {
@@ -189,20 +267,7 @@ absl::Status WriteDepthImage(const std::string& path, const DepthImage& image, d
     return absl::InvalidArgumentError(
         absl::StrCat(path, ": depth scale must be positive, got ", depth_scale));
   }
-  cv::Mat raw(image.height, image.width, CV_16UC1);
-  for (int v = 0; v < image.height; ++v) {
-    uint16_t* dst = raw.ptr<uint16_t>(v);
-    const float* src = image.pixel(0, v);
-    for (int u = 0; u < image.width; ++u) {
-      const double z = src[u];
-      if (!(std::isfinite(z) && z > 0)) {
-        dst[u] = 0;
-        continue;
-      }
-      dst[u] = static_cast<uint16_t>(std::min(std::round(z * depth_scale), 65535.0));
-    }
-  }
-  return WriteMat(path, raw);
+  return WriteMat(path, DepthImageToU16(image, depth_scale));
 }
 
 absl::StatusOr<Undistorter> Undistorter::Create(const CameraCalibration& calibration) {

@@ -21,6 +21,16 @@ namespace plx {
 absl::StatusOr<cv::Mat> DecodeColorFile(const std::string& path);
 absl::StatusOr<cv::Mat> DecodeDepthFile(const std::string& path);
 
+// The same from encoded bytes in memory (PNG, JPEG); `what` names the source in errors
+// (e.g. "frame.color").
+absl::StatusOr<cv::Mat> DecodeColorBuffer(const std::string& bytes, const std::string& what);
+absl::StatusOr<cv::Mat> DecodeDepthBuffer(const std::string& bytes, const std::string& what);
+
+// Encoded bytes: colour as 8-bit RGB in the format of `extension` (".png", ".jpg"), depth as a
+// 16-bit PNG of round(z * depth_scale).
+absl::StatusOr<std::string> EncodeColorImage(const ColorImage& image, const std::string& extension);
+absl::StatusOr<std::string> EncodeDepthImage(const DepthImage& image, double depth_scale);
+
 // CV_8UC3 RGB -> RGB in [0, 1]; CV_16UC1 -> metres.
 ColorImage ColorImageFromMat(const cv::Mat& rgb8);
 DepthImage DepthImageFromMat(const cv::Mat& depth16, double depth_scale);

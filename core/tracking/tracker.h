@@ -77,6 +77,10 @@ class Tracker {
 
   static absl::Status ValidateOptions(const TrackerOptions& options);
 
+  // Switches to another version of the map (the daemon's readers follow mapping jobs); the pose
+  // and motion model carry over.
+  void set_map(PlenoxelMap* map) { map_ = map; }
+
   // Starts from a known pose (e.g. the first frame's ground truth) at `timestamp`.
   void Reset(const SE3& world_T_camera, double timestamp);
 

@@ -1,4 +1,4 @@
-#include "clients/plenox/flags.h"
+#include "core/common/flags.h"
 
 #include <cmath>
 #include <cstdio>
@@ -8,12 +8,12 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 
-namespace plx::cli {
+namespace plx {
 
 void FlagSet::Declare(const std::string& name) {
   if (flags_.count(name)) {
     // A programming error: two pieces of one command claim the same flag.
-    std::fprintf(stderr, "plenox %s: flag --%s declared twice\n", command_.c_str(), name.c_str());
+    std::fprintf(stderr, "%s: flag --%s declared twice\n", command_.c_str(), name.c_str());
     std::abort();
   }
   order_.push_back(name);
@@ -79,7 +79,7 @@ absl::StatusOr<bool> FlagSet::Parse(const std::vector<std::string>& args) {
 }
 
 std::string FlagSet::Usage() const {
-  std::string out = absl::StrCat("usage: plenox ", command_, " [flags]\n\n", summary_, "\n\nflags:\n");
+  std::string out = absl::StrCat("usage: ", command_, " [flags]\n\n", summary_, "\n\nflags:\n");
   for (const std::string& name : order_) {
     const Flag& f = flags_.at(name);
     std::string left = absl::StrCat("  --", name, f.is_switch ? "" : absl::StrCat(" ", f.value_name));
@@ -135,4 +135,4 @@ absl::StatusOr<double> FlagSet::GetDouble(const std::string& name, double min_va
 
 bool FlagSet::GetSwitch(const std::string& name) const { return values_.count(name) > 0; }
 
-}  // namespace plx::cli
+}  // namespace plx

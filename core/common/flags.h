@@ -9,7 +9,7 @@
 
 #include "absl/status/statusor.h"
 
-namespace plx::cli {
+namespace plx {
 
 class FlagSet {
  public:
@@ -55,4 +55,4 @@ class FlagSet {
   std::map<std::string, std::string> values_;
 };
 
-}  // namespace plx::cli
+}  // namespace plx

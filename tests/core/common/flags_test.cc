@@ -1,4 +1,4 @@
-#include "clients/plenox/flags.h"
+#include "core/common/flags.h"
 
 #include <string>
 #include <vector>
@@ -8,7 +8,7 @@
 
 #include "absl/status/status.h"
 
-namespace plx::cli {
+namespace plx {
 namespace {
 
 using ::testing::AllOf;
@@ -17,7 +17,7 @@ using ::testing::Not;
 
 // The flag set every test starts from: one of each kind the subcommands declare.
 FlagSet MakeFlags() {
-  FlagSet flags("frob", "Frobnicates a dataset.");
+  FlagSet flags("plenox frob", "Frobnicates a dataset.");
   flags.Add("dataset", "DIR", "input folder", std::nullopt, /*required=*/true)
       .Add("every", "N", "use every N-th frame", "10")
       .Add("scale", "S", "a scale factor", "0.5")
@@ -282,4 +282,4 @@ TEST(FlagSetTest, EmptyDefaultIsNotShown) {
 }
 
 }  // namespace
-}  // namespace plx::cli
+}  // namespace plx

@@ -1,0 +1,20 @@
+// The map as a coloured point cloud in binary little-endian PLY (x y z float, red green blue
+// uchar): one point per stored vertex on the surface of the density field, i.e. with density
+// above `min_density` and a face neighbour at or below it, coloured by its view-independent
+// (DC) spherical-harmonic term.
+#pragma once
+
+#include <string>
+
+#include "core/grid/plenoxel_map.h"
+
+namespace plx {
+
+struct PlyExport {
+  std::string bytes;
+  int64_t points = 0;
+};
+
+PlyExport ExportSurfacePointsPly(const PlenoxelMap& map, float min_density);
+
+}  // namespace plx

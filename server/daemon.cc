@@ -1,0 +1,123 @@
+#include "server/daemon.h"
+
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/health_check_service_interface.h>
+
+#include <filesystem>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "server/log.h"
+
+namespace plx::server {
+
+absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& options) {
+  std::unique_ptr<Daemon> d(new Daemon());
+  d->options_ = options;
+  if (!options.data_dir.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(options.data_dir, ec);
+    if (ec) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("--data-dir ", options.data_dir, ": ", ec.message()));
+    }
+  }
+  MapStoreOptions store;
+  store.data_dir = options.data_dir;
+  store.max_maps = options.max_maps;
+  store.max_map_bytes = options.max_map_bytes;
+  d->maps_ = std::make_unique<MapStore>(store);
+  for (const std::string& problem : d->maps_->LoadAllFromDataDir()) {
+    LogEvent("warning", "map_not_loaded", {{"reason", problem}});
+  }
+  // One worker per compute device; this build's only device is the CPU (all its cores).
+  std::vector<std::unique_ptr<DeviceWorker>> workers;
+  workers.push_back(std::make_unique<DeviceWorker>(MakeCpuBackend(options.threads), "cpu"));
+  d->workers_ = std::make_unique<WorkerPool>(std::move(workers));
+  d->io_ = std::make_unique<DeviceWorker>(nullptr, "io");
+  d->jobs_ = std::make_unique<JobRegistry>();
+  d->metrics_registry_ = std::make_unique<Metrics>();
+  d->state_.maps = d->maps_.get();
+  d->state_.workers = d->workers_.get();
+  d->state_.io = d->io_.get();
+  d->state_.jobs = d->jobs_.get();
+  d->state_.metrics = d->metrics_registry_.get();
+  d->state_.config.auth_token = options.auth_token;
+  d->state_.config.max_streams = options.max_streams;
+  d->service_ = std::make_unique<PlenoxdService>(&d->state_);
+
+  grpc::EnableDefaultHealthCheckService(true);
+  // Reflection lists the API to anyone who asks; with authentication on it stays off, so only
+  // the health service answers without a token.
+  if (options.auth_token.empty()) grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  std::shared_ptr<grpc::ServerCredentials> credentials;
+  if (!options.tls_cert_pem.empty() || !options.tls_key_pem.empty()) {
+    grpc::SslServerCredentialsOptions ssl;
+    ssl.pem_key_cert_pairs.push_back({options.tls_key_pem, options.tls_cert_pem});
+    credentials = grpc::SslServerCredentials(ssl);
+  } else {
+    credentials = grpc::InsecureServerCredentials();
+  }
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(options.listen, credentials, &d->port_);
+  builder.RegisterService(d->service_.get());
+  builder.SetMaxReceiveMessageSize(options.max_message_bytes);
+  builder.SetMaxSendMessageSize(options.max_message_bytes);
+  d->server_ = builder.BuildAndStart();
+  if (!d->server_ || d->port_ == 0) {
+    return absl::UnavailableError(absl::StrCat("cannot listen on ", options.listen,
+                                               " (address in use, or not host:port?)"));
+  }
+  d->server_->GetHealthCheckService()->SetServingStatus(true);
+  if (options.metrics_port >= 0) {
+    std::string error;
+    Daemon* raw = d.get();
+    d->metrics_ = MetricsHttpServer::Start(options.metrics_host, options.metrics_port,
+                                           [raw] { return raw->RenderMetrics(); }, &error);
+    if (!d->metrics_) return absl::UnavailableError(error);
+  }
+  LogEvent("info", "serving",
+           {{"listen", options.listen}, {"port", std::to_string(d->port_)},
+            {"devices", absl::StrJoin(d->workers_->device_names(), ",")},
+            {"maps", std::to_string(d->maps_->size())},
+            {"auth", options.auth_token.empty() ? "off" : "bearer"},
+            {"tls", options.tls_cert_pem.empty() ? "off" : "on"},
+            {"metrics_port", std::to_string(d->metrics_port())}});
+  return d;
+}
+
+std::string Daemon::RenderMetrics() const {
+  Metrics::Gauges g;
+  g.maps = maps_->size();
+  g.map_bytes = maps_->TotalBytes();
+  g.queue_depth = workers_->total_queue_depth();
+  g.jobs_running = jobs_->running();
+  g.serving = !state_.draining.load();
+  g.devices = absl::StrJoin(workers_->device_names(), ",");
+  return metrics_registry_->Render(g);
+}
+
+absl::Status Daemon::Drain(absl::Duration grace) {
+  if (drained_) return absl::OkStatus();
+  drained_ = true;
+  LogEvent("info", "draining", {{"grace_s", absl::StrCat(absl::ToDoubleSeconds(grace))}});
+  state_.draining = true;
+  server_->GetHealthCheckService()->SetServingStatus(false);
+  // Running calls get `grace` to finish; then gRPC cancels them. Workers keep running until the
+  // server is down, so queued frames and mapping chunks complete or see their stream cancelled.
+  server_->Shutdown(std::chrono::system_clock::now() +
+                    std::chrono::milliseconds(absl::ToInt64Milliseconds(grace)));
+  workers_->StopAll();
+  io_->Stop();
+  const absl::Status saved = maps_->SaveDirty();
+  if (!saved.ok()) LogEvent("error", "save_failed", {{"reason", std::string(saved.message())}});
+  metrics_.reset();
+  LogEvent("info", "stopped", {});
+  return saved;
+}
+
+Daemon::~Daemon() {
+  if (server_ && !drained_) Drain(absl::Seconds(1)).IgnoreError();
+}
+
+}  // namespace plx::server

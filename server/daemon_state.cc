@@ -1,0 +1,48 @@
+#include "server/daemon_state.h"
+
+#include "absl/strings/str_cat.h"
+
+namespace plx::server {
+namespace {
+
+// Compares without an early exit, so the time taken does not reveal how much of a guess matched.
+bool ConstantTimeEquals(const std::string& a, const std::string& b) {
+  unsigned char diff = a.size() == b.size() ? 0 : 1;
+  for (size_t i = 0; i < a.size(); ++i) diff |= a[i] ^ (i < b.size() ? b[i] : 0);
+  return diff == 0;
+}
+
+}  // namespace
+
+absl::Status CheckCall(const DaemonState& state, const grpc::CallbackServerContext* context) {
+  if (state.draining.load()) {
+    return absl::UnavailableError("plenoxd is shutting down; retry on another instance");
+  }
+  if (state.config.auth_token.empty()) return absl::OkStatus();
+  const auto& metadata = context->client_metadata();
+  const auto it = metadata.find("authorization");
+  if (it == metadata.end()) {
+    return absl::UnauthenticatedError(
+        "missing credentials: send metadata \"authorization: Bearer <token>\"");
+  }
+  const std::string value(it->second.data(), it->second.size());
+  if (!ConstantTimeEquals(value, "Bearer " + state.config.auth_token)) {
+    return absl::UnauthenticatedError("invalid bearer token");
+  }
+  return absl::OkStatus();
+}
+
+absl::Status AcquireStreamSlot(DaemonState& state, const grpc::CallbackServerContext* context) {
+  if (absl::Status s = CheckCall(state, context); !s.ok()) return s;
+  const int64_t now = state.metrics->active_streams.fetch_add(1) + 1;
+  if (now > state.config.max_streams) {
+    state.metrics->active_streams.fetch_sub(1);
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "too many open streams (limit ", state.config.max_streams, "); retry later"));
+  }
+  return absl::OkStatus();
+}
+
+void ReleaseStreamSlot(DaemonState& state) { state.metrics->active_streams.fetch_sub(1); }
+
+}  // namespace plx::server

@@ -1,0 +1,226 @@
+#include "server/map_store.h"
+
+#include <filesystem>
+
+#include "absl/strings/str_cat.h"
+#include "core/common/status_macros.h"
+#include "core/io/map_file.h"
+#include "core/kernels/backend.h"
+#include "server/proto_convert.h"
+
+namespace plx::server {
+
+MapStore::MapStore(MapStoreOptions options) : options_(std::move(options)) {}
+
+std::string MapStore::PathOf(const std::string& name) const {
+  return (std::filesystem::path(options_.data_dir) / (name + ".plx")).string();
+}
+
+absl::StatusOr<MapStore::Entry*> MapStore::Find(const std::string& name) {
+  auto it = maps_.find(name);
+  if (it == maps_.end()) return absl::NotFoundError(absl::StrCat("no map named \"", name, "\""));
+  return &it->second;
+}
+
+absl::StatusOr<const MapStore::Entry*> MapStore::Find(const std::string& name) const {
+  auto it = maps_.find(name);
+  if (it == maps_.end()) return absl::NotFoundError(absl::StrCat("no map named \"", name, "\""));
+  return &it->second;
+}
+
+MapStatus MapStore::StatusOf(const std::string& name, const Entry& e) const {
+  MapStatus s;
+  s.name = name;
+  s.voxel_size = e.map->grid.voxel_size();
+  s.version = e.version;
+  s.bricks = e.map->grid.num_bricks();
+  s.memory_bytes = e.map->grid.Memory().total_bytes();
+  s.keyframes = e.keyframes;
+  s.dirty = e.dirty;
+  s.mapping = e.mapping;
+  s.source = e.map->source;
+  return s;
+}
+
+std::vector<std::string> MapStore::LoadAllFromDataDir() {
+  std::vector<std::string> problems;
+  if (options_.data_dir.empty()) return problems;
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(options_.data_dir, ec)) {
+    if (entry.path().extension() != ".plx") continue;
+    const std::string name = entry.path().stem().string();
+    if (!CheckMapName(name, "file").ok()) {
+      problems.push_back(absl::StrCat(entry.path().string(), ": not a valid map name, skipped"));
+      continue;
+    }
+    absl::StatusOr<MapStatus> loaded = Load(name);
+    if (!loaded.ok()) problems.push_back(std::string(loaded.status().message()));
+  }
+  if (ec) problems.push_back(absl::StrCat(options_.data_dir, ": ", ec.message()));
+  return problems;
+}
+
+absl::StatusOr<MapStatus> MapStore::Create(const std::string& name, float voxel_size) {
+  PLX_RETURN_IF_ERROR(CheckMapName(name, "name"));
+  if (!(voxel_size >= 0.001f && voxel_size <= 1.0f)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("voxel_size: must be in [0.001, 1] metres, got ", voxel_size));
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (maps_.count(name)) {
+    return absl::AlreadyExistsError(absl::StrCat("a map named \"", name, "\" exists"));
+  }
+  if (static_cast<int>(maps_.size()) >= options_.max_maps) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat("the daemon holds its maximum of ", options_.max_maps, " maps"));
+  }
+  Entry e;
+  e.map = std::make_shared<PlenoxelMap>(voxel_size);
+  e.map->grid.set_occupancy_fresh();  // empty: nothing to refresh
+  auto [it, inserted] = maps_.emplace(name, std::move(e));
+  return StatusOf(name, it->second);
+}
+
+absl::StatusOr<MapStatus> MapStore::Info(const std::string& name) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  PLX_ASSIGN_OR_RETURN(const Entry* e, Find(name));
+  return StatusOf(name, *e);
+}
+
+std::vector<MapStatus> MapStore::List() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  std::vector<MapStatus> out;
+  for (const auto& [name, e] : maps_) out.push_back(StatusOf(name, e));
+  return out;
+}
+
+absl::StatusOr<MapVersion> MapStore::Latest(const std::string& name) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  PLX_ASSIGN_OR_RETURN(const Entry* e, Find(name));
+  return MapVersion{e->map, e->version};
+}
+
+absl::Status MapStore::Delete(const std::string& name) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  PLX_ASSIGN_OR_RETURN(Entry * e, Find(name));
+  if (e->mapping) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("map \"", name, "\" is being mapped; cancel the Integrate stream first"));
+  }
+  maps_.erase(name);
+  if (!options_.data_dir.empty()) {
+    std::error_code ec;
+    std::filesystem::remove(PathOf(name), ec);
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<MapStatus> MapStore::Save(const std::string& name) {
+  if (options_.data_dir.empty()) {
+    return absl::FailedPreconditionError("the daemon has no --data-dir to save maps to");
+  }
+  std::shared_ptr<PlenoxelMap> map;
+  uint64_t version = 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    PLX_ASSIGN_OR_RETURN(Entry * e, Find(name));
+    map = e->map;
+    version = e->version;
+  }
+  // Written outside the lock: readers and the mapping job carry on.
+  PLX_RETURN_IF_ERROR(SaveMap(*map, PathOf(name)));
+  std::lock_guard<std::mutex> lock(mutex_);
+  PLX_ASSIGN_OR_RETURN(Entry * e, Find(name));
+  if (e->version == version) e->dirty = false;
+  return StatusOf(name, *e);
+}
+
+absl::StatusOr<MapStatus> MapStore::Load(const std::string& name) {
+  PLX_RETURN_IF_ERROR(CheckMapName(name, "name"));
+  if (options_.data_dir.empty()) {
+    return absl::FailedPreconditionError("the daemon has no --data-dir to load maps from");
+  }
+  const std::string path = PathOf(name);
+  if (!std::filesystem::exists(path)) {
+    return absl::NotFoundError(absl::StrCat("no saved map \"", name, "\" (", path, ")"));
+  }
+  PLX_ASSIGN_OR_RETURN(std::unique_ptr<PlenoxelMap> loaded, LoadMap(path));
+  // Published maps are shared by concurrent readers, so they must not need a lazy refresh.
+  RefreshOccupancyIfStale(*MakeCpuBackend(), loaded->grid, loaded->render.sigma_threshold);
+  std::shared_ptr<PlenoxelMap> map(std::move(loaded));
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto it = maps_.find(name);
+  if (it == maps_.end()) {
+    if (static_cast<int>(maps_.size()) >= options_.max_maps) {
+      return absl::ResourceExhaustedError(
+          absl::StrCat("the daemon holds its maximum of ", options_.max_maps, " maps"));
+    }
+    it = maps_.emplace(name, Entry{}).first;
+  } else if (it->second.mapping) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("map \"", name, "\" is being mapped; it cannot be replaced now"));
+  }
+  Entry& e = it->second;
+  e.map = std::move(map);
+  e.version += 1;
+  e.dirty = false;
+  return StatusOf(name, e);
+}
+
+absl::Status MapStore::SaveDirty() {
+  absl::Status first;
+  for (const MapStatus& s : List()) {
+    if (!s.dirty) continue;
+    absl::StatusOr<MapStatus> saved = Save(s.name);
+    if (!saved.ok() && first.ok()) first = saved.status();
+  }
+  return first;
+}
+
+absl::Status MapStore::BeginMapping(const std::string& name) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  PLX_ASSIGN_OR_RETURN(Entry * e, Find(name));
+  if (e->mapping) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("map \"", name, "\" already has a mapping job (one writer per map)"));
+  }
+  e->mapping = true;
+  return absl::OkStatus();
+}
+
+void MapStore::EndMapping(const std::string& name) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto it = maps_.find(name);
+  if (it != maps_.end()) it->second.mapping = false;
+}
+
+absl::StatusOr<uint64_t> MapStore::Publish(const std::string& name,
+                                           std::shared_ptr<PlenoxelMap> map, int keyframes_added) {
+  const int64_t bytes = map->grid.Memory().total_bytes();
+  if (bytes > options_.max_map_bytes) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "map \"", name, "\" would need ", bytes / 1000000, " MB, over the limit of ",
+        options_.max_map_bytes / 1000000, " MB per map"));
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  PLX_ASSIGN_OR_RETURN(Entry * e, Find(name));
+  e->map = std::move(map);
+  e->version += 1;
+  e->keyframes += keyframes_added;
+  e->dirty = true;
+  return e->version;
+}
+
+int64_t MapStore::TotalBytes() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  int64_t total = 0;
+  for (const auto& [name, e] : maps_) total += e.map->grid.Memory().total_bytes();
+  return total;
+}
+
+int MapStore::size() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return static_cast<int>(maps_.size());
+}
+
+}  // namespace plx::server

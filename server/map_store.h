@@ -1,0 +1,88 @@
+// The daemon's maps (DESIGN.md §10). Readers (tracking, render, export) take the latest
+// published version, a shared_ptr to an immutable map, and keep it as long as they need; one
+// mapping job per map works on its own copy and publishes new versions, so readers never wait
+// for a mapping pass and never see a half-written map. Maps persist as <data_dir>/<name>.plx.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/grid/plenoxel_map.h"
+
+namespace plx::server {
+
+struct MapStoreOptions {
+  std::string data_dir;               // empty: nothing is persisted
+  int max_maps = 16;
+  int64_t max_map_bytes = int64_t{4} << 30;
+};
+
+struct MapStatus {
+  std::string name;
+  float voxel_size = 0.0f;
+  uint64_t version = 0;
+  int64_t bricks = 0;
+  int64_t memory_bytes = 0;
+  int keyframes = 0;
+  bool dirty = false;    // changed since saved
+  bool mapping = false;  // a mapping job holds the writer lease
+  std::string source;
+};
+
+// A published map. The map must not be modified (its occupancy is already exact).
+struct MapVersion {
+  std::shared_ptr<PlenoxelMap> map;
+  uint64_t version = 0;
+};
+
+class MapStore {
+ public:
+  explicit MapStore(MapStoreOptions options);
+
+  // Loads every <data_dir>/*.plx; files that fail to load are reported, not fatal.
+  std::vector<std::string> LoadAllFromDataDir();
+
+  absl::StatusOr<MapStatus> Create(const std::string& name, float voxel_size);
+  absl::StatusOr<MapStatus> Info(const std::string& name) const;
+  std::vector<MapStatus> List() const;
+  absl::StatusOr<MapVersion> Latest(const std::string& name) const;
+  absl::Status Delete(const std::string& name);
+  absl::StatusOr<MapStatus> Save(const std::string& name);
+  absl::StatusOr<MapStatus> Load(const std::string& name);
+  // Saves every dirty map (drain); returns the first error after trying them all.
+  absl::Status SaveDirty();
+
+  // One mapping job per map: FAILED_PRECONDITION when another holds the lease.
+  absl::Status BeginMapping(const std::string& name);
+  void EndMapping(const std::string& name);
+  // Publishes a new version from the lease holder; RESOURCE_EXHAUSTED over the memory limit.
+  absl::StatusOr<uint64_t> Publish(const std::string& name, std::shared_ptr<PlenoxelMap> map,
+                                   int keyframes_added);
+
+  int64_t TotalBytes() const;
+  int size() const;
+
+ private:
+  struct Entry {
+    std::shared_ptr<PlenoxelMap> map;
+    uint64_t version = 1;
+    int keyframes = 0;
+    bool dirty = false;
+    bool mapping = false;
+  };
+  MapStatus StatusOf(const std::string& name, const Entry& e) const;
+  std::string PathOf(const std::string& name) const;
+  absl::StatusOr<Entry*> Find(const std::string& name);
+  absl::StatusOr<const Entry*> Find(const std::string& name) const;
+
+  MapStoreOptions options_;
+  mutable std::mutex mutex_;
+  std::map<std::string, Entry> maps_;
+};
+
+}  // namespace plx::server

@@ -1,0 +1,138 @@
+#include "server/metrics.h"
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <memory>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+
+namespace plx::server {
+
+void Metrics::ObserveTrackLatency(double seconds) {
+  size_t bucket = 0;
+  while (bucket < kBuckets.size() && seconds > kBuckets[bucket]) ++bucket;
+  latency_counts_[bucket].fetch_add(1, std::memory_order_relaxed);
+  latency_micros_sum_.fetch_add(static_cast<int64_t>(seconds * 1e6), std::memory_order_relaxed);
+}
+
+std::string Metrics::Render(const Gauges& g) const {
+  std::string out;
+  auto counter = [&](const char* name, const char* help, int64_t value) {
+    absl::StrAppend(&out, "# HELP ", name, " ", help, "\n# TYPE ", name, " counter\n", name, " ",
+                    value, "\n");
+  };
+  auto gauge = [&](const char* name, const char* help, int64_t value) {
+    absl::StrAppend(&out, "# HELP ", name, " ", help, "\n# TYPE ", name, " gauge\n", name, " ",
+                    value, "\n");
+  };
+  counter("plenoxd_frames_tracked_total", "Frames tracked.", frames_tracked.load());
+  counter("plenoxd_frames_dropped_total", "Frames dropped by latest-wins tracking streams.",
+          frames_dropped.load());
+  counter("plenoxd_frames_lost_total", "Tracked frames whose state was LOST.", frames_lost.load());
+  counter("plenoxd_keyframes_integrated_total", "Keyframes added to maps.",
+          keyframes_integrated.load());
+  counter("plenoxd_renders_total", "Render calls served.", renders.load());
+  counter("plenoxd_rpc_errors_total", "RPCs that ended with a non-OK status.", rpc_errors.load());
+  gauge("plenoxd_active_streams", "Open streaming RPCs.", active_streams.load());
+  gauge("plenoxd_maps", "Maps held.", g.maps);
+  gauge("plenoxd_map_bytes", "Bytes held by all maps.", g.map_bytes);
+  gauge("plenoxd_queue_depth", "Tasks queued or running on the device workers.", g.queue_depth);
+  gauge("plenoxd_jobs_running", "Mapping jobs running.", g.jobs_running);
+  gauge("plenoxd_serving", "1 while serving, 0 while draining.", g.serving ? 1 : 0);
+  absl::StrAppend(&out, "# HELP plenoxd_device_info Compute devices of the workers.\n",
+                  "# TYPE plenoxd_device_info gauge\nplenoxd_device_info{devices=\"", g.devices,
+                  "\"} 1\n");
+  const char* h = "plenoxd_track_latency_seconds";
+  absl::StrAppend(&out, "# HELP ", h, " Time from receiving a frame to its pose estimate.\n",
+                  "# TYPE ", h, " histogram\n");
+  int64_t cumulative = 0;
+  for (size_t i = 0; i < kBuckets.size(); ++i) {
+    cumulative += latency_counts_[i].load();
+    absl::StrAppend(&out, h, "_bucket{le=\"", absl::StrFormat("%g", kBuckets[i]), "\"} ",
+                    cumulative, "\n");
+  }
+  cumulative += latency_counts_[kBuckets.size()].load();
+  absl::StrAppend(&out, h, "_bucket{le=\"+Inf\"} ", cumulative, "\n", h, "_sum ",
+                  absl::StrFormat("%.6f", latency_micros_sum_.load() / 1e6), "\n", h, "_count ",
+                  cumulative, "\n");
+  return out;
+}
+
+std::unique_ptr<MetricsHttpServer> MetricsHttpServer::Start(const std::string& host, int port,
+                                                            std::function<std::string()> render,
+                                                            std::string* error) {
+  const int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) {
+    *error = absl::StrCat("metrics socket: ", std::strerror(errno));
+    return nullptr;
+  }
+  const int one = 1;
+  setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof(one));
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_port = htons(static_cast<uint16_t>(port));
+  if (inet_pton(AF_INET, host.c_str(), &addr.sin_addr) != 1) {
+    *error = absl::StrCat("metrics: not an IPv4 address: ", host);
+    close(fd);
+    return nullptr;
+  }
+  if (bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0 || listen(fd, 8) != 0) {
+    *error = absl::StrCat("metrics: cannot listen on ", host, ":", port, ": ", std::strerror(errno));
+    close(fd);
+    return nullptr;
+  }
+  socklen_t len = sizeof(addr);
+  getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
+  return std::unique_ptr<MetricsHttpServer>(
+      new MetricsHttpServer(fd, ntohs(addr.sin_port), std::move(render)));
+}
+
+MetricsHttpServer::MetricsHttpServer(int fd, int port, std::function<std::string()> render)
+    : fd_(fd), port_(port), render_(std::move(render)), thread_([this] { Loop(); }) {}
+
+MetricsHttpServer::~MetricsHttpServer() {
+  stopping_ = true;
+  if (thread_.joinable()) thread_.join();
+  close(fd_);
+}
+
+void MetricsHttpServer::Loop() {
+  while (!stopping_) {
+    pollfd p{fd_, POLLIN, 0};
+    if (poll(&p, 1, 200) <= 0) continue;  // wake up regularly to notice stopping_
+    const int client = accept4(fd_, nullptr, nullptr, SOCK_CLOEXEC);
+    if (client < 0) continue;
+    timeval timeout{2, 0};
+    setsockopt(client, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof(timeout));
+    char buffer[2048];
+    const ssize_t n = recv(client, buffer, sizeof(buffer) - 1, 0);
+    std::string request(buffer, n > 0 ? static_cast<size_t>(n) : 0);
+    std::string body, status = "200 OK", type = "text/plain; version=0.0.4";
+    if (request.rfind("GET /metrics", 0) == 0) {
+      body = render_();
+    } else {
+      status = "404 Not Found";
+      type = "text/plain";
+      body = "plenoxd serves GET /metrics\n";
+    }
+    const std::string response = absl::StrCat("HTTP/1.0 ", status, "\r\nContent-Type: ", type,
+                                              "\r\nContent-Length: ", body.size(),
+                                              "\r\nConnection: close\r\n\r\n", body);
+    size_t sent = 0;
+    while (sent < response.size()) {
+      const ssize_t k = send(client, response.data() + sent, response.size() - sent, MSG_NOSIGNAL);
+      if (k <= 0) break;
+      sent += static_cast<size_t>(k);
+    }
+    close(client);
+  }
+}
+
+}  // namespace plx::server
