@@ -2,14 +2,40 @@
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
+#include <grpcpp/server_builder.h>
 
 #include <filesystem>
+#include <memory>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "server/log.h"
 
 namespace plx::server {
+namespace {
+
+// Turns the reflection service on or off for one builder. Linking gRPC's reflection library
+// registers its plugin for every builder in the process (a static initialiser), so a daemon
+// with auth would list its API to callers without a token unless the plugin is removed here.
+class ReflectionOption final : public grpc::ServerBuilderOption {
+ public:
+  explicit ReflectionOption(bool enabled) : enabled_(enabled) {}
+  void UpdateArguments(grpc::ChannelArguments*) override {}
+  void UpdatePlugins(std::vector<std::unique_ptr<grpc::ServerBuilderPlugin>>* plugins) override {
+    auto reflection = std::make_unique<grpc::reflection::ProtoServerReflectionPlugin>();
+    const std::string name = reflection->name();
+    std::erase_if(*plugins, [&](const std::unique_ptr<grpc::ServerBuilderPlugin>& plugin) {
+      return plugin->name() == name;
+    });
+    if (enabled_) plugins->push_back(std::move(reflection));
+  }
+
+ private:
+  bool enabled_;
+};
+
+}  // namespace
 
 absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& options) {
   std::unique_ptr<Daemon> d(new Daemon());
@@ -47,9 +73,6 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   d->service_ = std::make_unique<PlenoxdService>(&d->state_);
 
   grpc::EnableDefaultHealthCheckService(true);
-  // Reflection lists the API to anyone who asks; with authentication on it stays off, so only
-  // the health service answers without a token.
-  if (options.auth_token.empty()) grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   std::shared_ptr<grpc::ServerCredentials> credentials;
   if (!options.tls_cert_pem.empty() || !options.tls_key_pem.empty()) {
     grpc::SslServerCredentialsOptions ssl;
@@ -59,6 +82,12 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
     credentials = grpc::InsecureServerCredentials();
   }
   grpc::ServerBuilder builder;
+  // Reflection lists the API to anyone who asks; with authentication on it stays off, so only
+  // the health service answers without a token.
+  builder.SetOption(std::make_unique<ReflectionOption>(options.auth_token.empty()));
+  // gRPC sets SO_REUSEPORT by default: a second daemon on a busy port would start and share
+  // the connections; with it off, Start fails with "address in use".
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.AddListeningPort(options.listen, credentials, &d->port_);
   builder.RegisterService(d->service_.get());
   builder.SetMaxReceiveMessageSize(options.max_message_bytes);

@@ -19,7 +19,9 @@ IntegrateReactor::IntegrateReactor(DaemonState* state, grpc::CallbackServerConte
   const absl::Status admitted = AcquireStreamSlot(*state_, context_);
   if (!admitted.ok()) {
     state_->metrics->rpc_errors++;
-    Finish(ToGrpcStatus(admitted));
+    final_status_ = ToGrpcStatus(admitted);
+    finished_ = true;
+    Finish(final_status_);
     return;
   }
   holds_slot_ = true;
@@ -62,6 +64,11 @@ void IntegrateReactor::OnReadDone(bool ok) {
   std::lock_guard<std::mutex> lock(mutex_);
   reading_ = false;
   if (!ok) {
+    if (first_ && !finished_) {
+      FailLocked(absl::InvalidArgumentError(
+          "empty stream: the first IntegrateRequest must name the map"));
+      return;
+    }
     reading_done_ = true;
     if (lease_ && !finished_) ScheduleLocked();  // spend the rest of the budget, then finish
     MaybeFinishLocked();
@@ -147,11 +154,13 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
     status = mapper_->AllocateAndInitialize();
     mapper_->set_max_iterations(iterations_per_keyframe_ * mapper_->training_set().num_frames());
   }
-  MappingProgress last;
+  bool optimised = false;
   if (status.ok() && mapper_ && !mapper_->budget_spent() && mapper_->training_set().num_rays() > 0) {
-    absl::StatusOr<MappingSummary> summary = mapper_->Optimize(nullptr, kChunkIterations);
+    absl::StatusOr<MappingSummary> summary = mapper_->Optimize(
+        [&](const MappingProgress&) { return true; }, kChunkIterations);
     if (summary.ok()) {
-      last = summary->last;
+      last_ = summary->last;
+      optimised = true;
     } else {
       status = summary.status();
     }
@@ -177,8 +186,8 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
   progress.set_job_id(job_id_);
   progress.set_keyframes_integrated(static_cast<uint32_t>(integrated_));
   progress.set_iterations(mapper_ ? static_cast<uint32_t>(mapper_->iterations_done()) : 0);
-  progress.set_train_psnr(last.psnr);
-  progress.set_train_depth_l1_m(last.depth_l1_m);
+  progress.set_train_psnr(last_.psnr);
+  progress.set_train_depth_l1_m(last_.depth_l1_m);
   progress.set_map_version(version_);
   progress.set_elapsed_s(SecondsSince(start_));
   const double fraction =
@@ -203,7 +212,7 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
     MaybeFinishLocked();
     return;
   }
-  if (last.iteration > 0 || !frames.empty()) {
+  if (optimised || !frames.empty()) {
     WriteLocked(std::move(progress));
     state_->jobs->Update(job_id_, JobState::kRunning, fraction,
                          absl::StrFormat("%d keyframes integrated", integrated_));

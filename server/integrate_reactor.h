@@ -71,6 +71,7 @@ class IntegrateReactor final : public grpc::ServerBidiReactor<plenoxd::v1::Integ
   int iterations_per_keyframe_ = 50;
   std::unique_ptr<Mapper> mapper_;
   int integrated_ = 0;
+  MappingProgress last_;  // training metrics of the latest chunk
   int unpublished_keyframes_ = 0;
   uint64_t version_ = 0;
   std::chrono::steady_clock::time_point start_, last_publish_;

@@ -189,6 +189,8 @@ class WatchJobReactor final : public grpc::ServerWriteReactor<pb::JobStatus> {
     }
   }
   void MaybeFinishLocked() {
+    // A cancelled or broken stream never sends the update still waiting.
+    if (ended_) next_.reset();
     if (finished_ || write_in_flight_ || next_) return;
     if (!(terminal_seen_ || ended_)) return;
     finished_ = true;
@@ -227,7 +229,8 @@ grpc::ServerUnaryReactor* PlenoxdService::CreateMap(grpc::CallbackServerContext*
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   absl::Status status = CheckCall(*state_, context);
   if (status.ok()) {
-    const float voxel = request->voxel_size() > 0 ? request->voxel_size() : 0.02f;
+    // Only exactly 0 means the default; negative and NaN sizes reach the store's range check.
+    const float voxel = request->voxel_size() == 0.0f ? 0.02f : request->voxel_size();
     status = StatusToProto(state_->maps->Create(request->name(), voxel), response);
   }
   Finish(reactor, "CreateMap", status);

@@ -153,11 +153,7 @@ absl::Status RenderedViewToProto(const RenderedView& view, pb::ColorEncoding col
       break;
     }
     case pb::COLOR_ENCODING_RAW_RGB8: {
-      std::string* bytes = out->mutable_color();
-      bytes->resize(view.color.data.size());
-      for (size_t i = 0; i < view.color.data.size(); ++i) {
-        (*bytes)[i] = static_cast<char>(std::lround(std::clamp(view.color.data[i], 0.0f, 1.0f) * 255));
-      }
+      *out->mutable_color() = ColorImageToRgb8Bytes(view.color);
       out->set_color_encoding(pb::COLOR_ENCODING_RAW_RGB8);
       break;
     }
@@ -172,16 +168,7 @@ absl::Status RenderedViewToProto(const RenderedView& view, pb::ColorEncoding col
       break;
     }
     case pb::DEPTH_ENCODING_RAW_U16: {
-      std::string* bytes = out->mutable_depth();
-      bytes->resize(2 * view.z_depth.data.size());
-      for (size_t i = 0; i < view.z_depth.data.size(); ++i) {
-        const float z = view.z_depth.data[i];
-        const uint16_t mm = (std::isfinite(z) && z > 0)
-                                ? static_cast<uint16_t>(std::min(std::round(z * 1000.0), 65535.0))
-                                : 0;
-        (*bytes)[2 * i] = static_cast<char>(mm & 0xff);
-        (*bytes)[2 * i + 1] = static_cast<char>(mm >> 8);
-      }
+      *out->mutable_depth() = DepthImageToU16Bytes(view.z_depth, 1000.0);
       out->set_depth_encoding(pb::DEPTH_ENCODING_RAW_U16);
       break;
     }

@@ -23,7 +23,9 @@ TrackReactor::TrackReactor(DaemonState* state, grpc::CallbackServerContext* cont
   const absl::Status admitted = AcquireStreamSlot(*state_, context_);
   if (!admitted.ok()) {
     state_->metrics->rpc_errors++;
-    Finish(ToGrpcStatus(admitted));
+    final_status_ = ToGrpcStatus(admitted);
+    finished_ = true;
+    Finish(final_status_);
     return;
   }
   holds_slot_ = true;
@@ -52,12 +54,15 @@ absl::Status TrackReactor::HandleFirstMessage() {
 void TrackReactor::OnReadDone(bool ok) {
   std::lock_guard<std::mutex> lock(mutex_);
   if (!ok) {
+    if (first_ && !finished_ && final_status_.ok()) {
+      FailLocked(absl::InvalidArgumentError("empty stream: the first TrackRequest must name the map"));
+      return;
+    }
     reading_done_ = true;
     MaybeFinishLocked();
     return;
   }
   if (finished_) return;
-  std::optional<SE3> initial_pose;
   if (first_) {
     first_ = false;
     if (absl::Status s = HandleFirstMessage(); !s.ok()) {
@@ -70,7 +75,8 @@ void TrackReactor::OnReadDone(bool ok) {
         FailLocked(pose.status());
         return;
       }
-      initial_pose = *pose;
+      // Held until a frame arrives: the first message may name the map and the start only.
+      initial_pose_ = *pose;
     }
   }
   if (request_.has_frame()) {
@@ -86,7 +92,8 @@ void TrackReactor::OnReadDone(bool ok) {
       state_->metrics->frames_dropped++;
     }
     if (!(pending_ && pending_->initial_pose)) {
-      pending_ = Pending{std::move(*frame), std::chrono::steady_clock::now(), initial_pose};
+      pending_ = Pending{std::move(*frame), std::chrono::steady_clock::now(), initial_pose_};
+      initial_pose_.reset();
       if (!busy_) Submit();
     }
   }

@@ -56,6 +56,8 @@ class TrackReactor final
   bool finished_ = false;
   grpc::Status final_status_;
   std::optional<Pending> pending_;
+  // TrackRequest.initial_pose from a first message without a frame, waiting for the first frame.
+  std::optional<SE3> initial_pose_;
   uint32_t dropped_ = 0;
   std::deque<plenoxd::v1::PoseEstimate> outbox_;
 

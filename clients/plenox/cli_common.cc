@@ -97,6 +97,11 @@ JsonObject& JsonObject::Add(const std::string& key, const std::string& value) {
   return *this;
 }
 
+JsonObject& JsonObject::AddBool(const std::string& key, bool value) {
+  fields_.emplace_back(key, value ? "true" : "false");
+  return *this;
+}
+
 std::string JsonObject::str() const {
   std::string out = "{";
   for (size_t i = 0; i < fields_.size(); ++i) {

@@ -50,6 +50,8 @@ class JsonObject {
   JsonObject& Add(const std::string& key, int64_t value);
   JsonObject& Add(const std::string& key, int value) { return Add(key, int64_t{value}); }
   JsonObject& Add(const std::string& key, const std::string& value);
+  // true / false. Not an Add overload: a string literal would convert to bool before string.
+  JsonObject& AddBool(const std::string& key, bool value);
   std::string str() const;
 
  private:

@@ -15,4 +15,23 @@ int RunTrack(const std::vector<std::string>& args);
 int RunSynth(const std::vector<std::string>& args);
 int RunDemo(const std::vector<std::string>& args);
 
+// The global flags that point plenox at a daemon (given before the command). With an empty
+// `server` everything runs in-process.
+struct RemoteOptions {
+  std::string server;      // --server HOST:PORT
+  std::string token_file;  // --token-file F: bearer token for an authenticating daemon
+  std::string tls_ca;      // --tls-ca PEM: root certificate of a TLS daemon
+};
+
+// The same commands against a plenoxd daemon (remote_*.cc; only in builds with gRPC, where
+// PLX_WITH_SERVER is defined). export, maps, save and load exist only in this form; they
+// print their --help without --server and otherwise say that they need it.
+int RunRemoteMap(const RemoteOptions& remote, const std::vector<std::string>& args);
+int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& args);
+int RunRemoteRender(const RemoteOptions& remote, const std::vector<std::string>& args);
+int RunRemoteExport(const RemoteOptions& remote, const std::vector<std::string>& args);
+int RunRemoteMaps(const RemoteOptions& remote, const std::vector<std::string>& args);
+int RunRemoteSave(const RemoteOptions& remote, const std::vector<std::string>& args);
+int RunRemoteLoad(const RemoteOptions& remote, const std::vector<std::string>& args);
+
 }  // namespace plx::cli

@@ -1,14 +1,21 @@
-// plenox: the command-line client. Maps, evaluates and renders RGB-D datasets in-process.
+// plenox: the command-line client. Maps, evaluates and renders RGB-D datasets in-process, or,
+// with the global flag --server HOST:PORT, has a plenoxd daemon do the work on its maps.
 #include <iostream>
+#include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "absl/status/status.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
 #include "clients/plenox/commands.h"
 
 namespace {
 
 constexpr char kUsage[] =
     "usage: plenox <command> [flags]   (plenox <command> --help for its flags)\n"
+    "       plenox --server HOST:PORT [--token-file F] [--tls-ca PEM] <command> [flags]\n"
     "\n"
     "commands:\n"
     "  demo       generate a synthetic RGB-D sequence, map it, score held-out views, track it\n"
@@ -17,7 +24,89 @@ constexpr char kUsage[] =
     "  eval-map   score a map on a dataset's held-out frames (PSNR, depth L1, coverage)\n"
     "  eval-traj  compare an estimated trajectory with ground truth (ATE, RPE)\n"
     "  render     render colour and depth images of a map from a pose\n"
-    "  synth      write the synthetic RGB-D sequence to a folder (TUM layout)\n";
+    "  synth      write the synthetic RGB-D sequence to a folder (TUM layout)\n"
+    "\n"
+    "with --server, on the daemon's maps (map --name N, track/render --map N):\n"
+    "  map, track, render   as above, the work done by the daemon\n"
+    "  export     write a map as a PLY point cloud\n"
+    "  maps       list the daemon's maps\n"
+    "  save       write a map to the daemon's data directory\n"
+    "  load       read a map back from the daemon's data directory\n"
+    "\n"
+    "global flags (before the command):\n"
+    "  --server HOST:PORT  talk to the plenoxd daemon there (plenoxd's default: 127.0.0.1:50051)\n"
+    "  --token-file F      bearer token for a daemon started with --auth-token-file\n"
+    "  --tls-ca PEM        root certificate of a daemon serving TLS\n";
+
+// Commands that only exist against a daemon, and commands that only run in-process.
+const std::set<std::string> kDaemonOnly = {"export", "maps", "save", "load"};
+const std::set<std::string> kInProcessOnly = {"demo", "eval-map", "eval-traj", "synth"};
+
+int UsageError(const std::string& message) {
+  std::cerr << "plenox: " << message << "\n(plenox --help for usage)\n";
+  return 2;
+}
+
+// "HOST:PORT" with a port in 1-65535 (IPv6 hosts in brackets: [::1]:50051).
+absl::Status CheckServerAddress(const std::string& address) {
+  const size_t colon = address.rfind(':');
+  const std::string host = colon == std::string::npos ? address : address.substr(0, colon);
+  int port = 0;
+  if (colon == std::string::npos || host.empty() ||
+      !absl::SimpleAtoi(address.substr(colon + 1), &port) || port < 1 || port > 65535 ||
+      address.substr(colon + 1).find_first_not_of("0123456789") != std::string::npos ||
+      (host.find(':') != std::string::npos && host.front() != '[')) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--server: expected HOST:PORT (e.g. 127.0.0.1:50051), got \"", address, "\""));
+  }
+  return absl::OkStatus();
+}
+
+// Takes the global flags (--server, --token-file, --tls-ca; "--flag value" or "--flag=value")
+// off the front of `args`.
+absl::Status ParseGlobalFlags(std::vector<std::string>* args, plx::cli::RemoteOptions* remote) {
+  const std::vector<std::pair<std::string, std::string*>> flags = {
+      {"--server", &remote->server},
+      {"--token-file", &remote->token_file},
+      {"--tls-ca", &remote->tls_ca}};
+  std::set<std::string> seen;
+  size_t i = 0;
+  while (i < args->size()) {
+    const std::string& arg = (*args)[i];
+    const size_t equals = arg.find('=');
+    const std::string name = arg.substr(0, equals);
+    std::string* target = nullptr;
+    for (const auto& [flag, value] : flags) {
+      if (flag == name) target = value;
+    }
+    if (target == nullptr) break;
+    std::string value;
+    if (equals != std::string::npos) {
+      value = arg.substr(equals + 1);
+      i += 1;
+    } else {
+      if (i + 1 >= args->size()) return absl::InvalidArgumentError(name + " needs a value");
+      value = (*args)[i + 1];
+      i += 2;
+    }
+    if (value.empty()) return absl::InvalidArgumentError(name + " needs a value");
+    if (!seen.insert(name).second) {
+      return absl::InvalidArgumentError(name + " is given more than once");
+    }
+    *target = value;
+  }
+  args->erase(args->begin(), args->begin() + static_cast<std::ptrdiff_t>(i));
+  if (remote->server.empty()) {
+    if (!remote->token_file.empty()) {
+      return absl::InvalidArgumentError("--token-file only applies together with --server");
+    }
+    if (!remote->tls_ca.empty()) {
+      return absl::InvalidArgumentError("--tls-ca only applies together with --server");
+    }
+    return absl::OkStatus();
+  }
+  return CheckServerAddress(remote->server);
+}
 
 }  // namespace
 
@@ -31,8 +120,39 @@ int main(int argc, char** argv) {
     std::cout << kUsage;
     return 0;
   }
+  plx::cli::RemoteOptions remote;
+  if (absl::Status s = ParseGlobalFlags(&args, &remote); !s.ok()) {
+    return UsageError(std::string(s.message()));
+  }
+  if (args.empty()) return UsageError("a command must follow the global flags");
+  if (args[0] == "--help" || args[0] == "-h" || args[0] == "help") {
+    std::cout << kUsage;
+    return 0;
+  }
   const std::string command = args[0];
   args.erase(args.begin());
+  const bool use_server = !remote.server.empty();
+#ifndef PLX_WITH_SERVER
+  if (use_server || kDaemonOnly.count(command) > 0) {
+    return UsageError(absl::StrCat(
+        use_server ? "--server" : command,
+        " needs a plenox built with gRPC (configure with -DPLX_WITH_SERVER=ON; needs "
+        "libgrpc++-dev and protobuf, see scripts/install_deps.sh); this build runs in-process "
+        "only"));
+  }
+#else
+  if (command == "map" && use_server) return plx::cli::RunRemoteMap(remote, args);
+  if (command == "track" && use_server) return plx::cli::RunRemoteTrack(remote, args);
+  if (command == "render" && use_server) return plx::cli::RunRemoteRender(remote, args);
+  if (command == "export") return plx::cli::RunRemoteExport(remote, args);
+  if (command == "maps") return plx::cli::RunRemoteMaps(remote, args);
+  if (command == "save") return plx::cli::RunRemoteSave(remote, args);
+  if (command == "load") return plx::cli::RunRemoteLoad(remote, args);
+  if (use_server && kInProcessOnly.count(command) > 0) {
+    return UsageError(
+        absl::StrCat(command, " runs in-process only; give it without --server"));
+  }
+#endif
   if (command == "map") return plx::cli::RunMap(args);
   if (command == "eval-map") return plx::cli::RunEvalMap(args);
   if (command == "eval-traj") return plx::cli::RunEvalTraj(args);

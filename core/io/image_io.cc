@@ -139,17 +139,24 @@ absl::StatusOr<cv::Mat> DecodeBuffer(const std::string& bytes, const std::string
   return image;
 }
 
+uint8_t ToByte(float value) {
+  return static_cast<uint8_t>(
+      std::lround(std::clamp(std::isfinite(value) ? value : 0.0f, 0.0f, 1.0f) * 255.0f));
+}
+
+uint16_t ToDepthUnits(float z, double depth_scale) {
+  return (std::isfinite(z) && z > 0)
+             ? static_cast<uint16_t>(std::min(std::round(z * depth_scale), 65535.0))
+             : 0;
+}
+
 cv::Mat ColorImageToBgr8(const ColorImage& image) {
   cv::Mat bgr(image.height, image.width, CV_8UC3);
   for (int v = 0; v < image.height; ++v) {
     uint8_t* dst = bgr.ptr<uint8_t>(v);
     for (int u = 0; u < image.width; ++u) {
       const float* rgb = image.pixel(u, v);
-      for (int c = 0; c < 3; ++c) {
-        const float value = std::isfinite(rgb[c]) ? rgb[c] : 0.0f;
-        dst[3 * u + (2 - c)] =
-            static_cast<uint8_t>(std::lround(std::clamp(value, 0.0f, 1.0f) * 255.0f));
-      }
+      for (int c = 0; c < 3; ++c) dst[3 * u + (2 - c)] = ToByte(rgb[c]);
     }
   }
   return bgr;
@@ -160,12 +167,7 @@ cv::Mat DepthImageToU16(const DepthImage& image, double depth_scale) {
   for (int v = 0; v < image.height; ++v) {
     uint16_t* dst = raw.ptr<uint16_t>(v);
     const float* src = image.pixel(0, v);
-    for (int u = 0; u < image.width; ++u) {
-      const double z = src[u];
-      dst[u] = (std::isfinite(z) && z > 0)
-                   ? static_cast<uint16_t>(std::min(std::round(z * depth_scale), 65535.0))
-                   : 0;
-    }
+    for (int u = 0; u < image.width; ++u) dst[u] = ToDepthUnits(src[u], depth_scale);
   }
   return raw;
 }
@@ -216,6 +218,22 @@ absl::StatusOr<std::string> EncodeDepthImage(const DepthImage& image, double dep
   PLX_RETURN_IF_ERROR(
       CheckImageShape("depth image", image.width, image.height, image.channels, image.data.size(), 1));
   return EncodeMat(DepthImageToU16(image, depth_scale), ".png");
+}
+
+std::string ColorImageToRgb8Bytes(const ColorImage& image) {
+  std::string bytes(image.data.size(), '\0');
+  for (size_t i = 0; i < image.data.size(); ++i) bytes[i] = static_cast<char>(ToByte(image.data[i]));
+  return bytes;
+}
+
+std::string DepthImageToU16Bytes(const DepthImage& image, double depth_scale) {
+  std::string bytes(2 * image.data.size(), '\0');
+  for (size_t i = 0; i < image.data.size(); ++i) {
+    const uint16_t units = ToDepthUnits(image.data[i], depth_scale);
+    bytes[2 * i] = static_cast<char>(units & 0xff);
+    bytes[2 * i + 1] = static_cast<char>(units >> 8);
+  }
+  return bytes;
 }
 
 ColorImage ColorImageFromMat(const cv::Mat& rgb8) {

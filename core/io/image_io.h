@@ -31,6 +31,11 @@ absl::StatusOr<cv::Mat> DecodeDepthBuffer(const std::string& bytes, const std::s
 absl::StatusOr<std::string> EncodeColorImage(const ColorImage& image, const std::string& extension);
 absl::StatusOr<std::string> EncodeDepthImage(const DepthImage& image, double depth_scale);
 
+// Raw wire layouts: width * height * 3 bytes of row-major 8-bit RGB, and width * height
+// little-endian uint16 of round(z * depth_scale) (0 where there is no depth).
+std::string ColorImageToRgb8Bytes(const ColorImage& image);
+std::string DepthImageToU16Bytes(const DepthImage& image, double depth_scale);
+
 // CV_8UC3 RGB -> RGB in [0, 1]; CV_16UC1 -> metres.
 ColorImage ColorImageFromMat(const cv::Mat& rgb8);
 DepthImage DepthImageFromMat(const cv::Mat& depth16, double depth_scale);

@@ -1,0 +1,343 @@
+#include "clients/plenox/remote_client.h"
+
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <grpc/support/log.h>
+
+#include "absl/strings/ascii.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "clients/plenox/cli_common.h"
+#include "core/io/image_io.h"
+#include "core/tracking/tracker.h"
+
+namespace plx::cli {
+namespace {
+
+// The whole file, or an error naming the flag and the file.
+absl::StatusOr<std::string> ReadWholeFile(const std::string& path, const std::string& flag) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) {
+    return absl::NotFoundError(absl::StrCat(flag, ": cannot read ", path, ": no such file"));
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    return absl::NotFoundError(
+        absl::StrCat(flag, ": cannot read ", path, ": ", std::strerror(errno)));
+  }
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// gRPC's own log lines ("E1122 ... Handshake failed ...") would come before plenox's message
+// and say the same less clearly; they stay off unless GRPC_VERBOSITY asks for them.
+void DropGrpcLog(gpr_log_func_args*) {}
+
+std::chrono::system_clock::time_point DeadlineAfter(absl::Duration d) {
+  return std::chrono::system_clock::now() +
+         std::chrono::milliseconds(absl::ToInt64Milliseconds(d));
+}
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<RemoteClient>> RemoteClient::Create(const RemoteOptions& options) {
+  if (std::getenv("GRPC_VERBOSITY") == nullptr) gpr_set_log_function(DropGrpcLog);
+  std::unique_ptr<RemoteClient> client(new RemoteClient());
+  client->server_ = options.server;
+  if (!options.token_file.empty()) {
+    absl::StatusOr<std::string> token = ReadWholeFile(options.token_file, "--token-file");
+    if (!token.ok()) return token.status();
+    client->token_ = std::string(absl::StripAsciiWhitespace(*token));
+    if (client->token_.empty()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("--token-file: ", options.token_file, " is empty"));
+    }
+    // Metadata values must be printable ASCII; gRPC would refuse the call otherwise.
+    for (char c : client->token_) {
+      if (c < 0x20 || c > 0x7e) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "--token-file: the token in ", options.token_file, " must be printable ASCII"));
+      }
+    }
+  }
+  std::shared_ptr<grpc::ChannelCredentials> credentials;
+  if (!options.tls_ca.empty()) {
+    absl::StatusOr<std::string> ca = ReadWholeFile(options.tls_ca, "--tls-ca");
+    if (!ca.ok()) return ca.status();
+    if (absl::StripAsciiWhitespace(*ca).empty()) {
+      return absl::InvalidArgumentError(absl::StrCat("--tls-ca: ", options.tls_ca, " is empty"));
+    }
+    grpc::SslCredentialsOptions ssl;
+    ssl.pem_root_certs = *ca;
+    credentials = grpc::SslCredentials(ssl);
+    client->tls_ = true;
+  } else {
+    credentials = grpc::InsecureChannelCredentials();
+  }
+  grpc::ChannelArguments arguments;
+  arguments.SetMaxReceiveMessageSize(kRemoteMaxMessageBytes);
+  arguments.SetMaxSendMessageSize(kRemoteMaxMessageBytes);
+  client->channel_ = grpc::CreateCustomChannel(options.server, credentials, arguments);
+  if (!client->channel_) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--server: cannot create a channel to ", options.server));
+  }
+  client->stub_ = pb::Plenoxd::NewStub(client->channel_);
+  return client;
+}
+
+absl::Status RemoteClient::Unreachable(const std::string& why) const {
+  return absl::UnavailableError(absl::StrCat(
+      "cannot reach ", server_, ": ", why, " (is plenoxd running there",
+      tls_ ? ", serving TLS with a certificate --tls-ca trusts?)"
+           : "? a daemon serving TLS needs --tls-ca)"));
+}
+
+absl::Status RemoteClient::Connect(absl::Duration timeout) {
+  const auto deadline = DeadlineAfter(timeout);
+  grpc_connectivity_state state = channel_->GetState(/*try_to_connect=*/true);
+  while (state != GRPC_CHANNEL_READY) {
+    // The first failed attempt is the answer: a refused connection will not be accepted a
+    // moment later, and retrying with backoff would only make the user wait.
+    if (state == GRPC_CHANNEL_TRANSIENT_FAILURE || state == GRPC_CHANNEL_SHUTDOWN) {
+      return Unreachable("the connection failed");
+    }
+    if (!channel_->WaitForStateChange(state, deadline)) {
+      return Unreachable(absl::StrFormat("no connection within %.0f s",
+                                         absl::ToDoubleSeconds(timeout)));
+    }
+    state = channel_->GetState(/*try_to_connect=*/true);
+  }
+  return absl::OkStatus();
+}
+
+std::unique_ptr<grpc::ClientContext> RemoteClient::NewContext(absl::Duration deadline,
+                                                             const std::string& map) const {
+  auto context = std::make_unique<grpc::ClientContext>();
+  if (!map.empty()) context->AddMetadata("x-plenoxd-map", map);
+  if (!token_.empty()) context->AddMetadata("authorization", absl::StrCat("Bearer ", token_));
+  if (deadline != absl::InfiniteDuration()) context->set_deadline(DeadlineAfter(deadline));
+  return context;
+}
+
+absl::Status RemoteClient::ToStatus(const grpc::Status& status) const {
+  if (status.ok()) return absl::OkStatus();
+  const auto code = static_cast<absl::StatusCode>(status.error_code());
+  const std::string& message = status.error_message();
+  switch (code) {
+    case absl::StatusCode::kUnauthenticated:
+      return absl::Status(code, absl::StrCat(message, " (UNAUTHENTICATED: ",
+                                             token_.empty()
+                                                 ? "give the daemon's token with --token-file"
+                                                 : "check the token in --token-file",
+                                             ")"));
+    case absl::StatusCode::kUnavailable:
+      return absl::Status(code, absl::StrCat(server_, " is unavailable: ", message,
+                                             " (UNAVAILABLE)"));
+    case absl::StatusCode::kDeadlineExceeded:
+      return absl::Status(code, absl::StrCat(server_, " did not answer in time: ", message,
+                                             " (DEADLINE_EXCEEDED)"));
+    default:
+      return absl::Status(code,
+                          absl::StrCat(message, " (", absl::StatusCodeToString(code), ")"));
+  }
+}
+
+absl::StatusOr<pb::MapInfo> RemoteClient::CreateMap(const std::string& name, float voxel_size) {
+  pb::CreateMapRequest request;
+  request.set_name(name);
+  request.set_voxel_size(voxel_size);
+  pb::MapInfo info;
+  const auto context = NewContext(kRemoteUnaryDeadline, name);
+  if (grpc::Status s = stub_->CreateMap(context.get(), request, &info); !s.ok()) {
+    return ToStatus(s);
+  }
+  return info;
+}
+
+absl::StatusOr<pb::MapInfo> RemoteClient::GetMap(const std::string& name) {
+  pb::GetMapRequest request;
+  request.set_name(name);
+  pb::MapInfo info;
+  const auto context = NewContext(kRemoteUnaryDeadline, name);
+  if (grpc::Status s = stub_->GetMap(context.get(), request, &info); !s.ok()) return ToStatus(s);
+  return info;
+}
+
+absl::StatusOr<std::vector<pb::MapInfo>> RemoteClient::ListMaps() {
+  pb::ListMapsResponse response;
+  const auto context = NewContext();
+  if (grpc::Status s = stub_->ListMaps(context.get(), pb::ListMapsRequest(), &response);
+      !s.ok()) {
+    return ToStatus(s);
+  }
+  return std::vector<pb::MapInfo>(response.maps().begin(), response.maps().end());
+}
+
+absl::StatusOr<pb::MapInfo> RemoteClient::SaveMap(const std::string& name) {
+  pb::SaveMapRequest request;
+  request.set_name(name);
+  pb::MapInfo info;
+  const auto context = NewContext(kRemoteFileDeadline, name);
+  if (grpc::Status s = stub_->SaveMap(context.get(), request, &info); !s.ok()) return ToStatus(s);
+  return info;
+}
+
+absl::StatusOr<pb::MapInfo> RemoteClient::LoadMap(const std::string& name) {
+  pb::LoadMapRequest request;
+  request.set_name(name);
+  pb::MapInfo info;
+  const auto context = NewContext(kRemoteFileDeadline, name);
+  if (grpc::Status s = stub_->LoadMap(context.get(), request, &info); !s.ok()) return ToStatus(s);
+  return info;
+}
+
+absl::StatusOr<pb::RenderResponse> RemoteClient::Render(const pb::RenderRequest& request) {
+  pb::RenderResponse response;
+  const auto context = NewContext(kRemoteUnaryDeadline, request.map());
+  if (grpc::Status s = stub_->Render(context.get(), request, &response); !s.ok()) {
+    return ToStatus(s);
+  }
+  return response;
+}
+
+std::unique_ptr<RemoteClient> ConnectOrReport(const std::string& command,
+                                              const RemoteOptions& options, int* exit_code) {
+  if (options.server.empty()) {
+    *exit_code = ReportError(
+        command,
+        absl::InvalidArgumentError(absl::StrCat(
+            "this command talks to a plenoxd daemon: give --server HOST:PORT before it, e.g. "
+            "plenox --server 127.0.0.1:50051 ",
+            command, " ...")),
+        /*usage_error=*/true);
+    return nullptr;
+  }
+  absl::StatusOr<std::unique_ptr<RemoteClient>> client = RemoteClient::Create(options);
+  if (!client.ok()) {
+    *exit_code = ReportError(command, client.status(), /*usage_error=*/true);
+    return nullptr;
+  }
+  if (absl::Status s = (*client)->Connect(); !s.ok()) {
+    *exit_code = ReportError(command, s);
+    return nullptr;
+  }
+  return std::move(*client);
+}
+
+void PoseToProto(const SE3& pose, pb::Pose* out) {
+  const Eigen::Vector3d& t = pose.translation();
+  const Eigen::Quaterniond& q = pose.rotation();
+  out->set_tx(t.x());
+  out->set_ty(t.y());
+  out->set_tz(t.z());
+  out->set_qx(q.x());
+  out->set_qy(q.y());
+  out->set_qz(q.z());
+  out->set_qw(q.w());
+}
+
+SE3 PoseFromProto(const pb::Pose& pose) {
+  return SE3(Eigen::Quaterniond(pose.qw(), pose.qx(), pose.qy(), pose.qz()),
+             Eigen::Vector3d(pose.tx(), pose.ty(), pose.tz()));
+}
+
+void IntrinsicsToProto(const PinholeIntrinsics& k, double depth_scale, pb::Intrinsics* out) {
+  out->set_fx(k.fx);
+  out->set_fy(k.fy);
+  out->set_cx(k.cx);
+  out->set_cy(k.cy);
+  out->set_width(static_cast<uint32_t>(k.width));
+  out->set_height(static_cast<uint32_t>(k.height));
+  out->set_depth_scale(depth_scale);
+}
+
+absl::StatusOr<WireEncoding> ParseWireEncoding(const std::string& text) {
+  if (text == "png") return WireEncoding::kPng;
+  if (text == "raw") return WireEncoding::kRaw;
+  return absl::InvalidArgumentError(
+      absl::StrFormat("--encoding must be png or raw, got \"%s\"", text));
+}
+
+absl::StatusOr<pb::Frame> FrameToProto(const RgbdFrame& frame, const CameraCalibration& calibration,
+                                       bool with_pose, WireEncoding encoding) {
+  pb::Frame out;
+  out.set_camera_id("plenox");
+  out.set_timestamp(frame.timestamp);
+  IntrinsicsToProto(calibration.pinhole, calibration.depth_scale, out.mutable_intrinsics());
+  if (encoding == WireEncoding::kRaw) {
+    out.set_color(ColorImageToRgb8Bytes(frame.color));
+    out.set_color_encoding(pb::COLOR_ENCODING_RAW_RGB8);
+    out.set_depth(DepthImageToU16Bytes(frame.depth, calibration.depth_scale));
+    out.set_depth_encoding(pb::DEPTH_ENCODING_RAW_U16);
+  } else {
+    absl::StatusOr<std::string> color = EncodeColorImage(frame.color, ".png");
+    if (!color.ok()) return color.status();
+    absl::StatusOr<std::string> depth = EncodeDepthImage(frame.depth, calibration.depth_scale);
+    if (!depth.ok()) return depth.status();
+    out.set_color(std::move(*color));
+    out.set_color_encoding(pb::COLOR_ENCODING_PNG);
+    out.set_depth(std::move(*depth));
+    out.set_depth_encoding(pb::DEPTH_ENCODING_PNG16);
+  }
+  if (with_pose) {
+    if (!frame.world_T_camera) {
+      return absl::InvalidArgumentError(
+          absl::StrFormat("frame at t=%.6f has no ground-truth pose", frame.timestamp));
+    }
+    PoseToProto(*frame.world_T_camera, out.mutable_pose());
+  }
+  return out;
+}
+
+absl::Status WriteFilesAtomically(const std::vector<std::pair<std::string, std::string>>& files) {
+  std::vector<std::pair<std::string, std::string>> written;  // temp -> final
+  const auto cleanup = [&] {
+    for (const auto& [temp, final_path] : written) std::remove(temp.c_str());
+  };
+  for (const auto& [path, bytes] : files) {
+    const std::string temp = absl::StrFormat(
+        "%s.tmp.%d%s", path, static_cast<int>(getpid()),
+        std::filesystem::path(path).extension().string());
+    written.emplace_back(temp, path);
+    std::FILE* f = std::fopen(temp.c_str(), "wb");
+    bool ok = f != nullptr;
+    if (ok) ok = std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
+    if (ok) ok = std::fflush(f) == 0 && fsync(fileno(f)) == 0;
+    const std::string reason = std::strerror(errno);
+    if (f != nullptr && std::fclose(f) != 0) ok = false;
+    if (!ok) {
+      cleanup();
+      return absl::InternalError(absl::StrFormat("cannot write %s: %s", path, reason));
+    }
+  }
+  for (const auto& [temp, final_path] : written) {
+    if (std::rename(temp.c_str(), final_path.c_str()) != 0) {
+      const std::string reason = std::strerror(errno);
+      cleanup();
+      return absl::InternalError(absl::StrFormat("cannot write %s: %s", final_path, reason));
+    }
+  }
+  return absl::OkStatus();
+}
+
+const char* TrackingStateText(pb::TrackingState state) {
+  switch (state) {
+    case pb::TRACKING_STATE_OK: return TrackingStateName(TrackingState::kOk);
+    case pb::TRACKING_STATE_DEGRADED: return TrackingStateName(TrackingState::kDegraded);
+    case pb::TRACKING_STATE_LOST: return TrackingStateName(TrackingState::kLost);
+    default: return "?";
+  }
+}
+
+}  // namespace plx::cli

@@ -1,0 +1,114 @@
+// The gRPC side of `plenox --server HOST:PORT <command>`: the channel to a plenoxd daemon
+// (64 MiB messages both ways, TLS with --tls-ca, the bearer token from --token-file on every
+// call), a short connect check so an unreachable daemon is reported at once, deadlines on unary
+// calls, and grpc::Status -> absl::Status so that commands report the daemon's own message
+// ("plenox map: no map named "x" (NOT_FOUND)") through ReportError with exit code 1. gRPC's own
+// log lines are dropped unless GRPC_VERBOSITY is set (e.g. GRPC_VERBOSITY=debug to debug TLS).
+//
+// Only built with PLX_WITH_SERVER (clients/plenox/CMakeLists.txt).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/time/time.h"
+#include "clients/plenox/commands.h"
+#include "core/geometry/intrinsics.h"
+#include "core/geometry/rgbd_frame.h"
+#include "core/geometry/se3.h"
+#include "plenoxd/v1/plenoxd.grpc.pb.h"
+
+namespace plx::cli {
+
+namespace pb = ::plenoxd::v1;
+
+// The largest message sent or accepted (the daemon's default limit too).
+inline constexpr int kRemoteMaxMessageBytes = 64 << 20;
+// How long Connect waits for a daemon that neither accepts nor refuses the connection.
+inline constexpr absl::Duration kRemoteConnectTimeout = absl::Seconds(5);
+// Deadline of unary calls; save and load (hundreds of MB to or from disk) get longer.
+inline constexpr absl::Duration kRemoteUnaryDeadline = absl::Seconds(60);
+inline constexpr absl::Duration kRemoteFileDeadline = absl::Seconds(600);
+
+class RemoteClient {
+ public:
+  // Reads --token-file (trimmed; must be non-empty printable ASCII) and --tls-ca and creates
+  // the channel; nothing goes over the network yet. Errors are the user's (a file that is
+  // missing or empty) and are reported as usage errors.
+  static absl::StatusOr<std::unique_ptr<RemoteClient>> Create(const RemoteOptions& options);
+
+  // Connects to the daemon. Unavailable "cannot reach HOST:PORT: ..." when the connection is
+  // refused or fails (also a TLS handshake that fails), or nothing answers within `timeout`.
+  absl::Status Connect(absl::Duration timeout = kRemoteConnectTimeout);
+
+  pb::Plenoxd::Stub& stub() { return *stub_; }
+  const std::string& server() const { return server_; }
+
+  // A context for one call: the bearer token when there is one, a deadline unless `deadline`
+  // is infinite (streams), and the map's name as "x-plenoxd-map" metadata when the call is about
+  // one map, which a proxy in front of several daemons hashes on (deploy/k8s/envoy.yaml).
+  std::unique_ptr<grpc::ClientContext> NewContext(absl::Duration deadline = kRemoteUnaryDeadline,
+                                                  const std::string& map = "") const;
+
+  // The daemon's status as an absl::Status with the same code: the daemon's message with the
+  // code's name appended, "(UNAUTHENTICATED: ...)" with a hint about --token-file, and
+  // UNAVAILABLE / DEADLINE_EXCEEDED naming the server.
+  absl::Status ToStatus(const grpc::Status& status) const;
+
+  // Unary calls (kRemoteUnaryDeadline; save and load kRemoteFileDeadline).
+  absl::StatusOr<pb::MapInfo> CreateMap(const std::string& name, float voxel_size);
+  absl::StatusOr<pb::MapInfo> GetMap(const std::string& name);
+  absl::StatusOr<std::vector<pb::MapInfo>> ListMaps();
+  absl::StatusOr<pb::MapInfo> SaveMap(const std::string& name);
+  absl::StatusOr<pb::MapInfo> LoadMap(const std::string& name);
+  absl::StatusOr<pb::RenderResponse> Render(const pb::RenderRequest& request);
+
+ private:
+  RemoteClient() = default;
+  absl::Status Unreachable(const std::string& why) const;
+
+  std::string server_;
+  std::string token_;
+  bool tls_ = false;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<pb::Plenoxd::Stub> stub_;
+};
+
+// For the commands: checks that --server was given, creates the client and connects. On an
+// error it prints it ("plenox <command>: ...") and returns nullptr with *exit_code set: usage
+// (2) without --server or with an unreadable --token-file / --tls-ca, failure (1) when the
+// daemon cannot be reached.
+std::unique_ptr<RemoteClient> ConnectOrReport(const std::string& command,
+                                              const RemoteOptions& options, int* exit_code);
+
+// Wire conversions (the daemon normalises quaternions on receipt).
+void PoseToProto(const SE3& pose, pb::Pose* out);
+SE3 PoseFromProto(const pb::Pose& pose);
+void IntrinsicsToProto(const PinholeIntrinsics& k, double depth_scale, pb::Intrinsics* out);
+
+// How frames travel: PNG (colour 8-bit, depth 16-bit; small on the wire, costs an encode here
+// and a decode on the daemon) or raw (RAW_RGB8 + RAW_U16; 1.5 MB at 640x480, no codec).
+enum class WireEncoding { kPng, kRaw };
+absl::StatusOr<WireEncoding> ParseWireEncoding(const std::string& text);
+
+// A decoded dataset frame as a Frame message: colour and depth (with the calibration's depth
+// scale) in `encoding`, the calibration's intrinsics, and the frame's ground-truth pose when
+// `with_pose` (InvalidArgument when it has none).
+absl::StatusOr<pb::Frame> FrameToProto(const RgbdFrame& frame, const CameraCalibration& calibration,
+                                       bool with_pose, WireEncoding encoding = WireEncoding::kPng);
+
+// Writes each (path, bytes) to "<path>.tmp.<pid><extension>" and renames them all into place
+// only when every one was written, so a failure leaves none of them behind.
+absl::Status WriteFilesAtomically(const std::vector<std::pair<std::string, std::string>>& files);
+
+// The name of a TrackingState for progress lines ("OK", "DEGRADED", "LOST").
+const char* TrackingStateText(pb::TrackingState state);
+
+}  // namespace plx::cli

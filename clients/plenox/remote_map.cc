@@ -1,0 +1,240 @@
+// plenox --server HOST:PORT map: map a dataset's keyframes with their ground-truth poses into a
+// map on the daemon (CreateMap, then one Integrate stream).
+#include <chrono>
+#include <cmath>
+#include <iostream>
+#include <mutex>
+#include <thread>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "clients/plenox/cli_common.h"
+#include "clients/plenox/commands.h"
+#include "clients/plenox/remote_client.h"
+#include "core/eval/map_metrics.h"
+
+namespace plx::cli {
+namespace {
+
+constexpr char kCommand[] = "map";
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// What the progress line shows; written by the sender and the progress reader.
+struct MappingState {
+  int sent = 0;
+  int total = 0;
+  bool have_progress = false;
+  pb::MappingProgress last;
+  // From the last message that reported an optimisation step (the final one may not).
+  double train_psnr = 0.0, train_depth_l1_m = 0.0;
+};
+
+std::string ProgressText(const std::string& name, int iterations_per_keyframe,
+                         const MappingState& s) {
+  std::string text = absl::StrFormat("mapping \"%s\": sent %d/%d keyframes", name, s.sent, s.total);
+  if (s.have_progress) {
+    const pb::MappingProgress& p = s.last;
+    absl::StrAppendFormat(&text, ", integrated %d, iteration %d/%d", p.keyframes_integrated(),
+                          p.iterations(), iterations_per_keyframe * p.keyframes_integrated());
+    if (s.train_psnr > 0.0) {
+      absl::StrAppendFormat(&text, ", PSNR %.2f dB, depth L1 %.2f cm", s.train_psnr,
+                            100.0 * s.train_depth_l1_m);
+    }
+    absl::StrAppendFormat(&text, ", version %d, %.1f s", p.map_version(), p.elapsed_s());
+  }
+  return text;
+}
+
+}  // namespace
+
+int RunRemoteMap(const RemoteOptions& remote, const std::vector<std::string>& args) {
+  FlagSet flags("plenox map",
+                "With --server: maps every K-th frame of a dataset, with its ground-truth pose,\n"
+                "into map N on the daemon. Creates N (or keeps mapping into it when it exists),\n"
+                "streams the keyframes (colour PNG, 16-bit depth PNG) and waits until the\n"
+                "daemon has spent the optimisation budget and published the final version.");
+  AddDatasetFlags(flags);
+  flags.Add("name", "N", "the map on the daemon (1-64 characters of [A-Za-z0-9_.-])", std::nullopt,
+            true)
+      .Add("every", "K", "map every K-th frame (0, K, 2K, ...)", "10")
+      .Add("voxel-size", "M", "voxel edge in metres of a new map (an existing map keeps its own)",
+           "0.02")
+      .Add("iterations-per-keyframe", "N", "optimisation iterations per keyframe", "50")
+      .Add("batch", "N", "rays per iteration", "8192")
+      .Add("max-depth", "M", "ignore depth measurements beyond this (metres)", "10")
+      .AddSwitch("json", "print a JSON summary on the last line of stdout")
+      .AddSwitch("quiet", "no progress on stderr");
+  int exit_code = 0;
+  if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
+
+  absl::StatusOr<int> every = flags.GetInt("every", 1, 1000000);
+  if (!every.ok()) return ReportError(kCommand, every.status(), true);
+  absl::StatusOr<double> voxel = flags.GetDouble("voxel-size", 0.001, 1.0);
+  if (!voxel.ok()) return ReportError(kCommand, voxel.status(), true);
+  absl::StatusOr<int> iterations = flags.GetInt("iterations-per-keyframe", 1, 100000);
+  if (!iterations.ok()) return ReportError(kCommand, iterations.status(), true);
+  absl::StatusOr<int> batch = flags.GetInt("batch", 1, 1 << 22);
+  if (!batch.ok()) return ReportError(kCommand, batch.status(), true);
+  absl::StatusOr<double> max_depth = flags.GetDouble("max-depth", 0.1, 1000.0);
+  if (!max_depth.ok()) return ReportError(kCommand, max_depth.status(), true);
+  absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);
+  if (!dataset_options.ok()) return ReportError(kCommand, dataset_options.status(), true);
+  const std::string name = flags.GetString("name");
+
+  std::unique_ptr<RemoteClient> client = ConnectOrReport(kCommand, remote, &exit_code);
+  if (!client) return exit_code;
+
+  // Everything local is checked before the daemon is asked to create anything.
+  absl::StatusOr<std::unique_ptr<RgbdDataset>> opened =
+      OpenDatasetFromFlags(flags, *dataset_options);
+  if (!opened.ok()) return ReportError(kCommand, opened.status());
+  const RgbdDataset& dataset = **opened;
+  const std::vector<int> keyframes = KeyframeIndices(dataset.size(), *every);
+  if (keyframes.empty()) {
+    return ReportError(kCommand, absl::InvalidArgumentError(absl::StrCat(
+                                     dataset.name(), " has no frames to map")));
+  }
+  for (int index : keyframes) {
+    if (!dataset.ground_truth(index)) {
+      return ReportError(
+          kCommand,
+          absl::FailedPreconditionError(absl::StrCat(
+              "frame ", index, " (t=", dataset.timestamp(index),
+              ") has no ground-truth pose; mapping with known poses needs one for every keyframe")));
+    }
+  }
+
+  bool created = true;
+  absl::StatusOr<pb::MapInfo> info = client->CreateMap(name, static_cast<float>(*voxel));
+  if (info.status().code() == absl::StatusCode::kAlreadyExists) {
+    created = false;
+    info = client->GetMap(name);
+    if (!info.ok()) return ReportError(kCommand, info.status());
+    std::cerr << absl::StrFormat(
+        "plenox map: map \"%s\" already exists on %s (voxel size %g m, %d keyframes, version %d): "
+        "mapping into it%s\n",
+        name, client->server(), info->voxel_size(), info->keyframes(), info->version(),
+        flags.IsSet("voxel-size") ? "; --voxel-size does not apply to it" : "");
+  } else if (!info.ok()) {
+    return ReportError(kCommand, info.status());
+  }
+
+  const auto start = std::chrono::steady_clock::now();
+  std::unique_ptr<grpc::ClientContext> context =
+      client->NewContext(absl::InfiniteDuration(), name);
+  std::unique_ptr<grpc::ClientReaderWriter<pb::IntegrateRequest, pb::MappingProgress>> stream =
+      client->stub().Integrate(context.get());
+
+  ProgressLine line(!flags.GetSwitch("quiet"));
+  std::mutex mutex;  // guards `state` and `line`
+  MappingState state;
+  state.total = static_cast<int>(keyframes.size());
+  bool done = false;
+  // The daemon's progress is read on its own thread, so that it keeps flowing while the
+  // sender waits for the daemon to take the next keyframe (it stops reading while behind).
+  std::thread reader([&] {
+    pb::MappingProgress progress;
+    while (stream->Read(&progress)) {
+      std::lock_guard<std::mutex> lock(mutex);
+      state.last = progress;
+      state.have_progress = true;
+      if (progress.train_psnr() > 0.0) {
+        state.train_psnr = progress.train_psnr();
+        state.train_depth_l1_m = progress.train_depth_l1_m();
+      }
+      if (progress.done()) done = true;
+      line.Update(ProgressText(name, *iterations, state));
+    }
+  });
+
+  absl::Status local = absl::OkStatus();
+  bool stream_open = true;
+  for (size_t i = 0; i < keyframes.size() && stream_open; ++i) {
+    absl::StatusOr<RgbdFrame> frame = dataset.LoadFrame(keyframes[i]);
+    absl::StatusOr<pb::Frame> encoded =
+        frame.ok() ? FrameToProto(*frame, dataset.calibration(), /*with_pose=*/true)
+                   : absl::StatusOr<pb::Frame>(frame.status());
+    if (!encoded.ok()) {
+      local = encoded.status();
+      break;
+    }
+    pb::IntegrateRequest request;
+    if (i == 0) {
+      request.set_map(name);
+      pb::IntegrateOptions* options = request.mutable_options();
+      options->set_iterations_per_keyframe(static_cast<uint32_t>(*iterations));
+      options->set_rays_per_iteration(static_cast<uint32_t>(*batch));
+      options->set_max_depth(static_cast<float>(*max_depth));
+    }
+    *request.mutable_frame() = std::move(*encoded);
+    // false: the daemon ended the stream (an error); Finish says why.
+    stream_open = stream->Write(request);
+    if (stream_open) {
+      std::lock_guard<std::mutex> lock(mutex);
+      ++state.sent;
+      line.Update(ProgressText(name, *iterations, state));
+    }
+  }
+  if (!local.ok()) {
+    context->TryCancel();
+  } else if (stream_open) {
+    stream->WritesDone();
+  }
+  reader.join();
+  const grpc::Status finished = stream->Finish();
+  if (!local.ok()) {
+    line.Finish("mapping cancelled");
+    return ReportError(kCommand, local);
+  }
+  if (!finished.ok()) {
+    line.Finish("mapping failed");
+    return ReportError(kCommand, client->ToStatus(finished));
+  }
+  if (!done) {
+    return ReportError(kCommand, absl::InternalError(
+                                     "the daemon ended the Integrate stream before mapping was done"));
+  }
+  const double seconds = SecondsSince(start);
+  const pb::MappingProgress last = state.last;
+
+  absl::StatusOr<pb::MapInfo> final_info = client->GetMap(name);
+  if (!final_info.ok()) return ReportError(kCommand, final_info.status());
+  const double map_mb = final_info->memory_bytes() / 1e6;
+  // The training error is shown only when the daemon reported one.
+  const bool have_error = state.train_psnr > 0.0;
+  line.Finish(absl::StrFormat(
+      "mapped %d keyframes into \"%s\" on %s: %d iterations%s, version %d, %.1f s",
+      last.keyframes_integrated(), name, client->server(), last.iterations(),
+      have_error ? absl::StrFormat(", last batch PSNR %.2f dB, depth L1 %.2f cm", state.train_psnr,
+                                   100.0 * state.train_depth_l1_m)
+                 : "",
+      last.map_version(), seconds));
+  if (flags.GetSwitch("json")) {
+    JsonObject json;
+    json.Add("map", name)
+        .Add("server", client->server())
+        .Add("created", created ? 1 : 0)
+        .Add("keyframes", static_cast<int64_t>(last.keyframes_integrated()))
+        .Add("iterations", static_cast<int64_t>(last.iterations()))
+        .Add("map_version", static_cast<int64_t>(last.map_version()))
+        .Add("bricks", static_cast<int64_t>(final_info->bricks()))
+        .Add("map_mb", map_mb)
+        .Add("map_keyframes", static_cast<int64_t>(final_info->keyframes()))
+        .Add("train_psnr", have_error ? state.train_psnr : std::nan(""))  // null: not reported
+        .Add("train_depth_l1_m", have_error ? state.train_depth_l1_m : std::nan(""))
+        .Add("seconds", seconds)
+        .Add("seconds_server", last.elapsed_s());
+    std::cout << json.str() << "\n";
+  } else {
+    std::cout << absl::StrFormat(
+        "mapped \"%s\" on %s: %d keyframes, %d bricks, %.1f MB, version %d, %.1f s\n", name,
+        client->server(), last.keyframes_integrated(), final_info->bricks(), map_mb,
+        last.map_version(), seconds);
+  }
+  return kExitOk;
+}
+
+}  // namespace plx::cli

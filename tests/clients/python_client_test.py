@@ -1,0 +1,411 @@
+#!/usr/bin/python3
+"""End-to-end test of clients/python (plenoxd_client) against real plenoxd processes.
+
+    PYTHONPATH=<build>/clients/python/gen:<repo>/clients/python \\
+      /usr/bin/python3 tests/clients/python_client_test.py --plenoxd <plenoxd> --plenox <plenox>
+
+Runs `plenox synth` for a small sequence, starts plenoxd on a free port with a temporary data
+directory, and checks health, maps, Integrate, lock-step and streaming Track (ATE < 1 cm), Render,
+Export, save/load, error codes, bearer-token authentication (a second daemon) and a clean exit on
+SIGTERM. Exits 0 when everything passed, 1 with a list of failures otherwise, 77 (skip) when
+this interpreter has no grpc/numpy.
+"""
+
+import argparse
+import os
+import queue
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import traceback
+
+try:
+    import grpc  # noqa: F401
+    import numpy as np
+except ImportError as missing:
+    print(f"SKIP: {sys.executable} cannot import grpc/numpy ({missing}); "
+          "install Debian's python3-grpcio and python3-numpy")
+    sys.exit(77)
+
+from plenoxd_client import Client, PlenoxdError, TumDataset, convert, pb, state_name
+
+FRAMES, WIDTH, HEIGHT, EVERY = 30, 96, 72, 10
+VOXEL_SIZE = 0.04         # what the plenox CLI end-to-end test maps this sequence with
+ITERATIONS_PER_KEYFRAME = 60
+TOKEN = "py-client-test-token"
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+class Failures:
+    def __init__(self):
+        self.items = []
+
+    def check(self, condition, what):
+        status = "ok  " if condition else "FAIL"
+        print(f"  [{status}] {what}", flush=True)
+        if not condition:
+            self.items.append(what)
+        return condition
+
+    def expect_error(self, fn, code, what, message_contains=None):
+        """fn() must raise PlenoxdError with `code` (a grpc.StatusCode name)."""
+        try:
+            fn()
+        except PlenoxdError as e:
+            ok = e.code_name == code and (message_contains is None or message_contains in e.message)
+            return self.check(ok, f"{what}: {code}"
+                              + (f" naming {message_contains!r}" if message_contains else "")
+                              + ("" if ok else f" (got {e})"))
+        except Exception as e:  # noqa: BLE001
+            return self.check(False, f"{what}: {code} (got {type(e).__name__}: {e})")
+        return self.check(False, f"{what}: {code} (the call succeeded)")
+
+
+class Daemon:
+    """A plenoxd process on 127.0.0.1:<free port>; its log goes to a file."""
+
+    def __init__(self, binary, work, name, extra_args=()):
+        self.name = name
+        self.data_dir = os.path.join(work, f"{name}_data")
+        os.makedirs(self.data_dir, exist_ok=True)
+        self.log_path = os.path.join(work, f"{name}.log")
+        self._log = open(self.log_path, "wb")
+        self.proc = subprocess.Popen(
+            [binary, "--listen", "127.0.0.1:0", "--data-dir", self.data_dir, *extra_args],
+            stdout=subprocess.PIPE, stderr=self._log, text=True)
+        lines = queue.Queue()
+
+        def pump():  # keeps draining stdout so the daemon never blocks on a full pipe
+            for line in self.proc.stdout:
+                lines.put(line)
+            lines.put(None)
+
+        threading.Thread(target=pump, daemon=True).start()
+        self.port = None
+        deadline = time.monotonic() + 30.0
+        while self.port is None and time.monotonic() < deadline:
+            try:
+                line = lines.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                break
+            if line is None:
+                break
+            m = re.search(r"plenoxd listening on port (\d+)", line)
+            if m:
+                self.port = int(m.group(1))
+        if self.port is None:
+            self.proc.kill()
+            self.proc.wait()
+            raise RuntimeError(f"{name}: plenoxd did not report its port (exit "
+                               f"{self.proc.returncode}); log:\n{self.log_tail()}")
+        self.target = f"127.0.0.1:{self.port}"
+
+    def log_tail(self, lines=30):
+        self._log.flush()
+        with open(self.log_path, "rb") as f:
+            return "\n".join(f.read().decode(errors="replace").splitlines()[-lines:])
+
+    def stop(self, timeout=60.0):
+        """SIGTERM; returns the exit code (None if it had to be killed)."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+                return None
+        return self.proc.returncode
+
+
+def ate_rmse(estimates, groundtruth):
+    """Position RMSE in metres over matching timestamps, no alignment; (rmse, matched)."""
+    errors = [np.linalg.norm(t - groundtruth[ts][0]) for ts, t in estimates if ts in groundtruth]
+    if not errors:
+        return float("inf"), 0
+    return float(np.sqrt(np.mean(np.square(errors)))), len(errors)
+
+
+def run_step(failures, name, fn):
+    print(f"- {name}", flush=True)
+    start = time.monotonic()
+    try:
+        fn()
+    except Exception:  # noqa: BLE001 -- a step's crash is a failure, the other steps still run
+        failures.check(False, f"{name}: raised\n{traceback.format_exc()}")
+    print(f"  ({time.monotonic() - start:.1f} s)", flush=True)
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--plenoxd", required=True)
+    parser.add_argument("--plenox", required=True)
+    parser.add_argument("--keep", action="store_true", help="keep the temporary folder")
+    args = parser.parse_args()
+
+    failures = Failures()
+    work = tempfile.mkdtemp(prefix="plenoxd_py_client_")
+    daemons = []
+    began = time.monotonic()
+    try:
+        sequence_dir = os.path.join(work, "sequence")
+        synth = subprocess.run(
+            [args.plenox, "synth", "--out", sequence_dir, "--frames", str(FRAMES), "--width",
+             str(WIDTH), "--height", str(HEIGHT)], capture_output=True, text=True, timeout=120)
+        if not failures.check(synth.returncode == 0, "plenox synth writes the sequence"):
+            print(synth.stdout, synth.stderr)
+            return 1
+        seq = TumDataset(sequence_dir)
+        frames = seq[:]
+        failures.check(len(frames) == FRAMES and all(f.pose is not None for f in frames),
+                       f"TumDataset reads {FRAMES} frames with ground-truth poses")
+        k = seq.intrinsics
+        failures.check((k.width, k.height) == (WIDTH, HEIGHT), "intrinsics.txt size")
+        groundtruth = seq.groundtruth()
+
+        daemon = Daemon(args.plenoxd, work, "open")
+        daemons.append(daemon)
+        client = Client(daemon.target, timeout=60.0)
+        state = {}
+
+        def health_and_maps():
+            failures.check(client.health() is True, "health: SERVING")
+            info = client.create_map("room", voxel_size=VOXEL_SIZE)
+            failures.check(info.name == "room" and abs(info.voxel_size - VOXEL_SIZE) < 1e-6,
+                           "create_map returns the map's info")
+            failures.check("room" in [m.name for m in client.list_maps()], "list_maps has it")
+            failures.check(client.get_map("room").keyframes == 0, "get_map: no keyframes yet")
+
+        def integrate():
+            keyframes = frames[::EVERY]
+            progress = list(client.integrate("room", keyframes,
+                                             {"iterations_per_keyframe": ITERATIONS_PER_KEYFRAME}))
+            failures.check(len(progress) > 0, "integrate yields progress")
+            last = progress[-1] if progress else pb.MappingProgress()
+            print(f"    final progress: {last.keyframes_integrated} keyframes, {last.iterations} "
+                  f"iterations, psnr {last.train_psnr:.1f} dB, {last.elapsed_s:.1f} s")
+            failures.check(last.done, "the final progress has done=True")
+            failures.check(last.keyframes_integrated == 3 and last.keyframes_received == 3,
+                           "3 keyframes received and integrated")
+            failures.check(sum(p.done for p in progress) == 1, "exactly one done message")
+            failures.check(client.get_map("room").keyframes == 3, "get_map: 3 keyframes")
+
+        def track_lockstep():
+            start = time.monotonic()
+            stream = client.track("room", frames, initial_pose=frames[0].pose, lockstep=True)
+            estimates = list(stream)
+            seconds = time.monotonic() - start
+            state["track_ms"] = 1000.0 * seconds / max(1, len(estimates))
+            failures.check(len(estimates) == FRAMES and stream.sent == FRAMES,
+                           f"lock-step track: {FRAMES} frames, {FRAMES} estimates "
+                           f"(got {len(estimates)}, {state['track_ms']:.0f} ms/frame)")
+            failures.check(stream.dropped == 0, "lock-step: nothing dropped")
+            states = [state_name(e) for e in estimates]
+            failures.check(all(s == "OK" for s in states),
+                           f"every state OK (got {sorted(set(states))})")
+            failures.check([e.timestamp for e in estimates] == [f.timestamp for f in frames],
+                           "estimates come in frame order with the frames' timestamps")
+            t0, q0 = convert.pose_from_proto(estimates[0].pose)
+            failures.check(np.allclose(t0, frames[0].pose[0], atol=1e-9)
+                           and abs(abs(np.dot(q0, frames[0].pose[1])) - 1) < 1e-9,
+                           "the first estimate is the initial pose")
+            rmse, matched = ate_rmse(
+                [(e.timestamp, convert.pose_from_proto(e.pose)[0]) for e in estimates],
+                groundtruth)
+            state["ate"] = rmse
+            failures.check(matched == FRAMES and rmse < 0.01,
+                           f"ATE {100 * rmse:.2f} cm < 1 cm over {matched} frames")
+
+        def track_streaming():
+            stream = client.track("room", frames, initial_pose=frames[0].pose, lockstep=False)
+            estimates = list(stream)
+            print(f"    streaming: sent {stream.sent}, estimates {stream.received}, dropped "
+                  f"{stream.dropped}")
+            failures.check(stream.sent == FRAMES and 2 <= len(estimates) <= FRAMES,
+                           "streaming track: all frames sent, estimates come back")
+            failures.check(stream.received + stream.dropped == stream.sent,
+                           "streaming: estimates + dropped == frames sent")
+            failures.check(estimates[0].timestamp == frames[0].timestamp
+                           and estimates[-1].timestamp == frames[-1].timestamp,
+                           "streaming: the first and the newest frame are always served")
+
+        def render_and_export():
+            pose = frames[15].pose
+            color, depth = client.render("room", pose, k)
+            failures.check(color.shape == (HEIGHT, WIDTH, 3) and color.dtype == np.uint8,
+                           f"render colour is {HEIGHT}x{WIDTH}x3 uint8 (got {color.shape} "
+                           f"{color.dtype})")
+            failures.check(depth.shape == (HEIGHT, WIDTH) and depth.dtype == np.float32,
+                           f"render depth is {HEIGHT}x{WIDTH} float32 (got {depth.shape} "
+                           f"{depth.dtype})")
+            valid = depth > 0
+            failures.check(valid.mean() > 0.8, f"render depth mostly non-zero "
+                           f"({100 * valid.mean():.0f}% of pixels)")
+            failures.check(color.max() > 0, "render colour is not black")
+            # Against the sequence's own depth (16-bit PNG) when OpenCV is here to decode it.
+            try:
+                measured = convert.decode_depth(frames[15].depth, "png16", WIDTH, HEIGHT,
+                                                k.depth_scale)
+            except RuntimeError:
+                measured = None
+            if measured is not None:
+                both = valid & (measured > 0)
+                error = float(np.median(np.abs(depth[both] - measured[both])))
+                failures.check(error < 0.05, f"rendered depth matches the frame's (median "
+                               f"|error| {100 * error:.1f} cm)")
+            info = client.render("room", pose, k, with_info=True)
+            failures.check(0.8 < info.coverage <= 1.0 and info.map_version > 0,
+                           f"render info: coverage {info.coverage:.2f}, version "
+                           f"{info.map_version}")
+            ply = client.export("room")
+            failures.check(ply.startswith(b"ply\n") and b"binary_little_endian" in ply[:200],
+                           f"export returns a binary PLY ({len(ply)} bytes)")
+
+        def raw_frames():
+            # convert.frame_from_arrays (RAW encodings, as from a live camera) tracks the same.
+            try:
+                rgb = convert.decode_color(frames[1].color, "png", WIDTH, HEIGHT)
+                metres = convert.decode_depth(frames[1].depth, "png16", WIDTH, HEIGHT,
+                                              k.depth_scale)
+            except RuntimeError as e:  # no python3-opencv to decode the PNGs with
+                print(f"    skipped: {e}")
+                return
+            raw = [frames[0], convert.frame_from_arrays(rgb, metres, k, frames[1].timestamp)]
+            estimates = list(client.track("room", raw, initial_pose=frames[0].pose))
+            t, _ = convert.pose_from_proto(estimates[-1].pose)
+            failures.check(len(estimates) == 2 and state_name(estimates[-1]) == "OK"
+                           and np.linalg.norm(t - frames[1].pose[0]) < 0.01,
+                           "a raw RGB8/RAW_U16 frame from numpy tracks like its PNGs")
+
+        def save_load():
+            saved = client.save_map("room")
+            failures.check(not saved.dirty and saved.bricks > 0, "save_map: no longer dirty")
+            failures.check(os.path.exists(os.path.join(daemon.data_dir, "room.plx")),
+                           "save_map writes <data-dir>/room.plx")
+            # load_map reads <data-dir>/<name>.plx: a copy under another name loads as that map.
+            copy = os.path.join(daemon.data_dir, "room_copy.plx")
+            shutil.copyfile(os.path.join(daemon.data_dir, "room.plx"), copy)
+            info = client.load_map("room_copy")
+            failures.check(info.name == "room_copy" and info.bricks == saved.bricks,
+                           f"load_map reads a saved map ({info.bricks} bricks, saved "
+                           f"{saved.bricks})")
+            color, depth = client.render("room_copy", frames[15].pose, k)
+            failures.check((depth > 0).mean() > 0.8, "the loaded map renders")
+            client.delete_map("room_copy")
+            failures.expect_error(lambda: client.get_map("room_copy"), "NOT_FOUND",
+                                  "get_map after delete_map")
+            failures.check(not os.path.exists(copy), "delete_map removes the saved file too")
+
+        def errors():
+            bad = frames[1].to_proto(with_pose=False)
+            bad.color = b"\x89PNG\r\n\x1a\n this is not a PNG"
+            failures.expect_error(
+                lambda: list(client.track("room", [frames[0], bad],
+                                          initial_pose=frames[0].pose)),
+                "INVALID_ARGUMENT", "track with a corrupt PNG", "frame.color")
+            failures.expect_error(lambda: list(client.integrate("room", [bad])),
+                                  "INVALID_ARGUMENT", "integrate with a corrupt PNG",
+                                  "frame[0].color")
+            failures.expect_error(lambda: list(client.integrate("room", [frames[1].to_proto(
+                with_pose=False)])), "INVALID_ARGUMENT", "integrate a frame without a pose",
+                "frame[0].pose")
+            failures.expect_error(lambda: client.get_map("no-such-map"), "NOT_FOUND",
+                                  "get_map of an unknown map")
+            failures.expect_error(lambda: client.render("no-such-map", frames[0].pose, k),
+                                  "NOT_FOUND", "render of an unknown map")
+            failures.expect_error(lambda: list(client.track("no-such-map", frames[:2])),
+                                  "NOT_FOUND", "track in an unknown map")
+            failures.expect_error(lambda: client.create_map("bad name!"), "INVALID_ARGUMENT",
+                                  "create_map with a bad name")
+
+        def example():
+            env = dict(os.environ)
+            out = os.path.join(work, "example_traj.txt")
+            r = subprocess.run(
+                [sys.executable, os.path.join(REPO, "clients/python/examples/track_sequence.py"),
+                 "--server", daemon.target, "--dataset", sequence_dir, "--map", "example",
+                 "--voxel-size", str(VOXEL_SIZE), "--iterations", str(ITERATIONS_PER_KEYFRAME),
+                 "--out", out], capture_output=True, text=True, timeout=300, env=env)
+            print("    " + "\n    ".join(r.stdout.strip().splitlines()[-3:]))
+            failures.check(r.returncode == 0, "examples/track_sequence.py exits 0"
+                           + ("" if r.returncode == 0 else f"\n{r.stdout}\n{r.stderr}"))
+            m = re.search(r"ATE \(no alignment, (\d+) frames\): rmse ([0-9.]+) cm", r.stdout)
+            failures.check(m is not None and int(m.group(1)) == FRAMES
+                           and float(m.group(2)) < 1.0, "the example reports ATE < 1 cm")
+            rows = [line for line in open(out, encoding="utf-8") if not line.startswith("#")] \
+                if os.path.exists(out) else []
+            failures.check(len(rows) == FRAMES and all(len(r.split()) == 8 for r in rows),
+                           f"the example writes a {FRAMES}-line TUM trajectory")
+
+        run_step(failures, "health and map lifecycle", health_and_maps)
+        run_step(failures, "integrate every 10th frame", integrate)
+        run_step(failures, "track lock-step", track_lockstep)
+        run_step(failures, "track streaming (latest wins)", track_streaming)
+        run_step(failures, "render and export", render_and_export)
+        run_step(failures, "raw frames from numpy", raw_frames)
+        run_step(failures, "save, delete, load", save_load)
+        run_step(failures, "errors", errors)
+        run_step(failures, "example script", example)
+        client.close()
+
+        def auth():
+            token_file = os.path.join(work, "token")
+            with open(token_file, "w", encoding="utf-8") as f:
+                f.write(TOKEN + "\n")
+            secured = Daemon(args.plenoxd, work, "auth", ["--auth-token-file", token_file])
+            daemons.append(secured)
+            with Client(secured.target, timeout=30.0) as anonymous:
+                failures.check(anonymous.health() is True, "auth: health works without a token")
+                failures.expect_error(anonymous.list_maps, "UNAUTHENTICATED",
+                                      "auth: list_maps without a token")
+                failures.expect_error(lambda: list(anonymous.track("room", frames[:1])),
+                                      "UNAUTHENTICATED", "auth: track without a token")
+            with Client(secured.target, token="wrong", timeout=30.0) as wrong:
+                failures.expect_error(lambda: wrong.create_map("room"), "UNAUTHENTICATED",
+                                      "auth: a wrong token")
+            with Client(secured.target, token=TOKEN, timeout=30.0) as right:
+                info = right.create_map("room", voxel_size=VOXEL_SIZE)
+                failures.check(info.name == "room" and [m.name for m in right.list_maps()]
+                               == ["room"], "auth: the right token works")
+                failures.check(right.health() is True, "auth: health with a token")
+
+        run_step(failures, "bearer-token authentication", auth)
+
+        def shutdown():
+            for d in daemons:
+                code = d.stop()
+                failures.check(code == 0, f"{d.name} daemon: SIGTERM -> exit code 0 (got {code})")
+
+        run_step(failures, "SIGTERM", shutdown)
+    except Exception:  # noqa: BLE001
+        failures.check(False, f"setup: raised\n{traceback.format_exc()}")
+    finally:
+        for d in daemons:
+            if d.proc.poll() is None:
+                d.proc.kill()
+                d.proc.wait()
+        if failures.items:
+            for d in daemons:
+                print(f"--- {d.name} daemon log (tail) ---\n{d.log_tail()}")
+        if args.keep or failures.items:
+            print(f"work folder kept: {work}")
+        else:
+            shutil.rmtree(work, ignore_errors=True)
+
+    print(f"\n{time.monotonic() - began:.1f} s in all")
+    if failures.items:
+        print(f"{len(failures.items)} check(s) FAILED:")
+        for item in failures.items:
+            print(f"  - {item.splitlines()[0]}")
+        return 1
+    print("all checks passed")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
