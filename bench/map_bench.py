@@ -45,7 +45,7 @@ def run_ours(args, name, dataset, workdir):
                      % (name, args.plenox)]
     map_path = os.path.join(workdir, "map.plx")
     cmd = [args.plenox, "map", "--dataset", dataset, "--out", map_path,
-           "--every", str(args.every)]
+           "--every", str(args.every)] + args.plenox_arg
     if args.voxel_size is not None:
         cmd += ["--voxel-size", repr(args.voxel_size)]
     if args.time_budget is not None:
@@ -59,7 +59,7 @@ def run_ours(args, name, dataset, workdir):
     copy_keys(m, row, ("keyframes", "seconds_per_keyframe", "map_mb", "peak_rss_mb",
                        "iterations"))
     cmd = [args.plenox, "eval-map", "--map", map_path, "--dataset", dataset,
-           "--every", str(args.every), "--pixels", "0", "--json"]
+           "--every", str(args.every), "--pixels", "0", "--json"] + args.plenox_arg
     try:
         e = run_json("%s ours eval-map" % name, cmd, args.timeout)
     except CommandError as exc:
@@ -136,6 +136,9 @@ def main():
     ap.add_argument("--every", type=int, default=10, help="keyframe stride K (default 10)")
     ap.add_argument("--peer-depth-max", type=float, default=10.0,
                     help="Open3D integration / ray-cast depth limit, metres (default 10)")
+    ap.add_argument("--plenox-arg", action="append", default=[], metavar="ARG",
+                    help="extra argument for every `plenox map`/`eval-map`/`track` run, "
+                         "e.g. --plenox-arg=--backend=cuda (repeatable; --opt=value form)")
     ap.add_argument("--timeout", type=float, default=3600.0,
                     help="limit per command in seconds (default 3600)")
     ap.add_argument("--out", help="also write the markdown table to this file")

@@ -58,7 +58,7 @@ def ours_map(args, name, dataset, workdir):
                       % (name, args.plenox)], None
     map_path = os.path.join(workdir, "map.plx")
     cmd = [args.plenox, "map", "--dataset", dataset, "--out", map_path,
-           "--every", str(args.every), "--json"]
+           "--every", str(args.every), "--json"] + args.plenox_arg
     try:
         m = run_json("%s ours map" % name, cmd, args.timeout)
     except CommandError as exc:
@@ -82,7 +82,7 @@ def ours_track(args, name, dataset, map_path, mode, workdir):
     row, problems = {}, []
     traj = os.path.join(workdir, "ours%s.txt" % ("_" + mode if mode else ""))
     cmd = [args.plenox, "track", "--map", map_path, "--dataset", dataset, "--out", traj,
-           "--json"]
+           "--json"] + args.plenox_arg
     if mode:
         cmd += ["--mode", mode]
     try:
@@ -242,6 +242,9 @@ def main():
     ap.add_argument("--rpe-delta", type=float, default=1.0,
                     help="RPE pose pairs this many metres of path apart (default 1; the dev "
                          "sequences are too short for 1 m pairs under evo's rule)")
+    ap.add_argument("--plenox-arg", action="append", default=[], metavar="ARG",
+                    help="extra argument for every `plenox map`/`eval-map`/`track` run, "
+                         "e.g. --plenox-arg=--backend=cuda (repeatable; --opt=value form)")
     ap.add_argument("--timeout", type=float, default=3600.0,
                     help="limit per command in seconds (default 3600)")
     ap.add_argument("--out", help="also write the markdown table to this file")

@@ -11,3 +11,9 @@
 namespace plx::cuda {
 #include "core/kernels/kernel_declarations.inc"
 }  // namespace plx::cuda
+
+namespace plx::cuda {
+// cudaSuccess when this binary holds code the current device can run (cuda/tracking_cuda.cu),
+// e.g. cudaErrorNoKernelImageForDevice when it was built for other architectures.
+cudaError_t ProbeKernelImage();
+}  // namespace plx::cuda

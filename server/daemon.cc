@@ -12,6 +12,10 @@
 #include "absl/strings/str_join.h"
 #include "server/log.h"
 
+#ifndef PLX_VERSION
+#define PLX_VERSION "unknown"
+#endif
+
 namespace plx::server {
 namespace {
 
@@ -35,11 +39,66 @@ class ReflectionOption final : public grpc::ServerBuilderOption {
   bool enabled_;
 };
 
+const char* BackendKindText(BackendKind kind) {
+  switch (kind) {
+    case BackendKind::kCpu: return "cpu";
+    case BackendKind::kCuda: return "cuda";
+    case BackendKind::kAuto: return "auto";
+  }
+  return "auto";
+}
+
+// The compute workers of DaemonOptions::backend / gpus, each with its own backend and queue.
+absl::StatusOr<std::vector<std::unique_ptr<DeviceWorker>>> MakeWorkers(const DaemonOptions& o) {
+  std::vector<std::unique_ptr<DeviceWorker>> workers;
+  std::vector<int> gpus;
+  if (o.backend == BackendKind::kCpu) {
+    if (o.gpus) {
+      return absl::InvalidArgumentError("--gpus only applies with --backend cuda or auto");
+    }
+  } else if (o.gpus) {
+    gpus = *o.gpus;
+  } else {
+    for (int i = 0; i < CudaDeviceCount(); ++i) gpus.push_back(i);
+  }
+  if (o.backend == BackendKind::kCuda && gpus.empty()) {
+    // MakeBackend names the reason: no CUDA in this build, or no device visible.
+    absl::StatusOr<std::unique_ptr<Backend>> probe = MakeBackend(BackendKind::kCuda, 0);
+    return absl::FailedPreconditionError(absl::StrCat(
+        "--backend cuda: ", probe.ok() ? "--gpus selects no device" : probe.status().message()));
+  }
+  if (gpus.empty()) {
+    std::unique_ptr<Backend> cpu = MakeCpuBackend(o.threads);
+    DeviceDescription device{"cpu", "cpu",
+                             absl::StrCat("cpu (", cpu->parallelism(), " threads)")};
+    workers.push_back(std::make_unique<DeviceWorker>(std::move(cpu), std::move(device)));
+    return workers;
+  }
+  for (int id : gpus) {
+    absl::StatusOr<std::unique_ptr<Backend>> gpu = MakeBackend(BackendKind::kCuda, id);
+    if (!gpu.ok()) {
+      return absl::FailedPreconditionError(absl::StrCat("--backend ", BackendKindText(o.backend),
+                                                        ": cuda:", id, ": ",
+                                                        gpu.status().message()));
+    }
+    DeviceDescription device{absl::StrCat("cuda:", id), "cuda", CudaDeviceName(id)};
+    workers.push_back(std::make_unique<DeviceWorker>(std::move(*gpu), std::move(device)));
+  }
+  return workers;
+}
+
 }  // namespace
+
+std::string PlenoxdVersion() { return PLX_VERSION; }
 
 absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& options) {
   std::unique_ptr<Daemon> d(new Daemon());
   d->options_ = options;
+  // The devices first: a daemon that cannot compute where it was told to stops before it
+  // reads any map.
+  absl::StatusOr<std::vector<std::unique_ptr<DeviceWorker>>> workers = MakeWorkers(options);
+  if (!workers.ok()) return workers.status();
+  d->workers_ = std::make_unique<WorkerPool>(std::move(*workers));
   if (!options.data_dir.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(options.data_dir, ec);
@@ -56,11 +115,7 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   for (const std::string& problem : d->maps_->LoadAllFromDataDir()) {
     LogEvent("warning", "map_not_loaded", {{"reason", problem}});
   }
-  // One worker per compute device; this build's only device is the CPU (all its cores).
-  std::vector<std::unique_ptr<DeviceWorker>> workers;
-  workers.push_back(std::make_unique<DeviceWorker>(MakeCpuBackend(options.threads), "cpu"));
-  d->workers_ = std::make_unique<WorkerPool>(std::move(workers));
-  d->io_ = std::make_unique<DeviceWorker>(nullptr, "io");
+  d->io_ = std::make_unique<DeviceWorker>(nullptr, DeviceDescription{"io", "io", "io"});
   d->jobs_ = std::make_unique<JobRegistry>();
   d->metrics_registry_ = std::make_unique<Metrics>();
   d->state_.maps = d->maps_.get();
@@ -70,6 +125,9 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   d->state_.metrics = d->metrics_registry_.get();
   d->state_.config.auth_token = options.auth_token;
   d->state_.config.max_streams = options.max_streams;
+  d->state_.config.version = PlenoxdVersion();
+  d->state_.config.backend = BackendKindText(options.backend);
+  d->state_.config.cuda_built = BuiltWithCuda();
   d->service_ = std::make_unique<PlenoxdService>(&d->state_);
 
   grpc::EnableDefaultHealthCheckService(true);
@@ -107,7 +165,8 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   }
   LogEvent("info", "serving",
            {{"listen", options.listen}, {"port", std::to_string(d->port_)},
-            {"devices", absl::StrJoin(d->workers_->device_names(), ",")},
+            {"backend", BackendKindText(options.backend)},
+            {"devices", absl::StrJoin(d->workers_->device_names(), ", ")},
             {"maps", std::to_string(d->maps_->size())},
             {"auth", options.auth_token.empty() ? "off" : "bearer"},
             {"tls", options.tls_cert_pem.empty() ? "off" : "on"},
@@ -122,7 +181,11 @@ std::string Daemon::RenderMetrics() const {
   g.queue_depth = workers_->total_queue_depth();
   g.jobs_running = jobs_->running();
   g.serving = !state_.draining.load();
-  g.devices = absl::StrJoin(workers_->device_names(), ",");
+  for (size_t i = 0; i < workers_->size(); ++i) {
+    const DeviceWorker& w = workers_->worker(i);
+    g.devices.push_back({w.device().id, w.device().kind, w.device().name, w.queue_depth(),
+                         w.streams()});
+  }
   return metrics_registry_->Render(g);
 }
 

@@ -4,12 +4,15 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include <grpcpp/grpcpp.h>
 
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
+#include "cuda/make_backend.h"
 #include "server/daemon_state.h"
 #include "server/metrics.h"
 #include "server/plenoxd_service.h"
@@ -28,7 +31,14 @@ struct DaemonOptions {
   int max_streams = 32;
   int max_message_bytes = 64 << 20;
   int threads = 0;                         // CPU backend threads (0 = all cores)
+  // Compute devices, one worker each: kCpu one CPU worker; kCuda one worker per GPU in `gpus`
+  // (Start fails when there is none); kAuto like kCuda when a GPU is visible, else kCpu.
+  BackendKind backend = BackendKind::kAuto;
+  std::optional<std::vector<int>> gpus;    // CUDA device ids (ParseGpuList); nullopt = all
 };
+
+// The version GetServerInfo reports (the CMake project's VERSION).
+std::string PlenoxdVersion();
 
 class Daemon {
  public:

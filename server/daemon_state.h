@@ -18,6 +18,10 @@ namespace plx::server {
 struct DaemonConfig {
   std::string auth_token;   // empty: no authentication
   int max_streams = 32;     // concurrent streaming RPCs
+  // For GetServerInfo.
+  std::string version;      // plenoxd's version (PLX_VERSION)
+  std::string backend;      // --backend: "cpu", "cuda" or "auto"
+  bool cuda_built = false;  // this binary has the CUDA backend
 };
 
 struct DaemonState {

@@ -1,9 +1,11 @@
 #include "server/device_worker.h"
 
+#include <utility>
+
 namespace plx::server {
 
-DeviceWorker::DeviceWorker(std::unique_ptr<Backend> backend, std::string device_name)
-    : backend_(std::move(backend)), device_name_(std::move(device_name)),
+DeviceWorker::DeviceWorker(std::unique_ptr<Backend> backend, DeviceDescription device)
+    : backend_(std::move(backend)), device_(std::move(device)),
       thread_([this] { Loop(); }) {}
 
 DeviceWorker::~DeviceWorker() { Stop(); }
@@ -12,7 +14,8 @@ void DeviceWorker::Post(Priority priority, DeviceTask task) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     if (!stopping_) {
-      queues_[static_cast<int>(priority)].push_back(std::move(task));
+      queues_[static_cast<int>(priority)].push_back(
+          {std::move(task), std::chrono::steady_clock::now()});
       wake_.notify_one();
       return;
     }
@@ -27,8 +30,14 @@ void DeviceWorker::Loop() {
       std::unique_lock<std::mutex> lock(mutex_);
       wake_.wait(lock, [&] { return stopping_ || !queues_[0].empty() || !queues_[1].empty(); });
       if (stopping_) return;
-      std::deque<DeviceTask>& queue = !queues_[0].empty() ? queues_[0] : queues_[1];
-      task = std::move(queue.front());
+      // Interactive first, but a background task that has waited kBackgroundMaxWait runs next,
+      // so a busy tracking load slows mapping down without stopping it.
+      const bool background =
+          queues_[0].empty() || (!queues_[1].empty() && std::chrono::steady_clock::now() -
+                                                                queues_[1].front().queued >
+                                                            kBackgroundMaxWait);
+      std::deque<QueuedTask>& queue = background ? queues_[1] : queues_[0];
+      task = std::move(queue.front().task);
       queue.pop_front();
       running_task_ = true;
     }
@@ -45,7 +54,7 @@ void DeviceWorker::Stop() {
     if (stopping_) return;
     stopping_ = true;
     for (auto& queue : queues_) {
-      for (auto& task : queue) dropped.push_back(std::move(task));
+      for (auto& queued : queue) dropped.push_back(std::move(queued.task));
       queue.clear();
     }
     wake_.notify_all();
@@ -63,11 +72,36 @@ WorkerPool::WorkerPool(std::vector<std::unique_ptr<DeviceWorker>> workers)
     : workers_(std::move(workers)) {}
 
 DeviceWorker& WorkerPool::Pick() {
-  DeviceWorker* best = workers_.front().get();
+  // Each worker's load is read once: queues move while we look.
+  DeviceWorker* best = nullptr;
+  std::pair<int, int> best_load;
   for (const auto& w : workers_) {
-    if (w->queue_depth() < best->queue_depth()) best = w.get();
+    const std::pair<int, int> load = {w->queue_depth(), w->streams()};
+    if (best == nullptr || load < best_load) {
+      best = w.get();
+      best_load = load;
+    }
   }
   return *best;
+}
+
+DeviceWorker& WorkerPool::AttachStream() {
+  std::lock_guard<std::mutex> lock(attach_mutex_);  // two streams starting at once spread out
+  DeviceWorker* best = nullptr;
+  std::pair<int, int> best_load;
+  for (const auto& w : workers_) {
+    const std::pair<int, int> load = {w->streams(), w->queue_depth()};
+    if (best == nullptr || load < best_load) {
+      best = w.get();
+      best_load = load;
+    }
+  }
+  best->streams_.fetch_add(1, std::memory_order_relaxed);
+  return *best;
+}
+
+void WorkerPool::DetachStream(DeviceWorker& worker) {
+  worker.streams_.fetch_sub(1, std::memory_order_relaxed);
 }
 
 void WorkerPool::StopAll() {

@@ -1,9 +1,17 @@
-// One worker thread per compute device (the CPU backend, or one per GPU later). Work is queued
-// with a priority: interactive work (tracking, rendering) always runs before background work
-// (mapping), and mapping is posted in short chunks, so a frame never waits behind a whole
-// mapping pass, only behind the chunk in progress.
+// One worker thread per compute device: the CPU backend (all its cores), or one per selected
+// GPU, each owning its own Backend and its own queue. Work is queued with a priority:
+// interactive work (tracking, rendering) runs before background work (mapping) unless mapping
+// has waited 250 ms (so it slows down under a full tracking load but never stops), and
+// mapping is posted in short chunks, so a frame never waits behind a whole mapping pass, only
+// behind the chunk in progress on its device.
+//
+// Streams (Track, Integrate) keep state made with one worker's backend (a Tracker, a Mapper),
+// so a stream is bound to one worker for its whole life (WorkerPool::AttachStream); one-off
+// calls (Render, Export) go to whichever worker is least busy (WorkerPool::Pick).
 #pragma once
 
+#include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
@@ -25,9 +33,16 @@ enum class Priority { kInteractive = 0, kBackground = 1 };
 // up (e.g. finish its RPC as UNAVAILABLE).
 using DeviceTask = std::function<void(Backend* backend, bool cancelled)>;
 
+// What a worker computes on, for logs, metrics and GetServerInfo.
+struct DeviceDescription {
+  std::string id;    // short and unique: "cpu", "cuda:0", "io"
+  std::string kind;  // "cpu", "cuda", or "io" for the file worker without a backend
+  std::string name;  // "cpu (16 threads)", "cuda:0 NVIDIA H100 80GB HBM3 (sm_90, 79.1 GiB)"
+};
+
 class DeviceWorker {
  public:
-  DeviceWorker(std::unique_ptr<Backend> backend, std::string device_name);
+  DeviceWorker(std::unique_ptr<Backend> backend, DeviceDescription device);
   ~DeviceWorker();  // Stop()s
 
   void Post(Priority priority, DeviceTask task);
@@ -35,32 +50,52 @@ class DeviceWorker {
   void Stop();
 
   int queue_depth() const;
-  const std::string& device_name() const { return device_name_; }
+  // Streams bound to this worker (WorkerPool::AttachStream).
+  int streams() const { return streams_.load(std::memory_order_relaxed); }
+  const DeviceDescription& device() const { return device_; }
+  const std::string& device_name() const { return device_.name; }
 
  private:
+  friend class WorkerPool;
   void Loop();
 
   std::unique_ptr<Backend> backend_;
-  std::string device_name_;
+  DeviceDescription device_;
+  std::atomic<int> streams_{0};
   mutable std::mutex mutex_;
   std::condition_variable wake_;
-  std::deque<DeviceTask> queues_[2];
+  struct QueuedTask {
+    DeviceTask task;
+    std::chrono::steady_clock::time_point queued;
+  };
+  std::deque<QueuedTask> queues_[2];
+  static constexpr std::chrono::milliseconds kBackgroundMaxWait{250};
   bool stopping_ = false;
   bool running_task_ = false;
   std::thread thread_;
 };
 
-// The workers of the daemon; Post picks the one with the shortest queue.
+// The compute workers of the daemon (at least one).
 class WorkerPool {
  public:
   explicit WorkerPool(std::vector<std::unique_ptr<DeviceWorker>> workers);
+  // For a one-off task: the worker with the shortest queue (ties: fewer streams, then the
+  // first).
   DeviceWorker& Pick();
+  // For a stream: the worker with the fewest bound streams (ties: shorter queue, then the
+  // first), now bound to one more; every AttachStream is matched by one DetachStream.
+  DeviceWorker& AttachStream();
+  void DetachStream(DeviceWorker& worker);
   void StopAll();
   int total_queue_depth() const;
   std::vector<std::string> device_names() const;
+  size_t size() const { return workers_.size(); }
+  const DeviceWorker& worker(size_t i) const { return *workers_[i]; }
+  DeviceWorker& worker(size_t i) { return *workers_[i]; }
 
  private:
   std::vector<std::unique_ptr<DeviceWorker>> workers_;
+  std::mutex attach_mutex_;
 };
 
 }  // namespace plx::server

@@ -1,5 +1,7 @@
 #include "server/integrate_reactor.h"
 
+#include <algorithm>
+
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "server/grpc_status.h"
@@ -107,7 +109,9 @@ void IntegrateReactor::OnReadDone(bool ok) {
 void IntegrateReactor::ScheduleLocked() {
   if (busy_) return;
   busy_ = true;
-  state_->workers->Pick().Post(Priority::kBackground,
+  // The stream stays on one worker: its Mapper holds that worker's backend.
+  if (worker_ == nullptr) worker_ = &state_->workers->AttachStream();
+  worker_->Post(Priority::kBackground,
                                [this](Backend* backend, bool cancelled) { RunTask(backend, cancelled); });
 }
 
@@ -122,13 +126,20 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
       MaybeFinishLocked();
       return;
     }
-    frames.swap(queue_);
-    input_closed = reading_done_;
+    // One keyframe per task: integrating one (brick allocation, depth fusion) is the longest
+    // step a task cannot split, and a tracking frame may be queued behind it.
+    if (!queue_.empty()) {
+      frames.push_back(std::move(queue_.front()));
+      queue_.pop_front();
+    }
+    input_closed = reading_done_ && queue_.empty();
     if (!reading_ && !reading_done_) {
       reading_ = true;
       StartRead(&request_);
     }
   }
+  const auto task_start = std::chrono::steady_clock::now();
+  double integrate_s = 0.0, optimize_s = 0.0, snapshot_s = 0.0;
   absl::Status status = absl::OkStatus();
   if (!mapper_ && !frames.empty()) {
     absl::StatusOr<MapVersion> latest = state_->maps->Latest(map_name_);
@@ -151,13 +162,17 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
     }
   }
   if (status.ok() && mapper_ && !frames.empty()) {
+    const auto integrate_start = std::chrono::steady_clock::now();
     status = mapper_->AllocateAndInitialize();
+    integrate_s = SecondsSince(integrate_start);
     mapper_->set_max_iterations(iterations_per_keyframe_ * mapper_->training_set().num_frames());
   }
   bool optimised = false;
   if (status.ok() && mapper_ && !mapper_->budget_spent() && mapper_->training_set().num_rays() > 0) {
+    const auto optimize_start = std::chrono::steady_clock::now();
     absl::StatusOr<MappingSummary> summary = mapper_->Optimize(
-        [&](const MappingProgress&) { return true; }, kChunkIterations);
+        [&](const MappingProgress&) { return true; }, kChunkIterations, kChunkSeconds);
+    optimize_s = SecondsSince(optimize_start);
     if (summary.ok()) {
       last_ = summary->last;
       optimised = true;
@@ -167,12 +182,17 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
   }
   const bool finishing = input_closed && (!mapper_ || mapper_->budget_spent() ||
                                           mapper_->training_set().num_rays() == 0);
+  // Publishing copies the whole map on this worker, so large maps publish less often: the copy
+  // takes at most about a tenth of the worker's time.
+  const double publish_gap = std::max(1.0, 10.0 * last_snapshot_s_);
   if (status.ok() && mapper_ &&
-      (finishing || (unpublished_keyframes_ > 0 && SecondsSince(last_publish_) > 1.0) ||
-       SecondsSince(last_publish_) > 3.0)) {
+      (finishing || (unpublished_keyframes_ > 0 && SecondsSince(last_publish_) > publish_gap) ||
+       SecondsSince(last_publish_) > 3.0 * publish_gap)) {
+    const auto snapshot_start = std::chrono::steady_clock::now();
+    std::shared_ptr<PlenoxelMap> snapshot(mapper_->Snapshot());
+    last_snapshot_s_ = snapshot_s = SecondsSince(snapshot_start);
     absl::StatusOr<uint64_t> version =
-        state_->maps->Publish(map_name_, std::shared_ptr<PlenoxelMap>(mapper_->Snapshot()),
-                              unpublished_keyframes_);
+        state_->maps->Publish(map_name_, std::move(snapshot), unpublished_keyframes_);
     if (version.ok()) {
       version_ = *version;
       unpublished_keyframes_ = 0;
@@ -182,6 +202,14 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
     }
   }
 
+  // Every tracking frame on this worker waits for a task in progress: say when one was long.
+  if (const double task_s = SecondsSince(task_start); task_s > kSlowTaskSeconds) {
+    LogEvent("warning", "slow_mapping_task",
+             {{"map", map_name_}, {"job", job_id_}, {"seconds", absl::StrFormat("%.3f", task_s)},
+              {"integrate_s", absl::StrFormat("%.3f", integrate_s)},
+              {"optimize_s", absl::StrFormat("%.3f", optimize_s)},
+              {"snapshot_s", absl::StrFormat("%.3f", snapshot_s)}});
+  }
   pb::MappingProgress progress;
   progress.set_job_id(job_id_);
   progress.set_keyframes_integrated(static_cast<uint32_t>(integrated_));
@@ -282,6 +310,7 @@ void IntegrateReactor::MaybeFinishLocked() {
 
 void IntegrateReactor::OnDone() {
   if (holds_slot_) ReleaseStreamSlot(*state_);
+  if (worker_ != nullptr) state_->workers->DetachStream(*worker_);
   LogEvent("info", "rpc", {{"method", "Integrate"}, {"map", map_name_}, {"job", job_id_},
                            {"keyframes", std::to_string(integrated_)},
                            {"status", std::to_string(final_status_.error_code())}});

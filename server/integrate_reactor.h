@@ -31,9 +31,13 @@ class IntegrateReactor final : public grpc::ServerBidiReactor<plenoxd::v1::Integ
   void OnCancel() override;
   void OnDone() override;
 
-  // Iterations per scheduled mapping task: short enough that tracking frames queued behind a
-  // chunk wait tens of milliseconds, long enough that scheduling costs nothing.
+  // One scheduled mapping task runs at most this many iterations or this long (at least one
+  // iteration): a tracking frame queued behind it waits at most about kChunkSeconds plus one
+  // iteration, and scheduling between chunks costs next to nothing.
   static constexpr int kChunkIterations = 10;
+  static constexpr double kChunkSeconds = 0.05;
+  // A task longer than this is logged (slow_mapping_task) with where its time went.
+  static constexpr double kSlowTaskSeconds = 0.3;
   // Keyframes decoded but not yet integrated before the stream stops reading (backpressure).
   static constexpr size_t kMaxQueuedKeyframes = 8;
 
@@ -56,6 +60,7 @@ class IntegrateReactor final : public grpc::ServerBidiReactor<plenoxd::v1::Integ
   bool reading_ = false;        // a StartRead is outstanding
   bool reading_done_ = false;   // the client half-closed (or failed)
   bool busy_ = false;           // a mapping task is queued or running
+  DeviceWorker* worker_ = nullptr;  // where every mapping task runs (bound at the first one)
   bool done_sent_ = false;
   bool write_in_flight_ = false;
   bool finished_ = false;
@@ -75,6 +80,7 @@ class IntegrateReactor final : public grpc::ServerBidiReactor<plenoxd::v1::Integ
   int unpublished_keyframes_ = 0;
   uint64_t version_ = 0;
   std::chrono::steady_clock::time_point start_, last_publish_;
+  double last_snapshot_s_ = 0.0;  // how long the last published copy of the map took
 };
 
 }  // namespace plx::server

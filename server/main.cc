@@ -10,6 +10,7 @@
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "core/common/flags.h"
+#include "cuda/make_backend.h"
 #include "server/daemon.h"
 
 namespace {
@@ -47,7 +48,12 @@ int main(int argc, char** argv) {
       .Add("max-map-mb", "MB", "memory per map", "4096")
       .Add("max-streams", "N", "concurrent streaming calls", "32")
       .Add("max-message-mb", "MB", "largest message accepted or sent", "64")
-      .Add("threads", "N", "CPU threads for compute (0 = all cores)", "0")
+      .Add("backend", "cpu|cuda|auto",
+           "compute backend: cuda = one worker per GPU of --gpus (fails at start without "
+           "one); auto = cuda when a GPU is visible, else one CPU worker",
+           "auto")
+      .Add("gpus", "all|0,1,...", "CUDA devices to use with --backend cuda or auto", "all")
+      .Add("threads", "N", "CPU threads of the CPU worker (0 = all cores)", "0")
       .Add("drain-seconds", "S", "how long running calls may finish on SIGTERM", "5");
   std::vector<std::string> args(argv + 1, argv + argc);
   absl::StatusOr<bool> parsed = flags.Parse(args);
@@ -78,6 +84,17 @@ int main(int argc, char** argv) {
   options.max_streams = *max_streams;
   options.max_message_bytes = *max_message_mb << 20;
   options.threads = *threads;
+  absl::StatusOr<plx::BackendKind> backend = plx::ParseBackendKind(flags.GetString("backend"));
+  if (!backend.ok()) return Usage(backend.status());
+  options.backend = *backend;
+  if (flags.IsSet("gpus")) {
+    if (options.backend == plx::BackendKind::kCpu) {
+      return Usage(absl::InvalidArgumentError("--gpus only applies with --backend cuda or auto"));
+    }
+    absl::StatusOr<std::vector<int>> gpus = plx::ParseGpuList(flags.GetString("gpus"));
+    if (!gpus.ok()) return Usage(gpus.status());
+    options.gpus = *gpus;
+  }
   if (flags.IsSet("auth-token-file")) {
     auto token = ReadFile(flags.GetString("auth-token-file"), "--auth-token-file");
     if (!token.ok()) return Usage(token.status());

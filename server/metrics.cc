@@ -14,6 +14,26 @@
 #include "absl/strings/str_format.h"
 
 namespace plx::server {
+namespace {
+
+// A label value in the text format: backslash, double quote and newline escaped.
+std::string LabelValue(const std::string& text) {
+  std::string out;
+  for (char c : text) {
+    if (c == '\\') {
+      out += "\\\\";
+    } else if (c == '"') {
+      out += "\\\"";
+    } else if (c == '\n') {
+      out += "\\n";
+    } else {
+      out += c;
+    }
+  }
+  return out;
+}
+
+}  // namespace
 
 void Metrics::ObserveTrackLatency(double seconds) {
   size_t bucket = 0;
@@ -46,9 +66,28 @@ std::string Metrics::Render(const Gauges& g) const {
   gauge("plenoxd_queue_depth", "Tasks queued or running on the device workers.", g.queue_depth);
   gauge("plenoxd_jobs_running", "Mapping jobs running.", g.jobs_running);
   gauge("plenoxd_serving", "1 while serving, 0 while draining.", g.serving ? 1 : 0);
-  absl::StrAppend(&out, "# HELP plenoxd_device_info Compute devices of the workers.\n",
-                  "# TYPE plenoxd_device_info gauge\nplenoxd_device_info{devices=\"", g.devices,
-                  "\"} 1\n");
+  // Per compute device (one worker each): what it is, and how busy.
+  absl::StrAppend(&out,
+                  "# HELP plenoxd_device_info Compute devices, one worker each (value 1; "
+                  "kind cpu or cuda, name the model).\n# TYPE plenoxd_device_info gauge\n");
+  for (const Gauges::Device& d : g.devices) {
+    absl::StrAppend(&out, "plenoxd_device_info{device=\"", LabelValue(d.id), "\",kind=\"",
+                    LabelValue(d.kind), "\",name=\"", LabelValue(d.name), "\"} 1\n");
+  }
+  absl::StrAppend(&out,
+                  "# HELP plenoxd_device_queue_depth Tasks queued or running on each device.\n"
+                  "# TYPE plenoxd_device_queue_depth gauge\n");
+  for (const Gauges::Device& d : g.devices) {
+    absl::StrAppend(&out, "plenoxd_device_queue_depth{device=\"", LabelValue(d.id), "\"} ",
+                    d.queue_depth, "\n");
+  }
+  absl::StrAppend(&out,
+                  "# HELP plenoxd_device_streams Track and Integrate streams bound to each "
+                  "device.\n# TYPE plenoxd_device_streams gauge\n");
+  for (const Gauges::Device& d : g.devices) {
+    absl::StrAppend(&out, "plenoxd_device_streams{device=\"", LabelValue(d.id), "\"} ",
+                    d.streams, "\n");
+  }
   const char* h = "plenoxd_track_latency_seconds";
   absl::StrAppend(&out, "# HELP ", h, " Time from receiving a frame to its pose estimate.\n",
                   "# TYPE ", h, " histogram\n");

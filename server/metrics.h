@@ -8,6 +8,7 @@
 #include <functional>
 #include <string>
 #include <thread>
+#include <vector>
 
 namespace plx::server {
 
@@ -30,7 +31,16 @@ class Metrics {
     int64_t queue_depth = 0;
     int64_t jobs_running = 0;
     bool serving = true;
-    std::string devices;  // comma-separated
+    // One per compute worker: plenoxd_device_info{device, kind, name} 1 and, per device, the
+    // tasks queued or running and the streams bound to it.
+    struct Device {
+      std::string id;    // "cpu", "cuda:0"
+      std::string kind;  // "cpu", "cuda"
+      std::string name;  // "cuda:0 NVIDIA H100 80GB HBM3 (sm_90, 79.1 GiB)"
+      int64_t queue_depth = 0;
+      int64_t streams = 0;
+    };
+    std::vector<Device> devices;
   };
   std::string Render(const Gauges& gauges) const;
 

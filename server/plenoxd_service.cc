@@ -259,6 +259,30 @@ grpc::ServerUnaryReactor* PlenoxdService::ListMaps(grpc::CallbackServerContext* 
   return reactor;
 }
 
+grpc::ServerUnaryReactor* PlenoxdService::GetServerInfo(grpc::CallbackServerContext* context,
+                                                        const pb::GetServerInfoRequest*,
+                                                        pb::ServerInfo* response) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  const absl::Status status = CheckCall(*state_, context);
+  if (status.ok()) {
+    response->set_version(state_->config.version);
+    response->set_backend(state_->config.backend);
+    response->set_cuda_built(state_->config.cuda_built);
+    response->set_maps(static_cast<uint32_t>(state_->maps->size()));
+    for (size_t i = 0; i < state_->workers->size(); ++i) {
+      const DeviceWorker& w = state_->workers->worker(i);
+      pb::Device* d = response->add_devices();
+      d->set_id(w.device().id);
+      d->set_kind(w.device().kind);
+      d->set_name(w.device().name);
+      d->set_queue_depth(static_cast<uint32_t>(w.queue_depth()));
+      d->set_streams(static_cast<uint32_t>(w.streams()));
+    }
+  }
+  Finish(reactor, "GetServerInfo", status);
+  return reactor;
+}
+
 grpc::ServerUnaryReactor* PlenoxdService::DeleteMap(grpc::CallbackServerContext* context,
                                                     const pb::DeleteMapRequest* request,
                                                     pb::DeleteMapResponse*) {

@@ -43,6 +43,9 @@ class PlenoxdService final : public plenoxd::v1::Plenoxd::CallbackService {
       grpc::CallbackServerContext* context, const plenoxd::v1::ExportRequest* request) override;
   grpc::ServerWriteReactor<plenoxd::v1::JobStatus>* WatchJob(
       grpc::CallbackServerContext* context, const plenoxd::v1::WatchJobRequest* request) override;
+  grpc::ServerUnaryReactor* GetServerInfo(grpc::CallbackServerContext* context,
+                                          const plenoxd::v1::GetServerInfoRequest* request,
+                                          plenoxd::v1::ServerInfo* response) override;
 
  private:
   // Finishes `reactor` with `status`, counting errors and logging the call.

@@ -102,7 +102,9 @@ void TrackReactor::OnReadDone(bool ok) {
 
 void TrackReactor::Submit() {
   busy_ = true;
-  state_->workers->Pick().Post(Priority::kInteractive,
+  // The stream stays on the worker of its first frame: its Tracker holds that worker's backend.
+  if (worker_ == nullptr) worker_ = &state_->workers->AttachStream();
+  worker_->Post(Priority::kInteractive,
                                [this](Backend* backend, bool cancelled) { RunTask(backend, cancelled); });
 }
 
@@ -222,6 +224,7 @@ void TrackReactor::MaybeFinishLocked() {
 
 void TrackReactor::OnDone() {
   if (holds_slot_) ReleaseStreamSlot(*state_);
+  if (worker_ != nullptr) state_->workers->DetachStream(*worker_);
   LogEvent("info", "rpc", {{"method", "Track"}, {"map", map_name_},
                            {"status", std::to_string(final_status_.error_code())}});
   delete this;

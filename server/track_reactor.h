@@ -66,6 +66,8 @@ class TrackReactor final
   TrackerOptions options_;
   MapVersion map_;
   std::unique_ptr<Tracker> tracker_;
+  // The worker every task of this stream runs on (bound at the first Submit, mutex_ held).
+  DeviceWorker* worker_ = nullptr;
   bool tracker_started_ = false;
 };
 

@@ -11,6 +11,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "core/common/status_macros.h"
+#include "cuda/make_backend.h"
 
 namespace plx::cli {
 
@@ -114,6 +115,55 @@ double PeakRssMb() {
   struct rusage usage;
   if (getrusage(RUSAGE_SELF, &usage) != 0) return 0.0;
   return usage.ru_maxrss / 1024.0;  // Linux reports kilobytes
+}
+
+void AddBackendFlags(FlagSet& flags) {
+  flags.Add("backend", "cpu|cuda|auto",
+            "compute backend; auto = a CUDA GPU when this build has CUDA and one is visible, "
+            "else the CPU",
+            "auto")
+      .Add("device", "N", "CUDA device for --backend cuda or auto", "0")
+      .Add("threads", "N", "CPU threads of the CPU backend (0 = all cores)", "0");
+}
+
+std::unique_ptr<Backend> BackendFromFlagsOrReport(const std::string& command,
+                                                  const FlagSet& flags, int* exit_code) {
+  absl::StatusOr<BackendKind> kind = ParseBackendKind(flags.GetString("backend"));
+  if (!kind.ok()) {
+    *exit_code = ReportError(command, kind.status(), true);
+    return nullptr;
+  }
+  absl::StatusOr<int> device = flags.GetInt("device", 0, 1023);
+  if (!device.ok()) {
+    *exit_code = ReportError(command, device.status(), true);
+    return nullptr;
+  }
+  if (flags.IsSet("device") && *kind == BackendKind::kCpu) {
+    *exit_code = ReportError(
+        command, absl::InvalidArgumentError("--device only applies with --backend cuda or auto"),
+        true);
+    return nullptr;
+  }
+  absl::StatusOr<int> threads = flags.GetInt("threads", 0, 4096);
+  if (!threads.ok()) {
+    *exit_code = ReportError(command, threads.status(), true);
+    return nullptr;
+  }
+  absl::StatusOr<std::unique_ptr<Backend>> backend = MakeBackend(*kind, *device, *threads);
+  if (!backend.ok()) {
+    *exit_code = ReportError(
+        command, absl::Status(backend.status().code(),
+                              absl::StrCat("--backend ", flags.GetString("backend"), ": ",
+                                           backend.status().message())));
+    return nullptr;
+  }
+  return std::move(*backend);
+}
+
+std::string BackendText(const Backend& backend) {
+  const std::string name = backend.name();
+  if (name == "cpu") return absl::StrCat("cpu, ", backend.parallelism(), " threads");
+  return name;
 }
 
 std::string Megabytes(int64_t bytes) { return absl::StrFormat("%.1f MB", bytes / 1e6); }

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <chrono>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
@@ -10,6 +11,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "core/common/flags.h"
+#include "core/kernels/backend.h"
 #include "core/io/dataset.h"
 #include "core/mapping/mapper.h"
 
@@ -80,6 +82,18 @@ void AddMapperFlags(FlagSet& flags);
 // the real count is known.
 absl::StatusOr<MapperOptions> MapperOptionsFromFlags(const FlagSet& flags, int keyframes);
 void SetIterationBudget(const FlagSet& flags, int keyframes, MapperOptions* options);
+
+// --backend cpu|cuda|auto, --device N, --threads N: where an in-process command computes.
+void AddBackendFlags(FlagSet& flags);
+// Makes the backend the flags ask for (cuda/make_backend.h). On an error it prints it
+// ("plenox <command>: ...") and returns nullptr with *exit_code set: usage (2) for a bad flag
+// value (--backend bogus, --device -1, --device with --backend cpu), failure (1) when the
+// backend cannot be made (--backend cuda in a build without CUDA or on a machine without the
+// device). Call it before any long work so such errors come at once.
+std::unique_ptr<Backend> BackendFromFlagsOrReport(const std::string& command,
+                                                  const FlagSet& flags, int* exit_code);
+// The backend for progress and summary lines: "cpu, 4 threads", or the GPU's name.
+std::string BackendText(const Backend& backend);
 
 // "12.3 MB"-style text.
 std::string Megabytes(int64_t bytes);

@@ -29,9 +29,9 @@ int RunDemo(const std::vector<std::string>& args) {
   flags.Add("out", "DIR", "output folder", "plenox_demo");
   AddSyntheticFlags(flags, 90, /*noise_by_default=*/true);
   AddMapperFlags(flags);
-  flags.Add("every", "N", "map every N-th frame", "10")
-      .Add("threads", "N", "CPU threads (0 = all cores)", "0")
-      .AddSwitch("json", "print the metrics as JSON on the last line of stdout");
+  flags.Add("every", "N", "map every N-th frame", "10");
+  AddBackendFlags(flags);
+  flags.AddSwitch("json", "print the metrics as JSON on the last line of stdout");
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
   absl::StatusOr<SyntheticOptions> synth = SyntheticOptionsFromFlags(flags);
@@ -42,9 +42,7 @@ int RunDemo(const std::vector<std::string>& args) {
   absl::StatusOr<MapperOptions> options = MapperOptionsFromFlags(flags, demo_keyframes);
   if (!options.ok()) return ReportError("demo", options.status(), true);
   absl::StatusOr<int> every = flags.GetInt("every", 1, 1000);
-  absl::StatusOr<int> threads = flags.GetInt("threads", 0, 4096);
   if (!every.ok()) return ReportError("demo", every.status(), true);
-  if (!threads.ok()) return ReportError("demo", threads.status(), true);
   if (HeldOutFrames(synth->num_frames, *every).empty()) {
     return ReportError("demo",
                        absl::InvalidArgumentError(absl::StrFormat(
@@ -53,6 +51,9 @@ int RunDemo(const std::vector<std::string>& args) {
                            synth->num_frames, *every, *every / 2 + 1)),
                        true);
   }
+
+  std::unique_ptr<Backend> backend = BackendFromFlagsOrReport("demo", flags, &exit_code);
+  if (!backend) return exit_code;
 
   const std::filesystem::path out = flags.GetString("out");
   std::error_code ec;
@@ -71,12 +72,11 @@ int RunDemo(const std::vector<std::string>& args) {
     return ReportError("demo", s);
   }
 
-  std::unique_ptr<Backend> backend = MakeCpuBackend(*threads);
   const std::vector<int> keyframes = KeyframeIndices(dataset->size(), *every);
   absl::StatusOr<MapDatasetResult> mapped =
       MapDataset(*dataset, keyframes, *options, *backend, MappingProgressPrinter(&line));
   if (!mapped.ok()) return ReportError("demo", mapped.status());
-  line.Finish(MappingSummaryText(mapped->summary));
+  line.Finish(MappingSummaryText(mapped->summary) + " [" + BackendText(*backend) + "]");
   const std::string map_path = (out / "map.plx").string();
   if (absl::Status s = SaveMap(*mapped->map, map_path); !s.ok()) return ReportError("demo", s);
 
@@ -131,6 +131,7 @@ int RunDemo(const std::vector<std::string>& args) {
   const MappingSummary& sum = mapped->summary;
   std::cout << absl::StrFormat(
       "\nplenox demo: %d synthetic frames, %d keyframes mapped, %d held-out frames scored\n"
+      "  backend      %s\n"
       "  mapping      %.1f s (%.2f s per keyframe), %d bricks, map %s\n"
       "  held-out     PSNR %.2f dB, depth L1 %.2f cm (median %.2f cm), coverage %.3f\n"
       "  tracking     %d frames, ATE %.2f mm (no alignment), median %.1f ms per frame, %d lost\n"
@@ -139,7 +140,8 @@ int RunDemo(const std::vector<std::string>& args) {
       "    map        %s\n"
       "    renders    %s, %s (frame %d; sensor: %s, %s)\n"
       "    trajectory %s (TUM format)\n",
-      dataset->size(), sum.keyframes, eval->frames, sum.allocation_s + sum.optimization_s,
+      dataset->size(), sum.keyframes, eval->frames, BackendText(*backend),
+      sum.allocation_s + sum.optimization_s,
       (sum.allocation_s + sum.optimization_s) / sum.keyframes, sum.memory.bricks,
       Megabytes(sum.memory.total_bytes()), eval->psnr, 100 * eval->depth_l1_m,
       100 * eval->depth_l1_median_m, eval->coverage, dataset->size(),
@@ -159,7 +161,8 @@ int RunDemo(const std::vector<std::string>& args) {
         .Add("ate_rmse_m", ate->ate.translation_m.rmse)
         .Add("ms_per_frame_median", tracked->ms_per_frame_median)
         .Add("lost", tracked->lost)
-        .Add("map", map_path);
+        .Add("map", map_path)
+        .Add("backend", backend->name());
     std::cout << json.str() << "\n";
   }
   return kExitOk;

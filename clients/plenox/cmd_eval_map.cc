@@ -21,22 +21,23 @@ int RunEvalMap(const std::vector<std::string>& args) {
       .Add("frames", "N", "evaluate at most N held-out frames, evenly spread (0 = all)", "0")
       .Add("pixels", "N", "random valid-depth pixels per frame (0 = all of them)", "10000")
       .Add("max-depth", "M", "ignore measured depth beyond this (metres)", "10")
-      .Add("threads", "N", "CPU threads (0 = all cores)", "0")
       .AddSwitch("json", "print the result as JSON");
+  AddBackendFlags(flags);
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
   absl::StatusOr<int> every = flags.GetInt("every", 1, 1000000);
   absl::StatusOr<int> frames = flags.GetInt("frames", 0, 1000000);
   absl::StatusOr<int> pixels = flags.GetInt("pixels", 0, 100000000);
   absl::StatusOr<double> max_depth = flags.GetDouble("max-depth", 0.1, 1000.0);
-  absl::StatusOr<int> threads = flags.GetInt("threads", 0, 4096);
-  for (const absl::Status& s : {every.status(), frames.status(), pixels.status(),
-                                max_depth.status(), threads.status()}) {
+  for (const absl::Status& s :
+       {every.status(), frames.status(), pixels.status(), max_depth.status()}) {
     if (!s.ok()) return ReportError("eval-map", s, true);
   }
 
   absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);
   if (!dataset_options.ok()) return ReportError("eval-map", dataset_options.status(), true);
+  std::unique_ptr<Backend> backend = BackendFromFlagsOrReport("eval-map", flags, &exit_code);
+  if (!backend) return exit_code;
 
   absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(flags.GetString("map"));
   if (!map.ok()) return ReportError("eval-map", map.status());
@@ -53,7 +54,6 @@ int RunEvalMap(const std::vector<std::string>& args) {
   MapEvalOptions options;
   options.pixels_per_frame = *pixels;
   options.max_depth = *max_depth;
-  std::unique_ptr<Backend> backend = MakeCpuBackend(*threads);
   absl::StatusOr<MapEvalResult> r = EvaluateMap(*backend, **map, **dataset, held_out, options);
   if (!r.ok()) return ReportError("eval-map", r.status());
   if (flags.GetSwitch("json")) {
@@ -63,14 +63,15 @@ int RunEvalMap(const std::vector<std::string>& args) {
         .Add("depth_l1_median_m", r->depth_l1_median_m)
         .Add("coverage", r->coverage)
         .Add("frames", r->frames)
-        .Add("pixels", r->pixels);
+        .Add("pixels", r->pixels)
+        .Add("backend", backend->name());
     std::cout << json.str() << "\n";
   } else {
     std::cout << absl::StrFormat(
         "held-out frames %d, pixels %d: PSNR %.2f dB, depth L1 %.2f cm (median %.2f cm), "
-        "coverage %.3f\n",
+        "coverage %.3f [%s]\n",
         r->frames, r->pixels, r->psnr, 100 * r->depth_l1_m, 100 * r->depth_l1_median_m,
-        r->coverage);
+        r->coverage, BackendText(*backend));
   }
   return kExitOk;
 }

@@ -19,22 +19,22 @@ int RunMap(const std::vector<std::string>& args) {
   flags.Add("out", "MAP", "map file to write", std::nullopt, true)
       .Add("every", "N", "map every N-th frame (0, N, 2N, ...)", "10");
   AddMapperFlags(flags);
-  flags.Add("threads", "N", "CPU threads (0 = all cores)", "0")
-      .AddSwitch("json", "print a JSON summary on the last line of stdout")
+  AddBackendFlags(flags);
+  flags.AddSwitch("json", "print a JSON summary on the last line of stdout")
       .AddSwitch("quiet", "no progress on stderr");
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
 
   absl::StatusOr<int> every = flags.GetInt("every", 1, 1000000);
   if (!every.ok()) return ReportError("map", every.status(), true);
-  absl::StatusOr<int> threads = flags.GetInt("threads", 0, 4096);
-  if (!threads.ok()) return ReportError("map", threads.status(), true);
   absl::StatusOr<MapperOptions> options = MapperOptionsFromFlags(flags, /*keyframes=*/1);
   if (!options.ok()) return ReportError("map", options.status(), true);
   absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);
   if (!dataset_options.ok()) return ReportError("map", dataset_options.status(), true);
   const std::string out = flags.GetString("out");
   if (absl::Status s = CheckOutputDirectory(out); !s.ok()) return ReportError("map", s);
+  std::unique_ptr<Backend> backend = BackendFromFlagsOrReport("map", flags, &exit_code);
+  if (!backend) return exit_code;
 
   absl::StatusOr<std::unique_ptr<RgbdDataset>> dataset =
       OpenDatasetFromFlags(flags, *dataset_options);
@@ -42,12 +42,11 @@ int RunMap(const std::vector<std::string>& args) {
   const std::vector<int> keyframes = KeyframeIndices((*dataset)->size(), *every);
   SetIterationBudget(flags, static_cast<int>(keyframes.size()), &*options);
 
-  std::unique_ptr<Backend> backend = MakeCpuBackend(*threads);
   ProgressLine line(!flags.GetSwitch("quiet"));
   absl::StatusOr<MapDatasetResult> result =
       MapDataset(**dataset, keyframes, *options, *backend, MappingProgressPrinter(&line));
   if (!result.ok()) return ReportError("map", result.status());
-  line.Finish(MappingSummaryText(result->summary));
+  line.Finish(MappingSummaryText(result->summary) + " [" + BackendText(*backend) + "]");
 
   if (absl::Status s = SaveMap(*result->map, out); !s.ok()) return ReportError("map", s);
 
@@ -68,6 +67,7 @@ int RunMap(const std::vector<std::string>& args) {
         .Add("seconds_per_keyframe", (sum.allocation_s + sum.optimization_s) / sum.keyframes)
         .Add("map_mb", map_mb)
         .Add("peak_rss_mb", PeakRssMb())
+        .Add("backend", backend->name())
         .Add("threads", backend->parallelism());
     std::cout << json.str() << "\n";
   } else {

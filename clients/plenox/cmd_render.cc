@@ -30,7 +30,8 @@ int RunRender(const std::vector<std::string>& args) {
            true)
       .Add("color", "C.png", "colour image to write")
       .Add("depth", "D.png", "depth image to write")
-      .Add("threads", "N", "CPU threads (0 = all cores)", "0");
+      .AddSwitch("json", "print a JSON summary on the last line of stdout");
+  AddBackendFlags(flags);
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
   const std::string color_path = flags.GetString("color"), depth_path = flags.GetString("depth");
@@ -41,17 +42,17 @@ int RunRender(const std::vector<std::string>& args) {
   if (!pose.ok()) return ReportError("render", pose.status(), true);
   absl::StatusOr<PinholeIntrinsics> k = ParsePinholeIntrinsics(flags.GetString("intrinsics"));
   if (!k.ok()) return ReportError("render", k.status(), true);
-  absl::StatusOr<int> threads = flags.GetInt("threads", 0, 4096);
-  if (!threads.ok()) return ReportError("render", threads.status(), true);
 
   for (const std::string& path : {color_path, depth_path}) {
     if (path.empty()) continue;
     if (absl::Status s = CheckOutputDirectory(path); !s.ok()) return ReportError("render", s);
   }
 
+  std::unique_ptr<Backend> backend = BackendFromFlagsOrReport("render", flags, &exit_code);
+  if (!backend) return exit_code;
+
   absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(flags.GetString("map"));
   if (!map.ok()) return ReportError("render", map.status());
-  std::unique_ptr<Backend> backend = MakeCpuBackend(*threads);
   const RenderedView view = RenderView(*backend, **map, *pose, *k);
   // Both images go to temporary names first and are renamed only when both were written, so a
   // failed render leaves no output behind.
@@ -84,10 +85,22 @@ int RunRender(const std::vector<std::string>& args) {
   }
   int64_t rendered = 0;
   for (float o : view.opacity.data) rendered += o >= kRenderedOpacity;
-  std::cout << absl::StrFormat("rendered %dx%d, %.1f%% of pixels hit the map%s%s\n", k->width,
-                               k->height, 100.0 * rendered / view.opacity.num_pixels(),
-                               color_path.empty() ? "" : ", colour -> " + color_path,
-                               depth_path.empty() ? "" : ", depth -> " + depth_path);
+  const double coverage = static_cast<double>(rendered) / view.opacity.num_pixels();
+  if (flags.GetSwitch("json")) {
+    JsonObject json;
+    json.Add("width", k->width)
+        .Add("height", k->height)
+        .Add("coverage", coverage)
+        .Add("color", color_path)
+        .Add("depth", depth_path)
+        .Add("backend", backend->name());
+    std::cout << json.str() << "\n";
+  } else {
+    std::cout << absl::StrFormat("rendered %dx%d on %s, %.1f%% of pixels hit the map%s%s\n",
+                                 k->width, k->height, BackendText(*backend), 100.0 * coverage,
+                                 color_path.empty() ? "" : ", colour -> " + color_path,
+                                 depth_path.empty() ? "" : ", depth -> " + depth_path);
+  }
   return kExitOk;
 }
 

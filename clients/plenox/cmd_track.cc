@@ -21,9 +21,9 @@ int RunTrack(const std::vector<std::string>& args) {
   flags.Add("out", "TRAJ.txt", "trajectory to write", std::nullopt, true)
       .Add("mode", "gn|adam", "Gauss-Newton/LM, or Adam as in the paper", "gn")
       .Add("rays", "N", "rays per frame (adam: per step) [default: gn 4096, adam 4096]", "")
-      .Add("iterations", "N", "iterations per frame [default: gn 8, adam 90]", "")
-      .Add("threads", "N", "CPU threads (0 = all cores)", "0")
-      .AddSwitch("json", "print a JSON summary on the last line of stdout")
+      .Add("iterations", "N", "iterations per frame [default: gn 8, adam 90]", "");
+  AddBackendFlags(flags);
+  flags.AddSwitch("json", "print a JSON summary on the last line of stdout")
       .AddSwitch("quiet", "no progress on stderr");
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
@@ -47,12 +47,12 @@ int RunTrack(const std::vector<std::string>& args) {
     if (!iterations.ok()) return ReportError("track", iterations.status(), true);
     options.iterations = *iterations;
   }
-  absl::StatusOr<int> threads = flags.GetInt("threads", 0, 4096);
-  if (!threads.ok()) return ReportError("track", threads.status(), true);
   absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);
   if (!dataset_options.ok()) return ReportError("track", dataset_options.status(), true);
   const std::string out = flags.GetString("out");
   if (absl::Status s = CheckOutputDirectory(out); !s.ok()) return ReportError("track", s);
+  std::unique_ptr<Backend> backend = BackendFromFlagsOrReport("track", flags, &exit_code);
+  if (!backend) return exit_code;
 
   absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(flags.GetString("map"));
   if (!map.ok()) return ReportError("track", map.status());
@@ -60,7 +60,6 @@ int RunTrack(const std::vector<std::string>& args) {
       OpenDatasetFromFlags(flags, *dataset_options);
   if (!dataset.ok()) return ReportError("track", dataset.status());
 
-  std::unique_ptr<Backend> backend = MakeCpuBackend(*threads);
   ProgressLine line(!flags.GetSwitch("quiet"));
   const int total = (*dataset)->size();
   int lost = 0;
@@ -82,8 +81,9 @@ int RunTrack(const std::vector<std::string>& args) {
     return ReportError("track", s);
   }
   line.Finish(absl::StrFormat(
-      "tracked %d frames: median %.1f ms, p95 %.1f ms per frame, %d lost, %d degraded%s", total,
-      result->ms_per_frame_median, result->ms_per_frame_p95, result->lost, result->degraded,
+      "tracked %d frames: median %.1f ms, p95 %.1f ms per frame, %d lost, %d degraded [%s]%s",
+      total, result->ms_per_frame_median, result->ms_per_frame_p95, result->lost,
+      result->degraded, BackendText(*backend),
       result->started_from_ground_truth ? "" : " (no ground truth: started at the identity)"));
   if (flags.GetSwitch("json")) {
     JsonObject json;
@@ -95,7 +95,8 @@ int RunTrack(const std::vector<std::string>& args) {
         .Add("mode", mode)
         .Add("rays", options.rays)
         .Add("iterations", options.iterations)
-        .Add("trajectory", out);
+        .Add("trajectory", out)
+        .Add("backend", backend->name());
     std::cout << json.str() << "\n";
   } else {
     std::cout << absl::StrFormat("wrote %s (%d poses)\n", out, total);

@@ -24,7 +24,7 @@ struct RemoteOptions {
 };
 
 // The same commands against a plenoxd daemon (remote_*.cc; only in builds with gRPC, where
-// PLX_WITH_SERVER is defined). export, maps, save and load exist only in this form; they
+// PLX_WITH_SERVER is defined). export, maps, save, load and info exist only in this form; they
 // print their --help without --server and otherwise say that they need it.
 int RunRemoteMap(const RemoteOptions& remote, const std::vector<std::string>& args);
 int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& args);
@@ -33,5 +33,6 @@ int RunRemoteExport(const RemoteOptions& remote, const std::vector<std::string>&
 int RunRemoteMaps(const RemoteOptions& remote, const std::vector<std::string>& args);
 int RunRemoteSave(const RemoteOptions& remote, const std::vector<std::string>& args);
 int RunRemoteLoad(const RemoteOptions& remote, const std::vector<std::string>& args);
+int RunRemoteInfo(const RemoteOptions& remote, const std::vector<std::string>& args);
 
 }  // namespace plx::cli

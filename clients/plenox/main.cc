@@ -32,6 +32,7 @@ constexpr char kUsage[] =
     "  maps       list the daemon's maps\n"
     "  save       write a map to the daemon's data directory\n"
     "  load       read a map back from the daemon's data directory\n"
+    "  info       the daemon's version, compute devices (CPU or GPUs) and map count\n"
     "\n"
     "global flags (before the command):\n"
     "  --server HOST:PORT  talk to the plenoxd daemon there (plenoxd's default: 127.0.0.1:50051)\n"
@@ -39,7 +40,7 @@ constexpr char kUsage[] =
     "  --tls-ca PEM        root certificate of a daemon serving TLS\n";
 
 // Commands that only exist against a daemon, and commands that only run in-process.
-const std::set<std::string> kDaemonOnly = {"export", "maps", "save", "load"};
+const std::set<std::string> kDaemonOnly = {"export", "maps", "save", "load", "info"};
 const std::set<std::string> kInProcessOnly = {"demo", "eval-map", "eval-traj", "synth"};
 
 int UsageError(const std::string& message) {
@@ -148,6 +149,7 @@ int main(int argc, char** argv) {
   if (command == "maps") return plx::cli::RunRemoteMaps(remote, args);
   if (command == "save") return plx::cli::RunRemoteSave(remote, args);
   if (command == "load") return plx::cli::RunRemoteLoad(remote, args);
+  if (command == "info") return plx::cli::RunRemoteInfo(remote, args);
   if (use_server && kInProcessOnly.count(command) > 0) {
     return UsageError(
         absl::StrCat(command, " runs in-process only; give it without --server"));

@@ -184,6 +184,16 @@ absl::StatusOr<std::vector<pb::MapInfo>> RemoteClient::ListMaps() {
   return std::vector<pb::MapInfo>(response.maps().begin(), response.maps().end());
 }
 
+absl::StatusOr<pb::ServerInfo> RemoteClient::GetServerInfo() {
+  pb::ServerInfo info;
+  const auto context = NewContext();
+  if (grpc::Status s = stub_->GetServerInfo(context.get(), pb::GetServerInfoRequest(), &info);
+      !s.ok()) {
+    return ToStatus(s);
+  }
+  return info;
+}
+
 absl::StatusOr<pb::MapInfo> RemoteClient::SaveMap(const std::string& name) {
   pb::SaveMapRequest request;
   request.set_name(name);

@@ -69,6 +69,7 @@ class RemoteClient {
   absl::StatusOr<pb::MapInfo> SaveMap(const std::string& name);
   absl::StatusOr<pb::MapInfo> LoadMap(const std::string& name);
   absl::StatusOr<pb::RenderResponse> Render(const pb::RenderRequest& request);
+  absl::StatusOr<pb::ServerInfo> GetServerInfo();
 
  private:
   RemoteClient() = default;

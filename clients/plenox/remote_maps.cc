@@ -1,5 +1,6 @@
-// plenox --server HOST:PORT maps / save / load: the daemon's maps (ListMaps), and writing a map
-// to / reading it back from the daemon's data directory (SaveMap, LoadMap).
+// plenox --server HOST:PORT maps / save / load / info: the daemon's maps (ListMaps), writing a
+// map to / reading it back from the daemon's data directory (SaveMap, LoadMap), and what the
+// daemon is and computes on (GetServerInfo).
 #include <algorithm>
 #include <iostream>
 
@@ -92,6 +93,50 @@ int RunRemoteMaps(const RemoteOptions& remote, const std::vector<std::string>& a
                                  m.voxel_size(), m.version(), m.bricks(), m.memory_bytes() / 1e6,
                                  m.keyframes(), m.dirty() ? "yes" : "no",
                                  m.mapping() ? "yes" : "no");
+  }
+  return kExitOk;
+}
+
+int RunRemoteInfo(const RemoteOptions& remote, const std::vector<std::string>& args) {
+  FlagSet flags("plenox info",
+                "Needs --server: the daemon's version, its compute devices (one worker each:\n"
+                "the CPU, or each GPU it was started with) with their queued tasks and bound\n"
+                "streams, and how many maps it holds.");
+  flags.AddSwitch("json",
+                  "one JSON object for the daemon, then one per device (JSON Lines)");
+  int exit_code = 0;
+  if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
+  std::unique_ptr<RemoteClient> client = ConnectOrReport("info", remote, &exit_code);
+  if (!client) return exit_code;
+  absl::StatusOr<pb::ServerInfo> info = client->GetServerInfo();
+  if (!info.ok()) return ReportError("info", info.status());
+  if (flags.GetSwitch("json")) {
+    JsonObject json;
+    json.Add("server", client->server())
+        .Add("version", info->version())
+        .Add("backend", info->backend())
+        .AddBool("cuda_built", info->cuda_built())
+        .Add("maps", static_cast<int64_t>(info->maps()))
+        .Add("devices", info->devices_size());
+    std::cout << json.str() << "\n";
+    for (const pb::Device& d : info->devices()) {
+      JsonObject device;
+      device.Add("device", d.id())
+          .Add("kind", d.kind())
+          .Add("name", d.name())
+          .Add("queue_depth", static_cast<int64_t>(d.queue_depth()))
+          .Add("streams", static_cast<int64_t>(d.streams()));
+      std::cout << device.str() << "\n";
+    }
+    return kExitOk;
+  }
+  std::cout << absl::StrFormat("plenoxd %s on %s: backend %s%s, %d maps, %d devices\n",
+                               info->version(), client->server(), info->backend(),
+                               info->cuda_built() ? "" : " (built without CUDA)", info->maps(),
+                               info->devices_size());
+  for (const pb::Device& d : info->devices()) {
+    std::cout << absl::StrFormat("  %-8s %-5s %s  (queue %d, streams %d)\n", d.id(), d.kind(),
+                                 d.name(), d.queue_depth(), d.streams());
   }
   return kExitOk;
 }

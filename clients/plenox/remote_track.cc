@@ -5,6 +5,7 @@
 #include <iostream>
 
 #include "absl/strings/str_cat.h"
+#include "core/common/percentile.h"
 #include "absl/strings/str_format.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
@@ -16,16 +17,6 @@ namespace plx::cli {
 namespace {
 
 constexpr char kCommand[] = "track";
-
-// Linear interpolation between order statistics, as the in-process track reports.
-double Percentile(std::vector<double> values, double q) {
-  if (values.empty()) return 0.0;
-  std::sort(values.begin(), values.end());
-  const double position = q * (values.size() - 1);
-  const size_t lo = static_cast<size_t>(std::floor(position));
-  const size_t hi = std::min(values.size() - 1, lo + 1);
-  return values[lo] + (position - lo) * (values[hi] - values[lo]);
-}
 
 }  // namespace
 
@@ -44,6 +35,7 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
       .Add("rays", "N", "rays per frame (adam: per step) [default: gn 4096, adam 4096]", "")
       .Add("iterations", "N", "iterations per frame [default: gn 8, adam 90]", "")
       .Add("encoding", "png|raw", "how frames travel: PNG, or raw RGB8 + uint16 (no codec)", "png")
+      .Add("timings", "FILE", "also write per-frame times: frame timestamp roundtrip_ms daemon_ms", "")
       .AddSwitch("json", "print a JSON summary on the last line of stdout")
       .AddSwitch("quiet", "no progress on stderr");
   int exit_code = 0;
@@ -158,6 +150,16 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
     return ReportError(kCommand, client->ToStatus(finished));
   }
 
+  if (const std::string timings = flags.GetString("timings"); !timings.empty()) {
+    std::string text = "# frame timestamp roundtrip_ms daemon_ms (frames 1..; 0 is the start)\n";
+    for (size_t k = 0; k < roundtrip_ms.size(); ++k) {
+      absl::StrAppendFormat(&text, "%d %.6f %.3f %.3f\n", static_cast<int>(k + 1),
+                            trajectory[k + 1].timestamp, roundtrip_ms[k], latency_ms[k]);
+    }
+    if (absl::Status s = WriteFilesAtomically({{timings, text}}); !s.ok()) {
+      return ReportError(kCommand, s);
+    }
+  }
   if (absl::Status s = WriteTumTrajectory(
           out, trajectory,
           absl::StrFormat("plenox track: %s on map %s at %s (mode %s)", dataset.name(), map_name,

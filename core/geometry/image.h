@@ -5,15 +5,18 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/common/unified_allocator.h"
+
 namespace plx {
 
-// Row-major, interleaved channels.
+// Row-major, interleaved channels. Pixels live in a UnifiedVector so kernels of every backend
+// can read them (core/common/unified_allocator.h).
 template <typename T>
 struct Image {
   int width = 0;
   int height = 0;
   int channels = 1;
-  std::vector<T> data;
+  UnifiedVector<T> data;
 
   Image() = default;
   Image(int w, int h, int c, T fill = T{}) : width(w), height(h), channels(c),

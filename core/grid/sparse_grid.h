@@ -1,6 +1,7 @@
-// Host owner of the sparse brick grid (DESIGN.md §5). Bricks of 8x8x8 vertices are stored in
+// Owner of the sparse brick grid (DESIGN.md §5). Bricks of 8x8x8 vertices are stored in
 // allocation order ("slots"); a dense coarse index over the current bounds maps brick
-// coordinates to slots and grows when bricks appear outside it. Kernels see it as a GridView.
+// coordinates to slots and grows when bricks appear outside it. Kernels see it as a GridView;
+// every array a kernel reads is a UnifiedVector, so the GPU backend reads it in place.
 #pragma once
 
 #include <array>
@@ -9,6 +10,7 @@
 
 #include "absl/status/statusor.h"
 #include "absl/types/span.h"
+#include "core/common/unified_allocator.h"
 #include "core/grid/grid_view.h"
 
 namespace plx {
@@ -84,10 +86,10 @@ class SparseGrid {
     return v;
   }
 
-  std::vector<float>& density() { return density_; }
-  const std::vector<float>& density() const { return density_; }
-  std::vector<float>& sh() { return sh_; }
-  const std::vector<float>& sh() const { return sh_; }
+  UnifiedVector<float>& density() { return density_; }
+  const UnifiedVector<float>& density() const { return density_; }
+  UnifiedVector<float>& sh() { return sh_; }
+  const UnifiedVector<float>& sh() const { return sh_; }
 
   GridMemory Memory() const;
 
@@ -99,7 +101,7 @@ class SparseGrid {
   void mark_occupancy_stale() { occupancy_stale_ = true; }
   int64_t num_active_blocks() const { return static_cast<int64_t>(cell_bits_.size() / kBrickEdge); }
   // Linear index (in the coarse index) of every active block, in cell_bits order.
-  const std::vector<int64_t>& active_blocks() const { return active_blocks_; }
+  const UnifiedVector<int64_t>& active_blocks() const { return active_blocks_; }
 
   // Brick-coordinate bounds of the index: [index_min, index_min + index_dims).
   const std::array<int32_t, 3>& index_min() const { return index_min_; }
@@ -114,16 +116,16 @@ class SparseGrid {
 
   float voxel_size_;
   std::vector<BrickCoord> brick_coords_;  // per slot
-  std::vector<float> density_;            // [num_vertices]
-  std::vector<float> sh_;                 // [num_vertices * 27]
+  UnifiedVector<float> density_;          // [num_vertices]
+  UnifiedVector<float> sh_;               // [num_vertices * 27]
   std::array<int32_t, 3> index_min_ = {0, 0, 0};
   std::array<int32_t, 3> index_dims_ = {0, 0, 0};
-  std::vector<int32_t> brick_slot_;     // coarse index
-  std::vector<int32_t> block_cells_;    // per index block: offset into cell_bits_, or -1
-  std::vector<uint64_t> cell_bits_;     // 8 words (512 cells) per active block
-  std::vector<int64_t> active_blocks_;  // index position of each active block
+  UnifiedVector<int32_t> brick_slot_;     // coarse index
+  UnifiedVector<int32_t> block_cells_;    // per index block: offset into cell_bits_, or -1
+  UnifiedVector<uint64_t> cell_bits_;     // 8 words (512 cells) per active block
+  UnifiedVector<int64_t> active_blocks_;  // index position of each active block
   bool occupancy_stale_ = true;
-  std::vector<int32_t> brick_origin_;   // [num_bricks * 3] index vertex coords of brick corners
+  UnifiedVector<int32_t> brick_origin_;   // [num_bricks * 3] index vertex coords of brick corners
 };
 
 }  // namespace plx

@@ -1,7 +1,15 @@
 // The compute backend the algorithms run on (DESIGN.md §3): the kernel drivers of
 // core/kernels/kernel_declarations.inc behind a virtual interface, so mapping, tracking and
-// rendering do not care whether they run on CPU threads or a GPU. Views must point at memory
-// the backend can read (host memory for the CPU backend).
+// rendering do not care whether they run on CPU threads or a GPU.
+//
+// Views must point at memory the backend can read. CPU backend: any host memory. CUDA backend
+// (cuda/cuda_backend.h): UnifiedVector memory (core/common/unified_allocator.h) allocated after
+// the CUDA backend was created (CUDA managed memory), device memory of its GPU or pinned host
+// memory; ordinary host memory (std::vector, the stack) makes the call abort with a message
+// naming the argument. So every array a kernel touches lives in a UnifiedVector, and programs
+// create their backend before they load maps or frames. Small parameter structs (the views
+// themselves, options, `scale`) are passed by value and may live anywhere. Every call returns
+// after the work is done: results can be read right away.
 #pragma once
 
 #include <memory>

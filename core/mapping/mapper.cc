@@ -115,7 +115,7 @@ absl::Status Mapper::AllocateAndInitialize() {
   allocated_frames_ = training_.num_frames();
   const int64_t new_vertices = map_->grid.num_vertices() - first_new_vertex;
   if (options_.initialize_from_depth && new_vertices > 0) {
-    const std::vector<TrainingFrameView>& frames = training_.frame_views();
+    const UnifiedVector<TrainingFrameView>& frames = training_.frame_views();
     backend_->FuseDepth(map_->grid.view(), first_new_vertex, new_vertices, frames.data(),
                         static_cast<int>(frames.size()), options_.fusion);
   }
@@ -146,7 +146,7 @@ absl::Status Mapper::Upsample() {
 }
 
 absl::StatusOr<MappingSummary> Mapper::Optimize(const MappingProgressCallback& progress,
-                                                int max_new_iterations) {
+                                                int max_new_iterations, double max_seconds) {
   PLX_RETURN_IF_ERROR(ValidateOptions(options_));
   if (allocated_frames_ != training_.num_frames()) PLX_RETURN_IF_ERROR(AllocateAndInitialize());
   if (training_.num_rays() == 0) {
@@ -185,6 +185,7 @@ absl::StatusOr<MappingSummary> Mapper::Optimize(const MappingProgressCallback& p
     }
     if (fraction >= 1.0) break;
     if (max_new_iterations > 0 && done >= max_new_iterations) break;
+    if (max_seconds > 0 && done > 0 && elapsed >= max_seconds) break;
     if (coarse_ && fraction >= options_.upsample_at) {
       PLX_RETURN_IF_ERROR(Upsample());
       tv_count = std::max<int64_t>(

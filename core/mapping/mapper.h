@@ -101,9 +101,10 @@ class Mapper {
   absl::Status AllocateAndInitialize();
 
   // Runs the optimisation until the budget is spent (or the callback says stop), or for at most
-  // `max_new_iterations` iterations when that is positive. The budget is cumulative over calls.
+  // `max_new_iterations` iterations / `max_seconds` seconds when those are positive (at least
+  // one iteration runs). The budget is cumulative over calls.
   absl::StatusOr<MappingSummary> Optimize(const MappingProgressCallback& progress = nullptr,
-                                          int max_new_iterations = 0);
+                                          int max_new_iterations = 0, double max_seconds = 0.0);
 
   // Raises or lowers the total iteration budget (e.g. as keyframes stream in).
   void set_max_iterations(int iterations) { options_.max_iterations = iterations; }
@@ -139,10 +140,11 @@ class Mapper {
   int iteration_ = 0;
   MappingSummary summary_;
 
-  std::vector<float> grad_density_, grad_sh_;
-  std::vector<uint8_t> touched_, brick_touched_;
-  std::vector<float> rms_density_, rms_sh_;
-  std::vector<MappingRayLoss> losses_;
+  // Read and written by the backend's kernels: UnifiedVector (core/common/unified_allocator.h).
+  UnifiedVector<float> grad_density_, grad_sh_;
+  UnifiedVector<uint8_t> touched_, brick_touched_;
+  UnifiedVector<float> rms_density_, rms_sh_;
+  UnifiedVector<MappingRayLoss> losses_;
 };
 
 }  // namespace plx

@@ -22,7 +22,7 @@ absl::Status TrainingSet::AddFrame(RgbdFrame frame, const SE3& world_T_camera,
   if (frames_.size() >= (1u << 20)) return absl::ResourceExhaustedError("too many keyframes");
   const uint32_t index = static_cast<uint32_t>(frames_.size());
   const float max_d = static_cast<float>(max_depth);
-  const std::vector<float>& depth = frame.depth.data;
+  const UnifiedVector<float>& depth = frame.depth.data;
   for (size_t p = 0; p < depth.size(); ++p) {
     if (depth[p] > 0.0f && depth[p] <= max_d) {
       ray_frame_.push_back(index);

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "absl/status/status.h"
+#include "core/common/unified_allocator.h"
 #include "core/geometry/intrinsics.h"
 #include "core/geometry/rgbd_frame.h"
 #include "core/geometry/se3.h"
@@ -22,7 +23,7 @@ class TrainingSet {
 
   int num_frames() const { return static_cast<int>(frames_.size()); }
   int64_t num_rays() const { return static_cast<int64_t>(ray_frame_.size()); }
-  const std::vector<TrainingFrameView>& frame_views() const { return views_; }
+  const UnifiedVector<TrainingFrameView>& frame_views() const { return views_; }
   const RgbdFrame& frame(int i) const { return frames_[i]; }
   const SE3& pose(int i) const { return poses_[i]; }
   const PinholeIntrinsics& intrinsics(int i) const { return intrinsics_[i]; }
@@ -34,9 +35,10 @@ class TrainingSet {
   std::deque<RgbdFrame> frames_;  // deque: image buffers never move when frames are added
   std::vector<SE3> poses_;
   std::vector<PinholeIntrinsics> intrinsics_;
-  std::vector<TrainingFrameView> views_;
-  std::vector<uint32_t> ray_frame_;
-  std::vector<uint32_t> ray_pixel_;
+  // Kernels read these (and the frames' images) on the backend: UnifiedVector.
+  UnifiedVector<TrainingFrameView> views_;
+  UnifiedVector<uint32_t> ray_frame_;
+  UnifiedVector<uint32_t> ray_pixel_;
 };
 
 }  // namespace plx

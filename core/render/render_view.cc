@@ -25,8 +25,10 @@ RenderedPixels RenderPixels(Backend& backend, PlenoxelMap& map, const SE3& world
     return out;
   }
   RefreshOccupancyIfStale(backend, map.grid, map.render.sigma_threshold);
+  // The caller's pixel list is ordinary host memory; a GPU backend reads the unified copy.
+  const UnifiedVector<int32_t> pixel_ids(pixels.begin(), pixels.end());
   backend.RenderPixels(map.grid.view(), ToKernelCamera(world_T_camera, intrinsics),
-                       pixels.empty() ? nullptr : pixels.data(), n, map.render,
+                       pixel_ids.empty() ? nullptr : pixel_ids.data(), n, map.render,
                        out.color.data(), out.depth.data(), out.opacity.data(),
                        out.median_depth.data());
   return out;

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/common/unified_allocator.h"
 #include "core/geometry/image.h"
 #include "core/geometry/intrinsics.h"
 #include "core/geometry/se3.h"
@@ -16,11 +17,12 @@ namespace plx {
 // A pixel counts as rendered when the map's opacity along its ray reaches this.
 inline constexpr float kRenderedOpacity = 0.5f;
 
+// Written by the backend's kernels, hence UnifiedVector (core/common/unified_allocator.h).
 struct RenderedPixels {
-  std::vector<float> color;    // [n * 3], unclamped
-  std::vector<float> depth;    // [n], expected range sum_i w_i t_i (not normalised)
-  std::vector<float> opacity;  // [n]
-  std::vector<float> median_depth;  // [n], range where the transmittance reaches 1/2
+  UnifiedVector<float> color;    // [n * 3], unclamped
+  UnifiedVector<float> depth;    // [n], expected range sum_i w_i t_i (not normalised)
+  UnifiedVector<float> opacity;  // [n]
+  UnifiedVector<float> median_depth;  // [n], range where the transmittance reaches 1/2
 
   // The surface range of pixel i, or 0 when the pixel is not rendered.
   float RenderedRange(int64_t i) const {
@@ -29,6 +31,7 @@ struct RenderedPixels {
 };
 
 // Renders the given pixel ids (v * width + u); all pixels in order when `pixels` is empty.
+// `pixels` may be host memory (it is copied into a UnifiedVector for the backend).
 RenderedPixels RenderPixels(Backend& backend, PlenoxelMap& map, const SE3& world_T_camera,
                             const PinholeIntrinsics& intrinsics,
                             const std::vector<int32_t>& pixels = {});

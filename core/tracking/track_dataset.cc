@@ -1,23 +1,9 @@
 #include "core/tracking/track_dataset.h"
 
-#include <algorithm>
-#include <cmath>
-
+#include "core/common/percentile.h"
 #include "core/common/status_macros.h"
 
 namespace plx {
-namespace {
-
-double Percentile(std::vector<double> values, double q) {
-  if (values.empty()) return 0.0;
-  std::sort(values.begin(), values.end());
-  const double position = q * (values.size() - 1);
-  const size_t lo = static_cast<size_t>(std::floor(position));
-  const size_t hi = std::min(values.size() - 1, lo + 1);
-  return values[lo] + (position - lo) * (values[hi] - values[lo]);
-}
-
-}  // namespace
 
 absl::StatusOr<TrackDatasetResult> TrackDataset(
     const RgbdDataset& dataset, PlenoxelMap& map, Backend& backend, const TrackerOptions& options,

@@ -67,7 +67,7 @@ SE3 Tracker::Predict(double timestamp) const {
 
 void Tracker::SamplePixels(const RgbdFrame& frame, int count) {
   valid_pixels_.clear();
-  const std::vector<float>& depth = frame.depth.data;
+  const UnifiedVector<float>& depth = frame.depth.data;
   for (int32_t p = 0; p < static_cast<int32_t>(depth.size()); ++p) {
     if (depth[p] > 0.0f && depth[p] <= options_.params.max_depth) valid_pixels_.push_back(p);
   }

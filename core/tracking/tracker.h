@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "core/common/unified_allocator.h"
 #include "core/geometry/intrinsics.h"
 #include "core/geometry/rgbd_frame.h"
 #include "core/geometry/se3.h"
@@ -111,8 +112,8 @@ class Tracker {
   std::optional<Vector6d> velocity_;  // tangent of the last motion, per second
   uint32_t frame_counter_ = 0;
   std::vector<int32_t> valid_pixels_;
-  std::vector<int32_t> pixels_;
-  std::vector<TrackingRayTerm> terms_;
+  UnifiedVector<int32_t> pixels_;          // read by the backend
+  UnifiedVector<TrackingRayTerm> terms_;   // written by the backend
   std::vector<float> scratch_;
 };
 

@@ -26,6 +26,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "cuda/make_backend.h"
 #include "tests/clients/cli_runner.h"
 #include "tests/test_util.h"
 
@@ -46,6 +47,7 @@ using plx::testing::WriteStringToFile;
 using ::testing::AllOf;
 using ::testing::HasSubstr;
 using ::testing::IsEmpty;
+using ::testing::Not;
 using ::testing::StartsWith;
 
 constexpr int kExitOk = 0;
@@ -130,13 +132,13 @@ TEST(RemoteCliBadInputTest, TokenFileProblemsAreUsageErrors) {
 }
 
 TEST(RemoteCliBadInputTest, CommandsThatNeedOrRefuseADaemonSaySo) {
-  for (const char* command : {"maps", "export", "save", "load"}) {
+  for (const char* command : {"maps", "export", "save", "load", "info"}) {
     SCOPED_TRACE(command);
     const CommandResult help = RunPlenox({command, "--help"});
     EXPECT_EQ(help.exit_code, kExitOk) << help.Describe();
     EXPECT_THAT(help.out, StartsWith(std::string("usage: plenox ") + command)) << help.Describe();
     std::vector<std::string> args = {command};
-    if (std::string(command) != "maps") args.insert(args.end(), {"--map", "m"});
+    if (std::string(command) != "maps" && std::string(command) != "info") args.insert(args.end(), {"--map", "m"});
     if (std::string(command) == "export") args.insert(args.end(), {"--out", "x.ply"});
     const CommandResult r = RunPlenox(args);
     EXPECT_EQ(r.exit_code, kExitUsage) << r.Describe();
@@ -622,6 +624,82 @@ TEST(RemoteCliTlsTest, TlsCaLetsTheClientTalkToATlsDaemon) {
   EXPECT_EQ(missing_ca.exit_code, kExitUsage) << missing_ca.Describe();
   EXPECT_THAT(missing_ca.err, HasSubstr("--tls-ca")) << missing_ca.Describe();
 
+  EXPECT_EQ(daemon.Stop(), 0) << daemon.Log();
+}
+
+// plenoxd's device flags: bad values are usage errors (exit 2) before anything starts, and
+// --backend cuda without CUDA stops at start (exit 1) with a message that names CUDA.
+TEST(PlenoxdDeviceFlagsTest, BadBackendOrGpusStopsTheDaemonAtStart) {
+  ScopedTempDir work("plenoxd_flags");
+  const auto run = [&](const std::vector<std::string>& flags) {
+    std::vector<std::string> args = {"--listen", "127.0.0.1:0", "--data-dir",
+                                     work.path() + "/data"};
+    args.insert(args.end(), flags.begin(), flags.end());
+    return plx::testing::RunCommand(PLENOXD_BINARY, args, "", /*timeout_s=*/20.0);
+  };
+  const CommandResult help = plx::testing::RunCommand(PLENOXD_BINARY, {"--help"});
+  EXPECT_EQ(help.exit_code, kExitOk) << help.Describe();
+  EXPECT_THAT(help.out, AllOf(HasSubstr("--backend cpu|cuda|auto"), HasSubstr("--gpus all|0,1,..."),
+                              HasSubstr("one worker per GPU")))
+      << help.Describe();
+
+  const struct {
+    std::vector<std::string> flags;
+    std::string says;
+  } usage_errors[] = {
+      {{"--backend", "gpu"}, "--backend must be cpu, cuda or auto, got \"gpu\""},
+      {{"--gpus", "zero"}, "--gpus: expected \"all\" or device ids like 0,1; got \"zero\""},
+      {{"--gpus", "-1"}, "--gpus"},
+      {{"--gpus", "4096"}, "--gpus: device 4096 does not exist"},
+      {{"--backend", "cpu", "--gpus", "0"}, "--gpus only applies with --backend cuda or auto"},
+  };
+  for (const auto& c : usage_errors) {
+    const CommandResult r = run(c.flags);
+    EXPECT_EQ(r.exit_code, kExitUsage) << r.Describe();
+    EXPECT_THAT(r.err, AllOf(StartsWith("plenoxd: "), HasSubstr(c.says))) << r.Describe();
+    EXPECT_THAT(r.out, IsEmpty()) << r.Describe();
+  }
+
+  if (CudaDeviceCount() == 0) {
+    const CommandResult cuda = run({"--backend", "cuda"});
+    EXPECT_EQ(cuda.exit_code, kExitFailure) << cuda.Describe();
+    EXPECT_THAT(cuda.err, AllOf(StartsWith("plenoxd: --backend cuda: "), HasSubstr("CUDA")))
+        << cuda.Describe();
+    EXPECT_THAT(cuda.out, Not(HasSubstr("listening"))) << cuda.Describe();
+  }
+}
+
+// `plenox --server ... info`: the daemon's version and its one CPU worker (--backend cpu).
+TEST(RemoteCliInfoTest, InfoListsTheDevices) {
+  ScopedTempDir work("plenox_remote_info");
+  DaemonProcess daemon(work.path(), {"--backend", "cpu"});
+  ASSERT_TRUE(daemon.running()) << daemon.Log();
+
+  const CommandResult text = RunPlenox({"--server", daemon.address(), "info"});
+  ASSERT_EQ(text.exit_code, kExitOk) << text.Describe();
+  EXPECT_THAT(text.out, AllOf(StartsWith("plenoxd "), HasSubstr("on " + daemon.address()),
+                              HasSubstr("backend cpu"), HasSubstr("0 maps"),
+                              HasSubstr("1 devices"), HasSubstr("cpu (2 threads)")))
+      << text.Describe();
+
+  const CommandResult json = RunPlenox({"--server", daemon.address(), "info", "--json"});
+  ASSERT_EQ(json.exit_code, kExitOk) << json.Describe();
+  std::istringstream lines(json.out);
+  std::string server_line, device_line, extra;
+  std::getline(lines, server_line);
+  std::getline(lines, device_line);
+  EXPECT_FALSE(std::getline(lines, extra)) << json.Describe();
+  const std::optional<FlatJson> server = ParseFlatJson(server_line);
+  ASSERT_TRUE(server.has_value()) << json.Describe();
+  EXPECT_EQ(server->at("backend").text, "cpu");
+  EXPECT_EQ(JsonNumber(*server, "maps"), 0.0);
+  EXPECT_EQ(JsonNumber(*server, "devices"), 1.0);
+  EXPECT_FALSE(server->at("version").text.empty());
+  const std::optional<FlatJson> device = ParseFlatJson(device_line);
+  ASSERT_TRUE(device.has_value()) << json.Describe();
+  EXPECT_EQ(device->at("device").text, "cpu");
+  EXPECT_EQ(device->at("kind").text, "cpu");
+  EXPECT_EQ(device->at("name").text, "cpu (2 threads)");
   EXPECT_EQ(daemon.Stop(), 0) << daemon.Log();
 }
 

@@ -90,7 +90,9 @@ TEST_F(MappingBackwardTest, GradientsMatchCentralDifferences) {
   }
   EXPECT_GT(checked_density, 20);
   for (size_t i = 0; i < touched.size(); ++i) {
-    if (touched[i]) EXPECT_EQ(brick_touched[i / kBrickVertices], 1) << "vertex " << i;
+    if (touched[i]) {
+      EXPECT_EQ(brick_touched[i / kBrickVertices], 1) << "vertex " << i;
+    }
   }
   EXPECT_GT(checked_sh, 100);
 }

@@ -1,0 +1,316 @@
+#!/usr/bin/python3
+"""End-to-end service benchmark: tracking through plenoxd over loopback (bench/README.md).
+
+One sequence (tum_fr3_teddy when ../shared/data has it, else the synthetic one) is mapped
+in-process, tracked in-process for the reference time, then served by a plenoxd on 127.0.0.1:
+1 and 4 concurrent `plenox --server track` clients, with and without a mapping job running on
+the same daemon. Each client streams every frame in lock-step (the next frame after the
+previous estimate), so every frame is served. Reported per scenario: frames per second of all
+clients together, the client-side round trip (frame sent -> estimate read; encoding
+excluded) at p50 and p99, the daemon's own latency (frame decoded -> estimate sent), and the
+service's overhead: round trip p50 over the in-process tracking median. Same map, frames,
+tracker options and start pose in every run.
+"""
+
+import argparse
+import datetime
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+from bench_common import (REPO, CommandError, git_commit, log, machine_line, make_synthetic,
+                          percentile, render_table, run_json, set_log_prefix, write_report)
+
+MAP_NAME = "bench"
+DEFAULT_SCENARIOS = "1:off:raw,1:off:png,4:off:raw,1:on:raw,4:on:raw"
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def read_timings(path):
+    """(roundtrip_ms, daemon_ms) lists from `plenox track --timings`."""
+    roundtrip, daemon = [], []
+    with open(path) as f:
+        for line in f:
+            if line.startswith("#") or not line.strip():
+                continue
+            parts = line.split()
+            roundtrip.append(float(parts[2]))
+            daemon.append(float(parts[3]))
+    return roundtrip, daemon
+
+
+class Daemon:
+    """plenoxd on a free loopback port with `data_dir`; stop() drains it with SIGTERM."""
+
+    def __init__(self, plenoxd, plenox, data_dir, log_path):
+        self.address = "127.0.0.1:%d" % free_port()
+        self.plenox = plenox
+        self.log = open(log_path, "w")
+        cmd = [plenoxd, "--listen", self.address, "--data-dir", data_dir]
+        log("plenoxd: %s" % " ".join(cmd))
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=self.log,
+                                     stderr=subprocess.STDOUT, start_new_session=True)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise CommandError("plenoxd exited with status %d at start (log: %s)"
+                                   % (self.proc.returncode, log_path))
+            probe = subprocess.run([plenox, "--server", self.address, "maps"],
+                                   capture_output=True, text=True)
+            if probe.returncode == 0 and MAP_NAME in probe.stdout:
+                return
+            time.sleep(0.5)
+        self.proc.kill()
+        raise CommandError("plenoxd did not list map %s within 60 s (log: %s)"
+                           % (MAP_NAME, log_path))
+
+    def stop(self):
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            code = self.proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            code = "killed after 60 s"
+        self.log.close()
+        return code
+
+
+class MappingLoad:
+    """Keeps a mapping job running on the daemon (a fresh map per job, the same keyframes)
+    until stop(); records how much of the window a job was running."""
+
+    def __init__(self, args, daemon, dataset, workdir):
+        self.cmd_base = [args.plenox, "--server", daemon.address, "map", "--dataset", dataset,
+                         "--every", str(args.every), "--quiet", "--json"]
+        self.workdir = workdir
+        self.stopping = threading.Event()
+        self.proc = None
+        self.jobs_finished = 0
+        self.failures = []
+        self.lock = threading.Lock()
+        self.thread = threading.Thread(target=self._loop, daemon=True)
+        self.thread.start()
+
+    def _loop(self):
+        n = 0
+        while not self.stopping.is_set():
+            n += 1
+            cmd = self.cmd_base + ["--name", "load%d_%d" % (os.getpid(), n)]
+            with self.lock:
+                if self.stopping.is_set():
+                    return
+                self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL,
+                                             stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                             start_new_session=True)
+            out, err = self.proc.communicate()
+            if self.stopping.is_set():
+                return
+            if self.proc.returncode == 0:
+                self.jobs_finished += 1
+            else:
+                self.failures.append(err.decode("utf-8", "replace")[-400:])
+                return
+
+    def stop(self):
+        with self.lock:
+            self.stopping.set()
+            if self.proc is not None and self.proc.poll() is None:
+                self.proc.send_signal(signal.SIGINT)  # the client leaves; the daemon cancels
+        self.thread.join(timeout=60)
+
+
+def run_clients(args, daemon, dataset, workdir, tag, clients, encoding):
+    """Starts `clients` trackers at once; returns their JSON summaries and timing files."""
+    procs = []
+    for c in range(clients):
+        traj = os.path.join(workdir, "%s_c%d.txt" % (tag, c))
+        timings = os.path.join(workdir, "%s_c%d_timings.txt" % (tag, c))
+        cmd = [args.plenox, "--server", daemon.address, "track", "--map", MAP_NAME,
+               "--dataset", dataset, "--out", traj, "--timings", timings, "--encoding",
+               encoding, "--json", "--quiet"]
+        if c == 0:
+            log("%s: %d x %s" % (tag, clients, " ".join(cmd)))
+        procs.append((subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                       stderr=subprocess.PIPE), traj, timings))
+    results = []
+    for proc, traj, timings in procs:
+        out, err = proc.communicate(timeout=args.timeout)
+        if proc.returncode != 0:
+            raise CommandError("%s: a tracking client failed (status %d): %s"
+                               % (tag, proc.returncode, err.decode("utf-8", "replace")[-600:]))
+        lines = [l for l in out.decode().splitlines() if l.strip()]
+        results.append((json.loads(lines[-1]), traj, timings))
+    return results
+
+
+def ate(args, traj, dataset):
+    r = run_json("ate", [args.plenox, "eval-traj", "--est", traj, "--gt",
+                         os.path.join(dataset, "groundtruth.txt"), "--json"], args.timeout)
+    return r.get("ate_rmse_m")
+
+
+def parse_scenarios(text):
+    out = []
+    for item in text.split(","):
+        parts = item.strip().split(":")
+        if len(parts) != 3 or not parts[0].isdigit() or parts[1] not in ("on", "off") \
+                or parts[2] not in ("raw", "png"):
+            raise ValueError("scenario %r is not CLIENTS:on|off:raw|png" % item)
+        out.append((int(parts[0]), parts[1] == "on", parts[2]))
+    return out
+
+
+def main():
+    set_log_prefix("service_bench")
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--plenox", default=os.path.join(REPO, "build", "clients", "plenox", "plenox"))
+    ap.add_argument("--plenoxd", default=os.path.join(REPO, "build", "server", "plenoxd"))
+    ap.add_argument("--data", default=os.path.join(os.path.dirname(REPO), "shared", "data"),
+                    help="folder of sequences (default ../shared/data)")
+    ap.add_argument("--sequence", default="tum_fr3_teddy",
+                    help="sequence under --data, or 'synthetic' (default tum_fr3_teddy; the "
+                         "synthetic one when it is absent)")
+    ap.add_argument("--every", type=int, default=10, help="keyframe stride for mapping")
+    ap.add_argument("--scenarios", default=DEFAULT_SCENARIOS,
+                    help="comma-separated CLIENTS:MAPPING:ENCODING, mapping on|off, encoding "
+                         "raw|png (default %s)" % DEFAULT_SCENARIOS)
+    ap.add_argument("--timeout", type=float, default=1800.0, help="limit per command (s)")
+    ap.add_argument("--out", help="also write the markdown report to this file")
+    args = ap.parse_args()
+    try:
+        scenarios = parse_scenarios(args.scenarios)
+    except ValueError as exc:
+        ap.error(str(exc))
+    for binary in (args.plenox, args.plenoxd):
+        if not os.access(binary, os.X_OK):
+            ap.error("%s is not an executable (build it: bash scripts/build.sh)" % binary)
+
+    notes = []
+    started = datetime.datetime.now(datetime.timezone.utc)
+    machine = machine_line()
+    with tempfile.TemporaryDirectory(prefix="service_bench_") as tmp:
+        dataset = os.path.join(os.path.abspath(args.data), args.sequence)
+        name = args.sequence
+        if args.sequence == "synthetic" or not os.path.isdir(dataset):
+            if args.sequence != "synthetic":
+                notes.append("%s not found under %s; ran the synthetic sequence instead"
+                             % (args.sequence, args.data))
+            dataset, name = os.path.join(tmp, "synthetic"), "synthetic"
+            make_synthetic(args.plenox, dataset, args.timeout)
+
+        data_dir = os.path.join(tmp, "daemon_data")
+        os.makedirs(data_dir)
+        map_path = os.path.join(data_dir, MAP_NAME + ".plx")
+        m = run_json("map", [args.plenox, "map", "--dataset", dataset, "--out", map_path,
+                             "--every", str(args.every), "--json"], args.timeout)
+        notes.append("map: %s keyframes of %s mapped in-process in %.0f s (every %d-th frame, "
+                     "ground-truth poses); the daemon loads the same file"
+                     % (m.get("keyframes"), name, m.get("seconds", 0), args.every))
+        inproc_traj = os.path.join(tmp, "inprocess.txt")
+
+        def in_process(label):
+            return run_json(label, [args.plenox, "track", "--map", map_path, "--dataset",
+                                    dataset, "--out", inproc_traj, "--json", "--quiet"],
+                            args.timeout)
+
+        # Before and after the daemon runs, so a load change in between shows.
+        refs = [in_process("in-process track (before)")]
+        inproc_ate = ate(args, inproc_traj, dataset)
+
+        daemon = Daemon(args.plenoxd, args.plenox, data_dir, os.path.join(tmp, "plenoxd.log"))
+        rows = []
+        try:
+            for i, (clients, mapping, encoding) in enumerate(scenarios):
+                tag = "s%d_%dc_%s_%s" % (i, clients, "map" if mapping else "idle", encoding)
+                load = None
+                if mapping:
+                    load = MappingLoad(args, daemon, dataset, tmp)
+                    time.sleep(3.0)  # the first keyframes are on the daemon and the job runs
+                wall0 = time.monotonic()
+                try:
+                    results = run_clients(args, daemon, dataset, tmp, tag, clients, encoding)
+                finally:
+                    wall = time.monotonic() - wall0
+                    if load is not None:
+                        load.stop()
+                if load is not None and load.failures:
+                    notes.append("%s: the mapping job failed: %s" % (tag, load.failures[0]))
+                roundtrip, daemon_ms = [], []
+                for _, _, timings in results:
+                    r, d = read_timings(timings)
+                    roundtrip += r
+                    daemon_ms += d
+                frames = len(roundtrip)
+                rows.append({
+                    "clients": clients, "mapping": mapping, "encoding": encoding,
+                    "frames": frames,
+                    # Sum of each client's rate: every client streams for the whole window.
+                    "fps": sum(r[0]["fps"] for r in results),
+                    "rt_p50": percentile(roundtrip, 50), "rt_p99": percentile(roundtrip, 99),
+                    "daemon_p50": percentile(daemon_ms, 50),
+                    "daemon_p99": percentile(daemon_ms, 99),
+                    "lost": sum(r[0]["lost"] for r in results),
+                    "ate": ate(args, results[0][1], dataset),
+                    "wall": wall,
+                    "map_jobs": load.jobs_finished if load else None,
+                })
+                if load is not None:
+                    notes.append("%s: %d mapping jobs completed during the %.0f s window"
+                                 % (tag, load.jobs_finished, wall))
+                log("%s: %.1f fps, round trip p50 %.1f ms p99 %.1f ms"
+                    % (tag, rows[-1]["fps"], rows[-1]["rt_p50"], rows[-1]["rt_p99"]))
+        finally:
+            drain = daemon.stop()
+        notes.append("plenoxd drained on SIGTERM with exit status %s" % drain)
+        refs.append(in_process("in-process track (after)"))
+    inproc_ms = sum(r["ms_per_frame_median"] for r in refs) / len(refs)
+
+    cols = ["clients", "mapping job", "frames", "encoding", "FPS (all clients)",
+            "round trip p50 ms", "round trip p99 ms", "daemon p50 ms", "daemon p99 ms",
+            "overhead (p50 / in-process)", "lost", "ATE client 0 cm"]
+    body = []
+    for r in rows:
+        body.append([str(r["clients"]), "yes" if r["mapping"] else "no", str(r["frames"]),
+                     r["encoding"], "%.2f" % r["fps"], "%.1f" % r["rt_p50"],
+                     "%.1f" % r["rt_p99"], "%.1f" % r["daemon_p50"], "%.1f" % r["daemon_p99"],
+                     "%+.1f%%" % (100.0 * (r["rt_p50"] / inproc_ms - 1.0)), str(r["lost"]),
+                     "%.2f" % (100.0 * r["ate"]) if r["ate"] is not None else "n/a"])
+    header = [
+        "## Service benchmark (`bench/service_bench.py`): tracking through plenoxd on loopback",
+        "",
+        "Run %s UTC, commit %s, on %s." % (started.strftime("%Y-%m-%d %H:%M"),
+                                           git_commit() or "?", machine),
+        "Sequence %s; in-process tracking of the same frames (`plenox track`, before and "
+        "after the daemon runs): median %s ms per frame (mean %.1f used below), ATE %.2f cm."
+        % (name, " / ".join("%.1f" % r["ms_per_frame_median"] for r in refs), inproc_ms,
+           100.0 * inproc_ate if inproc_ate is not None else -1),
+    ]
+    notes.append("round trip: client-side, frame written to estimate read (encoding excluded); "
+                 "daemon: the daemon's latency field (frame decoded to estimate sent); "
+                 "overhead compares the round-trip median with the in-process median")
+    notes.append("FPS: sum of the clients' rates, each = frames / its streaming time "
+                 "(loading and encoding frames included); clients run in lock-step, so the "
+                 "daemon never drops a frame")
+    notes.append("mapping job: `plenox --server map` of the same sequence into a fresh map, "
+                 "restarted whenever it finishes, for the whole window")
+    write_report(render_table(cols, body, header, notes), args.out)
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except CommandError as exc:
+        log("FAILED: %s" % exc)
+        sys.exit(1)

@@ -1,0 +1,360 @@
+// CudaBackend: forwards each Backend call to the plx::cuda kernel drivers on the backend's
+// stream and synchronises before returning (callers read results right after). See
+// cuda/cuda_backend.h for the memory residency rules.
+#include "cuda/cuda_backend.h"
+
+#include <cinttypes>
+#include <cstdio>
+#include <cstdlib>
+#include <mutex>
+#include <unordered_map>
+
+#include <cuda_runtime.h>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "core/common/unified_allocator.h"
+#include "cuda/cuda_status.h"
+#include "cuda/kernels_cuda.h"
+
+namespace plx::cuda {
+namespace {
+
+// UnifiedVector hooks: CUDA managed memory, visible to the host and every device.
+void* ManagedAllocate(size_t bytes, void*) {
+  void* p = nullptr;
+  if (cudaMallocManaged(&p, bytes, cudaMemAttachGlobal) != cudaSuccess) {
+    (void)cudaGetLastError();  // out of memory is reported as std::bad_alloc, not left pending
+    return nullptr;
+  }
+  return p;
+}
+
+void ManagedDeallocate(void* block, size_t, void*) {
+  // cudaFree waits for the device; it fails harmlessly once the runtime is shutting down (static
+  // destructors), when the memory goes back with the process anyway.
+  (void)cudaFree(block);
+}
+
+const UnifiedMemoryHooks kManagedHooks{&ManagedAllocate, &ManagedDeallocate, nullptr,
+                                       "cuda-managed"};
+
+void InstallManagedMemoryOnce() {
+  static std::once_flag once;
+  std::call_once(once, [] { InstallUnifiedMemoryHooks(&kManagedHooks); });
+}
+
+class CudaBackend final : public Backend {
+ public:
+  static absl::StatusOr<std::unique_ptr<Backend>> Create(int device) {
+    const int devices = VisibleDeviceCount();
+    if (device < 0 || device >= devices) {
+      return absl::FailedPreconditionError(
+          absl::StrCat("CUDA device ", device, " does not exist (", devices, " visible)"));
+    }
+    PLX_CUDA_RETURN_IF_ERROR(cudaSetDevice(device));
+    cudaDeviceProp prop;
+    PLX_CUDA_RETURN_IF_ERROR(cudaGetDeviceProperties(&prop, device));
+    int concurrent_managed = 0, pageable = 0, pools = 0;
+    PLX_CUDA_RETURN_IF_ERROR(
+        cudaDeviceGetAttribute(&concurrent_managed, cudaDevAttrConcurrentManagedAccess, device));
+    PLX_CUDA_RETURN_IF_ERROR(
+        cudaDeviceGetAttribute(&pageable, cudaDevAttrPageableMemoryAccess, device));
+    PLX_CUDA_RETURN_IF_ERROR(
+        cudaDeviceGetAttribute(&pools, cudaDevAttrMemoryPoolsSupported, device));
+    if (!concurrent_managed) {
+      // Without it the host may not touch any managed memory while a kernel runs on the
+      // device (Windows/WSL, some embedded boards): other workers' host code would fault.
+      return absl::FailedPreconditionError(absl::StrCat(
+          DescribeDevice(device),
+          " lacks concurrent managed memory access, which the CUDA backend needs; use --backend "
+          "cpu"));
+    }
+    if (!pools) {
+      return absl::FailedPreconditionError(
+          absl::StrCat(DescribeDevice(device), " has no stream-ordered memory pools"));
+    }
+    if (const cudaError_t image = ProbeKernelImage(); image != cudaSuccess) {
+      (void)cudaGetLastError();
+      return absl::FailedPreconditionError(absl::StrCat(
+          "this binary has no CUDA code for ", DescribeDevice(device), " (",
+          cudaGetErrorString(image), "); rebuild with -DPLX_CUDA_ARCHITECTURES=", prop.major,
+          prop.minor));
+    }
+    cudaStream_t stream = nullptr;
+    PLX_CUDA_RETURN_IF_ERROR(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
+    InstallManagedMemoryOnce();
+    return std::unique_ptr<Backend>(new CudaBackend(device, prop, pageable != 0, stream));
+  }
+
+  ~CudaBackend() override {
+    (void)cudaSetDevice(device_);
+    (void)cudaStreamSynchronize(stream_);
+    (void)cudaStreamDestroy(stream_);
+  }
+
+  std::string name() const override { return name_; }
+  int parallelism() const override { return sm_count_; }
+
+  void RenderPixels(const GridView& grid, const CameraView& camera, const int32_t* pixels,
+                    int64_t count, const RenderOptions& options, float* color, float* depth,
+                    float* opacity, float* median_depth) override {
+    Begin("RenderPixels");
+    CheckGrid(grid, "grid");
+    Check(pixels, "pixels");
+    Check(color, "color");
+    Check(depth, "depth");
+    Check(opacity, "opacity");
+    Check(median_depth, "median_depth");
+    PrefetchGrid(grid);
+    cuda::RenderPixels(ctx_, grid, camera, pixels, count, options, color, depth, opacity,
+                       median_depth);
+    Finish();
+  }
+
+  void MappingForwardBackward(const GridView& grid, const GridGradView& grad,
+                              const TrainingRaysView& rays, const MappingBatchParams& params,
+                              MappingRayLoss* losses) override {
+    Begin("MappingForwardBackward");
+    CheckGrid(grid, "grid");
+    CheckGrad(grad);
+    Check(rays.frames, "rays.frames");
+    Check(rays.ray_frame, "rays.ray_frame");
+    Check(rays.ray_pixel, "rays.ray_pixel");
+    Check(losses, "losses");
+    PrefetchGrid(grid);
+    PrefetchGrad(grid, grad);
+    cuda::MappingForwardBackward(ctx_, grid, grad, rays, params, losses);
+    Finish();
+  }
+
+  void RmsPropStep(const GridView& grid, const GridGradView& grad,
+                   const OptimizerStateView& state, const RmsPropParams& params) override {
+    Begin("RmsPropStep");
+    CheckGrid(grid, "grid");
+    CheckGrad(grad);
+    Check(state.rms_density, "state.rms_density");
+    Check(state.rms_sh, "state.rms_sh");
+    PrefetchGrid(grid);
+    PrefetchGrad(grid, grad);
+    const size_t n = static_cast<size_t>(grid.num_vertices());
+    Prefetch(state.rms_density, n * sizeof(float));
+    Prefetch(state.rms_sh, n * kShCoeffCount * sizeof(float));
+    cuda::RmsPropStep(ctx_, grid, grad, state, params);
+    Finish();
+  }
+
+  void FuseDepth(const GridView& grid, int64_t first_vertex, int64_t vertex_count,
+                 const TrainingFrameView* frames, int num_frames,
+                 const FusionParams& params) override {
+    Begin("FuseDepth");
+    CheckGrid(grid, "grid");
+    Check(frames, "frames");
+    // Once per allocation round, so every frame's images are checked too.
+    for (int f = 0; f < num_frames && frames != nullptr; ++f) {
+      Check(frames[f].color, "frames[].color");
+      Check(frames[f].depth, "frames[].depth");
+    }
+    PrefetchGrid(grid);
+    cuda::FuseDepth(ctx_, grid, first_vertex, vertex_count, frames, num_frames, params);
+    Finish();
+  }
+
+  void RefreshOccupancy(const GridView& grid, const int64_t* active_blocks, int64_t count,
+                        float threshold) override {
+    Begin("RefreshOccupancy");
+    CheckGrid(grid, "grid");
+    Check(active_blocks, "active_blocks");
+    PrefetchGrid(grid);
+    cuda::RefreshOccupancy(ctx_, grid, active_blocks, count, threshold);
+    Finish();
+  }
+
+  void ComputeTrackingTerms(const GridView& grid, const TrainingFrameView& frame,
+                            const int32_t* pixels, int64_t count, const TrackingParams& params,
+                            TrackingRayTerm* terms) override {
+    Begin("ComputeTrackingTerms");
+    CheckGrid(grid, "grid");
+    Check(frame.color, "frame.color");
+    Check(frame.depth, "frame.depth");
+    Check(pixels, "pixels");
+    Check(terms, "terms");
+    PrefetchGrid(grid);
+    cuda::ComputeTrackingTerms(ctx_, grid, frame, pixels, count, params, terms);
+    Finish();
+  }
+
+  TrackingSums ReduceTrackingTerms(const TrackingRayTerm* terms, int64_t count,
+                                   TrackingLoss loss, float huber_k,
+                                   const float scale[2]) override {
+    Begin("ReduceTrackingTerms");
+    Check(terms, "terms");
+    const TrackingSums sums = cuda::ReduceTrackingTerms(ctx_, terms, count, loss, huber_k, scale);
+    Finish();
+    return sums;
+  }
+
+  void ResampleGrid(const GridView& target, const GridView& source) override {
+    Begin("ResampleGrid");
+    CheckGrid(target, "target");
+    CheckGrid(source, "source");
+    PrefetchGrid(target);
+    PrefetchGrid(source);
+    cuda::ResampleGrid(ctx_, target, source);
+    Finish();
+  }
+
+  void AddTvGradient(const GridView& grid, const GridGradView& grad, int64_t first_vertex,
+                     int64_t vertex_count, float lambda_density, float lambda_sh) override {
+    Begin("AddTvGradient");
+    CheckGrid(grid, "grid");
+    CheckGrad(grad);
+    PrefetchGrid(grid);
+    PrefetchGrad(grid, grad);
+    cuda::AddTvGradient(ctx_, grid, grad, first_vertex, vertex_count, lambda_density, lambda_sh);
+    Finish();
+  }
+
+ private:
+  CudaBackend(int device, const cudaDeviceProp& prop, bool pageable_access, cudaStream_t stream)
+      : device_(device),
+        name_(absl::StrCat("cuda:", device, " ", prop.name)),
+        sm_count_(prop.multiProcessorCount),
+        pageable_access_(pageable_access),
+        stream_(stream) {
+    ctx_.stream = stream_;
+  }
+
+  // Every call: this thread's current device is ours (a worker thread may serve several), and
+  // no error of an earlier, unrelated runtime call is left pending.
+  void Begin(const char* method) {
+    method_ = method;
+    PLX_CUDA_CHECK(cudaSetDevice(device_));
+    (void)cudaGetLastError();
+  }
+
+  // Launch errors show at once, execution errors at the synchronisation.
+  void Finish() {
+    if (const cudaError_t e = cudaGetLastError(); e != cudaSuccess) Fatal(e, "kernel launch");
+    if (const cudaError_t e = cudaStreamSynchronize(stream_); e != cudaSuccess) {
+      Fatal(e, "kernel execution");
+    }
+  }
+
+  [[noreturn]] void Fatal(cudaError_t error, const char* what) const {
+    std::fprintf(stderr, "plenoxd: %s::%s: %s failed: %s (%s)\n", name_.c_str(), method_, what,
+                 cudaGetErrorName(error), cudaGetErrorString(error));
+    std::fflush(stderr);
+    std::abort();
+  }
+
+  // Views must point at memory this device can read (core/kernels/backend.h): managed memory
+  // (UnifiedVector after the backend exists), its own device memory, or pinned host memory.
+  // One driver lookup per pointer (about a microsecond), skipped when the device reads
+  // pageable memory anyway. A violation aborts with the argument's name instead of faulting
+  // inside a kernel.
+  void Check(const void* p, const char* what) const {
+    if (p == nullptr || pageable_access_) return;
+    cudaPointerAttributes attr;
+    const cudaError_t e = cudaPointerGetAttributes(&attr, p);
+    if (e != cudaSuccess) (void)cudaGetLastError();
+    const bool readable =
+        e == cudaSuccess &&
+        (attr.type == cudaMemoryTypeManaged ||
+         (attr.type == cudaMemoryTypeDevice && attr.device == device_) ||
+         (attr.type == cudaMemoryTypeHost && attr.devicePointer != nullptr));
+    if (readable) return;
+    std::fprintf(stderr,
+                 "plenoxd: %s::%s: `%s` (%p) is %s memory this GPU cannot read. Arrays passed to "
+                 "the CUDA backend must be UnifiedVector memory allocated after the backend was "
+                 "created (core/common/unified_allocator.h, core/kernels/backend.h).\n",
+                 name_.c_str(), method_, what, p,
+                 e != cudaSuccess                          ? "unknown"
+                 : attr.type == cudaMemoryTypeDevice       ? "another device's"
+                                                           : "ordinary host");
+    std::fflush(stderr);
+    std::abort();
+  }
+
+  void CheckGrid(const GridView& g, const char* what) const {
+    Check(g.density, absl::StrCat(what, ".density").c_str());
+    Check(g.sh, absl::StrCat(what, ".sh").c_str());
+    Check(g.brick_slot, absl::StrCat(what, ".brick_slot").c_str());
+    Check(g.block_cells, absl::StrCat(what, ".block_cells").c_str());
+    Check(g.cell_bits, absl::StrCat(what, ".cell_bits").c_str());
+    Check(g.brick_origin, absl::StrCat(what, ".brick_origin").c_str());
+  }
+
+  void CheckGrad(const GridGradView& g) const {
+    Check(g.density, "grad.density");
+    Check(g.sh, "grad.sh");
+    Check(g.touched, "grad.touched");
+    Check(g.brick_touched, "grad.brick_touched");
+  }
+
+  // Managed pages move on demand (one fault per page group) or in bulk when prefetched. Each
+  // large array is prefetched to the device once per (address, size): after the host grows a
+  // grid (a new allocation, written by the host) the GPU pulls it over at copy speed instead
+  // of fault by fault. Only a performance hint: errors are ignored.
+  void Prefetch(const void* p, size_t bytes) {
+    if (p == nullptr || bytes < (size_t{1} << 20)) return;
+    auto [it, inserted] = prefetched_.try_emplace(p, bytes);
+    if (!inserted && it->second == bytes) return;
+    it->second = bytes;
+    if (prefetched_.size() > 64) prefetched_.clear();  // addresses are reused after frees
+    cudaMemLocation location{};
+    location.type = cudaMemLocationTypeDevice;
+    location.id = device_;
+    if (cudaMemPrefetchAsync(p, bytes, location, 0, stream_) != cudaSuccess) {
+      (void)cudaGetLastError();
+    }
+  }
+
+  void PrefetchGrid(const GridView& g) {
+    const size_t n = static_cast<size_t>(g.num_vertices());
+    Prefetch(g.density, n * sizeof(float));
+    Prefetch(g.sh, n * kShCoeffCount * sizeof(float));
+  }
+
+  void PrefetchGrad(const GridView& g, const GridGradView& grad) {
+    const size_t n = static_cast<size_t>(g.num_vertices());
+    Prefetch(grad.density, n * sizeof(float));
+    Prefetch(grad.sh, n * kShCoeffCount * sizeof(float));
+  }
+
+  const int device_;
+  const std::string name_;
+  const int sm_count_;
+  const bool pageable_access_;
+  cudaStream_t stream_;
+  ExecContext ctx_;
+  const char* method_ = "";
+  std::unordered_map<const void*, size_t> prefetched_;
+};
+
+}  // namespace
+
+int VisibleDeviceCount() {
+  int count = 0;
+  if (cudaGetDeviceCount(&count) != cudaSuccess) {
+    (void)cudaGetLastError();  // no driver / no device: not an error for the caller
+    return 0;
+  }
+  return count;
+}
+
+std::string DescribeDevice(int device) {
+  cudaDeviceProp prop;
+  if (const cudaError_t e = cudaGetDeviceProperties(&prop, device); e != cudaSuccess) {
+    (void)cudaGetLastError();
+    return absl::StrCat("cuda:", device, " (unavailable: ", cudaGetErrorString(e), ")");
+  }
+  return absl::StrFormat("cuda:%d %s (sm_%d%d, %.1f GiB)", device, prop.name, prop.major,
+                         prop.minor, static_cast<double>(prop.totalGlobalMem) / (1 << 30));
+}
+
+absl::StatusOr<std::unique_ptr<plx::Backend>> MakeCudaBackend(int device) {
+  return CudaBackend::Create(device);
+}
+
+}  // namespace plx::cuda
