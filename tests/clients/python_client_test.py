@@ -180,6 +180,10 @@ def main():
                            "create_map returns the map's info")
             failures.check("room" in [m.name for m in client.list_maps()], "list_maps has it")
             failures.check(client.get_map("room").keyframes == 0, "get_map: no keyframes yet")
+            server = client.server_info()
+            failures.check(server.maps == 1 and len(server.devices) >= 1
+                           and server.devices[0].kind in ("cpu", "cuda"),
+                           "server_info: one map, the compute devices")
 
         def integrate():
             keyframes = frames[::EVERY]

@@ -337,6 +337,10 @@ class Client:
             raise PlenoxdError.from_rpc_error(e, "Health.Check") from None
         return response.status == health_pb2.HealthCheckResponse.SERVING
 
+    def server_info(self):
+        """ServerInfo: version, backend, compute devices (id, kind, name, queue, streams), maps."""
+        return self._unary("GetServerInfo", pb.GetServerInfoRequest())
+
     # --- maps ---
 
     def create_map(self, name, voxel_size=0.0):
