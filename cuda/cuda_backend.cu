@@ -20,6 +20,10 @@
 namespace plx::cuda {
 namespace {
 
+// RMSProp work items per brick: 8 vertices per thread, so a batch's touched bricks fill the GPU
+// (one thread per brick would leave it nearly idle and serialise 512 updates per thread).
+constexpr int kRmsPropBrickSlices = 64;
+
 // UnifiedVector hooks: CUDA managed memory, visible to the host and every device.
 void* ManagedAllocate(size_t bytes, void*) {
   void* p = nullptr;
@@ -140,7 +144,9 @@ class CudaBackend final : public Backend {
     const size_t n = static_cast<size_t>(grid.num_vertices());
     Prefetch(state.rms_density, n * sizeof(float));
     Prefetch(state.rms_sh, n * kShCoeffCount * sizeof(float));
-    cuda::RmsPropStep(ctx_, grid, grad, state, params);
+    RmsPropParams sliced = params;
+    sliced.brick_slices = kRmsPropBrickSlices;
+    cuda::RmsPropStep(ctx_, grid, grad, state, sliced);
     Finish();
   }
 

@@ -54,6 +54,9 @@ struct RmsPropParams {
   float beta = 0.95f;
   float epsilon = 1e-8f;
   float sigma_threshold = 1e-8f;  // densities crossing it upwards mark their cells occupied
+  // Work items per brick (a power of two dividing 512): 1 on the CPU, where one thread per brick
+  // skips untouched bricks whole; a GPU wants many threads per brick (its backend sets this).
+  int brick_slices = 1;
 };
 
 // RMSProp running averages, same slot layout as the grid.

@@ -52,17 +52,23 @@ void RmsPropStep(const ExecContext& ctx, const GridView& grid, const GridGradVie
   const GridGradView gg = grad;
   const OptimizerStateView s = state;
   const RmsPropParams p = params;
-  // One work item per brick: most bricks receive no gradient in a batch and are skipped whole.
-  ParallelFor(ctx, g.num_bricks, [=] PLX_HD_LAMBDA(int64_t brick) {
+  // brick_slices work items per brick, each a contiguous run of its vertices: most bricks
+  // receive no gradient in a batch and are skipped whole. The bricks' touched flags are cleared
+  // in a second pass, once every slice has read them.
+  const int slices =
+      p.brick_slices > 0 && kBrickVertices % p.brick_slices == 0 ? p.brick_slices : 1;
+  const int64_t per_slice = kBrickVertices / slices;
+  ParallelFor(ctx, g.num_bricks * slices, [=] PLX_HD_LAMBDA(int64_t item) {
+    const int64_t brick = item / slices;
     if (gg.brick_touched[brick] == 0) return;
-    gg.brick_touched[brick] = 0;
-    for (int64_t i = brick * kBrickVertices; i < (brick + 1) * kBrickVertices; ++i) {
+    const int64_t first = brick * kBrickVertices + (item % slices) * per_slice;
+    for (int64_t i = first; i < first + per_slice; ++i) {
       if (gg.touched[i] == 0) continue;
       gg.touched[i] = 0;
       UpdateVertex(g, gg, s, p, i);
     }
   });
+  ParallelFor(ctx, g.num_bricks, [=] PLX_HD_LAMBDA(int64_t brick) { gg.brick_touched[brick] = 0; });
 }
-
 
 }  // namespace plx::PLX_BACKEND_NS

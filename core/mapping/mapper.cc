@@ -31,8 +31,10 @@ MapperOptions MapperOptionsForVoxelSize(float voxel_size) {
 }
 
 Mapper::Mapper(const MapperOptions& options, Backend* backend)
-    : options_(options), backend_(backend), coarse_(options.coarse_to_fine),
-      map_(std::make_unique<PlenoxelMap>(options.voxel_size * (options.coarse_to_fine ? 2 : 1))) {
+    : options_(options),
+      backend_(backend),
+      map_(std::make_unique<PlenoxelMap>(options.voxel_size * (options.coarse_to_fine ? 2 : 1))),
+      coarse_(options.coarse_to_fine) {
   map_->render = options.render;
 }
 
