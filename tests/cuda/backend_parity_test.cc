@@ -27,29 +27,16 @@
 #include "core/render/render_view.h"
 #include "core/tracking/tracking_terms.h"
 #include "tests/backend_test_util.h"
+#include "tests/grad_buffers.h"
 
 namespace plx {
 namespace {
 
 using testing::CudaSkipReason;
+using testing::GradBuffers;
 using testing::MakeTestBackend;
 
 constexpr int kKeyframes[] = {0, 10, 20};
-
-// Gradient buffers of one backend, same slot layout as the map.
-struct GradBuffers {
-  UnifiedVector<float> density, sh;
-  UnifiedVector<uint8_t> touched, brick_touched;
-
-  explicit GradBuffers(const SparseGrid& grid)
-      : density(grid.num_vertices(), 0.0f),
-        sh(grid.num_vertices() * kShCoeffCount, 0.0f),
-        touched(grid.num_vertices(), 0),
-        brick_touched(grid.num_bricks(), 0) {}
-  GridGradView view() {
-    return GridGradView{density.data(), sh.data(), touched.data(), brick_touched.data()};
-  }
-};
 
 float MaxAbs(const UnifiedVector<float>& v) {
   float m = 0.0f;

@@ -10,22 +10,12 @@
 #include "core/kernels/backend.h"
 #include "core/mapping/map_dataset.h"
 #include "core/mapping/training_set.h"
+#include "tests/grad_buffers.h"
 
 namespace plx {
 namespace {
 
-struct Gradients {
-  UnifiedVector<float> density, sh;
-  UnifiedVector<uint8_t> touched, brick_touched;
-  explicit Gradients(const SparseGrid& grid)
-      : density(grid.num_vertices(), 0.0f),
-        sh(grid.num_vertices() * kShCoeffCount, 0.0f),
-        touched(grid.num_vertices(), 0),
-        brick_touched(grid.num_bricks(), 0) {}
-  GridGradView view() {
-    return GridGradView{density.data(), sh.data(), touched.data(), brick_touched.data()};
-  }
-};
+using testing::GradBuffers;
 
 TEST(RmsPropSlicesTest, SlicedBricksGiveTheSameUpdateAsWholeBricks) {
   std::unique_ptr<Backend> backend = MakeCpuBackend(2);
@@ -52,7 +42,7 @@ TEST(RmsPropSlicesTest, SlicedBricksGiveTheSameUpdateAsWholeBricks) {
   batch.seed = 7;
   batch.batch_size = 4096;
   batch.render = map.render;
-  Gradients grads(map.grid);
+  GradBuffers grads(map.grid);
   UnifiedVector<MappingRayLoss> losses(batch.batch_size);
   backend->MappingForwardBackward(map.grid.view(), grads.view(), set.rays_view(), batch,
                                   losses.data());
@@ -66,7 +56,7 @@ TEST(RmsPropSlicesTest, SlicedBricksGiveTheSameUpdateAsWholeBricks) {
   params.lr_density = 5.0f;
   params.sigma_threshold = map.render.sigma_threshold;
   for (int step = 0; step < 2; ++step) {
-    Gradients gw = grads, gs = grads;
+    GradBuffers gw = grads, gs = grads;
     params.brick_slices = 1;
     backend->RmsPropStep(whole.grid.view(), gw.view(), {rms_dw.data(), rms_sw.data()}, params);
     params.brick_slices = 64;
