@@ -1,9 +1,4 @@
 // plenox render: colour and depth images of a map from a given camera.
-#include <unistd.h>
-
-#include <cerrno>
-#include <cstdio>
-#include <cstring>
 #include <iostream>
 #include <utility>
 #include <vector>
@@ -11,6 +6,7 @@
 #include "absl/strings/str_format.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
+#include "core/io/atomic_write.h"
 #include "core/io/image_io.h"
 #include "core/io/map_file.h"
 #include "core/io/pose_text.h"
@@ -54,34 +50,21 @@ int RunRender(const std::vector<std::string>& args) {
   absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(flags.GetString("map"));
   if (!map.ok()) return ReportError("render", map.status());
   const RenderedView view = RenderView(*backend, **map, *pose, *k);
-  // Both images go to temporary names first and are renamed only when both were written, so a
-  // failed render leaves no output behind.
-  const std::string suffix = absl::StrFormat(".tmp.%d.png", static_cast<int>(getpid()));
-  std::vector<std::pair<std::string, std::string>> written;  // temp -> final
-  auto cleanup = [&] {
-    for (const auto& [temp, final_path] : written) std::remove(temp.c_str());
-  };
+  // Both images are written under temporary names and renamed only when both were written, so
+  // a failed render leaves no output behind.
+  std::vector<std::pair<std::string, std::string>> files;
   if (!color_path.empty()) {
-    written.emplace_back(color_path + suffix, color_path);
-    if (absl::Status s = WriteColorImage(written.back().first, view.color); !s.ok()) {
-      cleanup();
-      return ReportError("render", s);
-    }
+    absl::StatusOr<std::string> png = EncodeColorImage(view.color, ".png");
+    if (!png.ok()) return ReportError("render", png.status());
+    files.emplace_back(color_path, std::move(*png));
   }
   if (!depth_path.empty()) {
-    written.emplace_back(depth_path + suffix, depth_path);
-    if (absl::Status s = WriteDepthImage(written.back().first, view.z_depth, 1000.0); !s.ok()) {
-      cleanup();
-      return ReportError("render", s);
-    }
+    absl::StatusOr<std::string> png = EncodeDepthImage(view.z_depth, 1000.0);
+    if (!png.ok()) return ReportError("render", png.status());
+    files.emplace_back(depth_path, std::move(*png));
   }
-  for (const auto& [temp, final_path] : written) {
-    if (std::rename(temp.c_str(), final_path.c_str()) != 0) {
-      const std::string reason = std::strerror(errno);
-      cleanup();
-      return ReportError("render", absl::InternalError(absl::StrFormat(
-                                       "cannot write %s: %s", final_path, reason)));
-    }
+  if (absl::Status s = WriteFilesAtomically(files, "cannot write the render"); !s.ok()) {
+    return ReportError("render", s);
   }
   int64_t rendered = 0;
   for (float o : view.opacity.data) rendered += o >= kRenderedOpacity;

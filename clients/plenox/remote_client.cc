@@ -310,37 +310,6 @@ absl::StatusOr<pb::Frame> FrameToProto(const RgbdFrame& frame, const CameraCalib
   return out;
 }
 
-absl::Status WriteFilesAtomically(const std::vector<std::pair<std::string, std::string>>& files) {
-  std::vector<std::pair<std::string, std::string>> written;  // temp -> final
-  const auto cleanup = [&] {
-    for (const auto& [temp, final_path] : written) std::remove(temp.c_str());
-  };
-  for (const auto& [path, bytes] : files) {
-    const std::string temp = absl::StrFormat(
-        "%s.tmp.%d%s", path, static_cast<int>(getpid()),
-        std::filesystem::path(path).extension().string());
-    written.emplace_back(temp, path);
-    std::FILE* f = std::fopen(temp.c_str(), "wb");
-    bool ok = f != nullptr;
-    if (ok) ok = std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
-    if (ok) ok = std::fflush(f) == 0 && fsync(fileno(f)) == 0;
-    const std::string reason = std::strerror(errno);
-    if (f != nullptr && std::fclose(f) != 0) ok = false;
-    if (!ok) {
-      cleanup();
-      return absl::InternalError(absl::StrFormat("cannot write %s: %s", path, reason));
-    }
-  }
-  for (const auto& [temp, final_path] : written) {
-    if (std::rename(temp.c_str(), final_path.c_str()) != 0) {
-      const std::string reason = std::strerror(errno);
-      cleanup();
-      return absl::InternalError(absl::StrFormat("cannot write %s: %s", final_path, reason));
-    }
-  }
-  return absl::OkStatus();
-}
-
 const char* TrackingStateText(pb::TrackingState state) {
   switch (state) {
     case pb::TRACKING_STATE_OK: return TrackingStateName(TrackingState::kOk);

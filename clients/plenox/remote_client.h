@@ -105,10 +105,6 @@ absl::StatusOr<WireEncoding> ParseWireEncoding(const std::string& text);
 absl::StatusOr<pb::Frame> FrameToProto(const RgbdFrame& frame, const CameraCalibration& calibration,
                                        bool with_pose, WireEncoding encoding = WireEncoding::kPng);
 
-// Writes each (path, bytes) to "<path>.tmp.<pid><extension>" and renames them all into place
-// only when every one was written, so a failure leaves none of them behind.
-absl::Status WriteFilesAtomically(const std::vector<std::pair<std::string, std::string>>& files);
-
 // The name of a TrackingState for progress lines ("OK", "DEGRADED", "LOST").
 const char* TrackingStateText(pb::TrackingState state);
 

@@ -5,6 +5,7 @@
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "clients/plenox/remote_client.h"
+#include "core/io/atomic_write.h"
 #include "core/io/pose_text.h"
 
 namespace plx::cli {
@@ -68,7 +69,7 @@ int RunRemoteRender(const RemoteOptions& remote, const std::vector<std::string>&
   std::vector<std::pair<std::string, std::string>> files;
   if (!color_path.empty()) files.emplace_back(color_path, response->color());
   if (!depth_path.empty()) files.emplace_back(depth_path, response->depth());
-  if (absl::Status s = WriteFilesAtomically(files); !s.ok()) return ReportError(kCommand, s);
+  if (absl::Status s = WriteFilesAtomically(files, "cannot write the render"); !s.ok()) return ReportError(kCommand, s);
   std::cout << absl::StrFormat(
       "rendered %dx%d (map version %d on %s), %.1f%% of pixels hit the map%s%s\n", k->width,
       k->height, response->map_version(), client->server(), 100.0 * response->coverage(),

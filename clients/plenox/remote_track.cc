@@ -10,6 +10,7 @@
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "clients/plenox/remote_client.h"
+#include "core/io/atomic_write.h"
 #include "core/io/trajectory_file.h"
 #include "core/tracking/tracker.h"
 
@@ -156,7 +157,7 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
       absl::StrAppendFormat(&text, "%d %.6f %.3f %.3f\n", static_cast<int>(k + 1),
                             trajectory[k + 1].timestamp, roundtrip_ms[k], latency_ms[k]);
     }
-    if (absl::Status s = WriteFilesAtomically({{timings, text}}); !s.ok()) {
+    if (absl::Status s = WriteFileAtomically(timings, text, "cannot write --timings"); !s.ok()) {
       return ReportError(kCommand, s);
     }
   }

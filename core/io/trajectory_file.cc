@@ -1,14 +1,7 @@
 #include "core/io/trajectory_file.h"
 
-#include <fcntl.h>
-#include <unistd.h>
-
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
-#include <cstring>
-#include <filesystem>
-#include <system_error>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -17,6 +10,7 @@
 #include "absl/strings/strip.h"
 #include "absl/strings/string_view.h"
 #include "core/common/status_macros.h"
+#include "core/io/atomic_write.h"
 #include "core/io/text_table.h"
 
 namespace plx {
@@ -30,26 +24,6 @@ struct ParsedPose {
   StampedPose stamped;
   int line_number = 0;
 };
-
-absl::Status ErrnoStatus(int err, const std::string& message) {
-  const std::string text = absl::StrCat(message, ": ", std::strerror(err));
-  if (err == ENOENT) return absl::NotFoundError(text);
-  if (err == EACCES || err == EPERM || err == EROFS) return absl::PermissionDeniedError(text);
-  return absl::UnavailableError(text);
-}
-
-// Writes all of `data` to `fd`, retrying short writes and EINTR.
-absl::Status WriteAll(int fd, absl::string_view data, const std::string& what) {
-  while (!data.empty()) {
-    const ssize_t n = ::write(fd, data.data(), data.size());
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      return ErrnoStatus(errno, what);
-    }
-    data.remove_prefix(static_cast<size_t>(n));
-  }
-  return absl::OkStatus();
-}
 
 std::string FormatLine(const StampedPose& p) {
   Eigen::Quaterniond q = p.pose.rotation();
@@ -102,7 +76,6 @@ absl::StatusOr<std::vector<StampedPose>> ReadTumTrajectory(const std::string& pa
 
 absl::Status WriteTumTrajectory(const std::string& path, const std::vector<StampedPose>& poses,
                                 const std::string& header_comment) {
-  namespace fs = std::filesystem;
   const std::string what = absl::StrCat("cannot write trajectory ", path);
 
   std::string text;
@@ -137,35 +110,7 @@ absl::Status WriteTumTrajectory(const std::string& path, const std::vector<Stamp
     text += line;
   }
 
-  fs::path dir = fs::path(path).parent_path();
-  if (dir.empty()) dir = ".";
-  std::error_code ec;
-  if (!fs::is_directory(dir, ec)) {
-    return absl::NotFoundError(
-        absl::StrCat(what, ": directory ", dir.string(), " does not exist"));
-  }
-
-  const std::string temp_path = absl::StrCat(path, ".tmp.", ::getpid());
-  const int fd = ::open(temp_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) {
-    return ErrnoStatus(errno, absl::StrCat(what, ": cannot create temp file ", temp_path));
-  }
-  absl::Status status = WriteAll(fd, text, absl::StrCat(what, ": writing ", temp_path));
-  // Contents must be on disk before the rename publishes them.
-  if (status.ok() && ::fsync(fd) != 0) {
-    status = ErrnoStatus(errno, absl::StrCat(what, ": fsync of ", temp_path));
-  }
-  if (::close(fd) != 0 && status.ok()) {
-    status = ErrnoStatus(errno, absl::StrCat(what, ": closing ", temp_path));
-  }
-  if (status.ok() && ::rename(temp_path.c_str(), path.c_str()) != 0) {
-    status = ErrnoStatus(errno, absl::StrCat(what, ": renaming ", temp_path));
-  }
-  if (!status.ok()) {
-    ::unlink(temp_path.c_str());
-    return status;
-  }
-  return absl::OkStatus();
+  return WriteFileAtomically(path, text, what);
 }
 
 }  // namespace plx
