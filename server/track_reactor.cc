@@ -39,10 +39,9 @@ absl::Status TrackReactor::HandleFirstMessage() {
   if (!map.ok()) return map.status();
   map_ = *map;
   const pb::TrackOptions& o = request_.options();
-  if (o.mode() == pb::TrackOptions::MODE_ADAM) {
-    options_.mode = TrackingMode::kAdam;
-    options_.iterations = 90;
-  }
+  options_ = TrackerOptionsForMode(o.mode() == pb::TrackOptions::MODE_ADAM
+                                      ? TrackingMode::kAdam
+                                      : TrackingMode::kGaussNewton);
   if (o.rays() > 0) options_.rays = static_cast<int>(o.rays());
   if (o.iterations() > 0) options_.iterations = static_cast<int>(o.iterations());
   if (absl::Status s = Tracker::ValidateOptions(options_); !s.ok()) {

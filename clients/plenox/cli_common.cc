@@ -202,6 +202,29 @@ absl::Status CheckOutputDirectory(const std::string& path) {
                                           " does not exist"));
 }
 
+void AddTrackerFlags(FlagSet& flags) {
+  flags.Add("mode", "gn|adam", "Gauss-Newton/LM, or Adam as in the paper", "gn")
+      .Add("rays", "N", "rays per frame (adam: per step) [default: gn 4096, adam 4096]", "")
+      .Add("iterations", "N", "iterations per frame [default: gn 8, adam 90]", "");
+}
+
+absl::StatusOr<TrackerOptions> TrackerOptionsFromFlags(const FlagSet& flags) {
+  const std::string mode = flags.GetString("mode");
+  if (mode != "gn" && mode != "adam") {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("--mode must be gn or adam, got \"%s\"", mode));
+  }
+  TrackerOptions options =
+      TrackerOptionsForMode(mode == "adam" ? TrackingMode::kAdam : TrackingMode::kGaussNewton);
+  if (flags.IsSet("rays")) {
+    PLX_ASSIGN_OR_RETURN(options.rays, flags.GetInt("rays", 16, 1 << 22));
+  }
+  if (flags.IsSet("iterations")) {
+    PLX_ASSIGN_OR_RETURN(options.iterations, flags.GetInt("iterations", 1, 10000));
+  }
+  return options;
+}
+
 void AddMapperFlags(FlagSet& flags) {
   flags.Add("voxel-size", "M", "voxel edge in metres", "0.02")
       .Add("time-budget", "S", "optimisation time limit in seconds (0 = none)", "0")

@@ -14,6 +14,7 @@
 #include "core/kernels/backend.h"
 #include "core/io/dataset.h"
 #include "core/mapping/mapper.h"
+#include "core/tracking/tracker.h"
 
 namespace plx::cli {
 
@@ -82,6 +83,11 @@ void AddMapperFlags(FlagSet& flags);
 // the real count is known.
 absl::StatusOr<MapperOptions> MapperOptionsFromFlags(const FlagSet& flags, int keyframes);
 void SetIterationBudget(const FlagSet& flags, int keyframes, MapperOptions* options);
+
+// --mode gn|adam, --rays N, --iterations N: the tracker's settings, for in-process and remote
+// tracking alike (unset flags keep the mode's defaults, TrackerOptionsForMode).
+void AddTrackerFlags(FlagSet& flags);
+absl::StatusOr<TrackerOptions> TrackerOptionsFromFlags(const FlagSet& flags);
 
 // --backend cpu|cuda|auto, --device N, --threads N: where an in-process command computes.
 void AddBackendFlags(FlagSet& flags);

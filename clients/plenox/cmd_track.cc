@@ -18,35 +18,18 @@ int RunTrack(const std::vector<std::string>& args) {
                 "reports LOST keep the predicted pose and are counted.");
   flags.Add("map", "MAP", "map file", std::nullopt, true);
   AddDatasetFlags(flags);
-  flags.Add("out", "TRAJ.txt", "trajectory to write", std::nullopt, true)
-      .Add("mode", "gn|adam", "Gauss-Newton/LM, or Adam as in the paper", "gn")
-      .Add("rays", "N", "rays per frame (adam: per step) [default: gn 4096, adam 4096]", "")
-      .Add("iterations", "N", "iterations per frame [default: gn 8, adam 90]", "");
+  flags.Add("out", "TRAJ.txt", "trajectory to write", std::nullopt, true);
+  AddTrackerFlags(flags);
   AddBackendFlags(flags);
   flags.AddSwitch("json", "print a JSON summary on the last line of stdout")
       .AddSwitch("quiet", "no progress on stderr");
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
 
-  TrackerOptions options;
+  absl::StatusOr<TrackerOptions> tracker_options = TrackerOptionsFromFlags(flags);
+  if (!tracker_options.ok()) return ReportError("track", tracker_options.status(), true);
+  const TrackerOptions& options = *tracker_options;
   const std::string mode = flags.GetString("mode");
-  if (mode == "adam") {
-    options.mode = TrackingMode::kAdam;
-    options.iterations = 90;
-  } else if (mode != "gn") {
-    return ReportError("track", absl::InvalidArgumentError(absl::StrFormat(
-                                    "--mode must be gn or adam, got \"%s\"", mode)), true);
-  }
-  if (flags.IsSet("rays")) {
-    absl::StatusOr<int> rays = flags.GetInt("rays", 16, 1 << 22);
-    if (!rays.ok()) return ReportError("track", rays.status(), true);
-    options.rays = *rays;
-  }
-  if (flags.IsSet("iterations")) {
-    absl::StatusOr<int> iterations = flags.GetInt("iterations", 1, 10000);
-    if (!iterations.ok()) return ReportError("track", iterations.status(), true);
-    options.iterations = *iterations;
-  }
   absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);
   if (!dataset_options.ok()) return ReportError("track", dataset_options.status(), true);
   const std::string out = flags.GetString("out");

@@ -31,43 +31,26 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
                 "sent to estimate read, encoding excluded).");
   flags.Add("map", "N", "the map on the daemon", std::nullopt, true);
   AddDatasetFlags(flags);
-  flags.Add("out", "TRAJ.txt", "trajectory to write", std::nullopt, true)
-      .Add("mode", "gn|adam", "Gauss-Newton/LM, or Adam as in the paper", "gn")
-      .Add("rays", "N", "rays per frame (adam: per step) [default: gn 4096, adam 4096]", "")
-      .Add("iterations", "N", "iterations per frame [default: gn 8, adam 90]", "")
-      .Add("encoding", "png|raw", "how frames travel: PNG, or raw RGB8 + uint16 (no codec)", "png")
+  flags.Add("out", "TRAJ.txt", "trajectory to write", std::nullopt, true);
+  AddTrackerFlags(flags);
+  flags.Add("encoding", "png|raw", "how frames travel: PNG, or raw RGB8 + uint16 (no codec)", "png")
       .Add("timings", "FILE", "also write per-frame times: frame timestamp roundtrip_ms daemon_ms", "")
       .AddSwitch("json", "print a JSON summary on the last line of stdout")
       .AddSwitch("quiet", "no progress on stderr");
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
 
-  // The same defaults the daemon applies, so that the summary names what actually ran.
-  TrackerOptions options;
-  pb::TrackOptions wire;
+  // The options the daemon will apply (it starts from the same TrackerOptionsForMode), so that
+  // the summary names what actually ran; only flags the user set go on the wire.
+  absl::StatusOr<TrackerOptions> tracker_options = TrackerOptionsFromFlags(flags);
+  if (!tracker_options.ok()) return ReportError(kCommand, tracker_options.status(), true);
+  const TrackerOptions& options = *tracker_options;
   const std::string mode = flags.GetString("mode");
-  if (mode == "adam") {
-    options.mode = TrackingMode::kAdam;
-    options.iterations = 90;
-    wire.set_mode(pb::TrackOptions::MODE_ADAM);
-  } else if (mode == "gn") {
-    wire.set_mode(pb::TrackOptions::MODE_GAUSS_NEWTON);
-  } else {
-    return ReportError(kCommand, absl::InvalidArgumentError(absl::StrFormat(
-                                     "--mode must be gn or adam, got \"%s\"", mode)), true);
-  }
-  if (flags.IsSet("rays")) {
-    absl::StatusOr<int> rays = flags.GetInt("rays", 16, 1 << 22);
-    if (!rays.ok()) return ReportError(kCommand, rays.status(), true);
-    options.rays = *rays;
-    wire.set_rays(static_cast<uint32_t>(*rays));
-  }
-  if (flags.IsSet("iterations")) {
-    absl::StatusOr<int> iterations = flags.GetInt("iterations", 1, 10000);
-    if (!iterations.ok()) return ReportError(kCommand, iterations.status(), true);
-    options.iterations = *iterations;
-    wire.set_iterations(static_cast<uint32_t>(*iterations));
-  }
+  pb::TrackOptions wire;
+  wire.set_mode(options.mode == TrackingMode::kAdam ? pb::TrackOptions::MODE_ADAM
+                                                    : pb::TrackOptions::MODE_GAUSS_NEWTON);
+  if (flags.IsSet("rays")) wire.set_rays(static_cast<uint32_t>(options.rays));
+  if (flags.IsSet("iterations")) wire.set_iterations(static_cast<uint32_t>(options.iterations));
   absl::StatusOr<WireEncoding> encoding = ParseWireEncoding(flags.GetString("encoding"));
   if (!encoding.ok()) return ReportError(kCommand, encoding.status(), true);
   absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);

@@ -60,6 +60,14 @@ struct TrackerOptions {
   uint32_t seed = 20230606;
 };
 
+// The defaults of a mode: Gauss-Newton as above; Adam with the paper's 90 steps per frame.
+inline TrackerOptions TrackerOptionsForMode(TrackingMode mode) {
+  TrackerOptions options;
+  options.mode = mode;
+  if (mode == TrackingMode::kAdam) options.iterations = 90;
+  return options;
+}
+
 struct TrackingResult {
   SE3 pose;                 // world_T_camera; for LOST frames the prediction, not an estimate
   TrackingState state = TrackingState::kLost;

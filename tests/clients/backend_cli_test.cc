@@ -21,6 +21,7 @@ using plx::testing::CommandResult;
 using plx::testing::FlatJson;
 using plx::testing::JsonNumber;
 using plx::testing::LastLine;
+using plx::testing::LastLineJson;
 using plx::testing::ListTree;
 using plx::testing::ParseFlatJson;
 using plx::testing::RunPlenox;
@@ -59,12 +60,6 @@ std::vector<std::string> With(std::vector<std::string> args,
                               const std::vector<std::string>& extra) {
   args.insert(args.end(), extra.begin(), extra.end());
   return args;
-}
-
-FlatJson LastLineJson(const CommandResult& r) {
-  const std::optional<FlatJson> json = ParseFlatJson(LastLine(r.out));
-  EXPECT_TRUE(json.has_value()) << "last stdout line is not a flat JSON object\n" << r.Describe();
-  return json.value_or(FlatJson{});
 }
 
 std::string JsonString(const FlatJson& json, const std::string& key) {

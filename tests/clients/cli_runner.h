@@ -326,6 +326,38 @@ inline std::optional<double> JsonNumber(const FlatJson& json, const std::string&
   return v;
 }
 
+// Whitespace-separated fields of the non-comment, non-blank lines of a text file.
+inline std::vector<std::vector<std::string>> ReadRows(const std::string& path) {
+  std::vector<std::vector<std::string>> rows;
+  std::istringstream in(ReadFileToString(path));
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream fields(line);
+    std::vector<std::string> row;
+    for (std::string f; fields >> f;) row.push_back(f);
+    if (!row.empty() && row[0][0] != '#') rows.push_back(std::move(row));
+  }
+  return rows;
+}
+
+// fields[first, first + count) joined by single spaces.
+inline std::string JoinFields(const std::vector<std::string>& fields, size_t first, size_t count) {
+  std::string out;
+  for (size_t i = first; i < first + count && i < fields.size(); ++i) {
+    if (!out.empty()) out += ' ';
+    out += fields[i];
+  }
+  return out;
+}
+
+// The JSON object on the last line of stdout, or a failure naming what came back.
+inline FlatJson LastLineJson(const CommandResult& r) {
+  const std::optional<FlatJson> json = ParseFlatJson(LastLine(r.out));
+  EXPECT_TRUE(json.has_value()) << "last stdout line is not a flat JSON object\n" << r.Describe();
+  return json.value_or(FlatJson{});
+}
+
+
 // A MakeTempDir folder that is removed when the test passes and kept (for a post-mortem) when
 // it fails.
 class ScopedTempDir {

@@ -28,6 +28,9 @@ using plx::testing::CommandResult;
 using plx::testing::FlatJson;
 using plx::testing::JsonNumber;
 using plx::testing::LastLine;
+using plx::testing::LastLineJson;
+using plx::testing::JoinFields;
+using plx::testing::ReadRows;
 using plx::testing::ListTree;
 using plx::testing::ParseFlatJson;
 using plx::testing::ReadFileToString;
@@ -47,36 +50,6 @@ constexpr int kExitUsage = 2;
 // Mapping is multithreaded; pinning the thread count keeps the numbers reproducible on machines
 // with different core counts (and keeps the suite within the 2 cores CI has).
 constexpr char kThreads[] = "2";
-
-// Whitespace-separated fields of the non-comment, non-blank lines of a text file.
-std::vector<std::vector<std::string>> ReadRows(const std::string& path) {
-  std::vector<std::vector<std::string>> rows;
-  std::istringstream in(ReadFileToString(path));
-  std::string line;
-  while (std::getline(in, line)) {
-    std::istringstream fields(line);
-    std::vector<std::string> row;
-    for (std::string f; fields >> f;) row.push_back(f);
-    if (!row.empty() && row[0][0] != '#') rows.push_back(std::move(row));
-  }
-  return rows;
-}
-
-std::string JoinFields(const std::vector<std::string>& fields, size_t first, size_t count) {
-  std::string out;
-  for (size_t i = first; i < first + count && i < fields.size(); ++i) {
-    if (!out.empty()) out += ' ';
-    out += fields[i];
-  }
-  return out;
-}
-
-// The JSON object on the last line of stdout, or a failure naming what came back.
-FlatJson LastLineJson(const CommandResult& r) {
-  const std::optional<FlatJson> json = ParseFlatJson(LastLine(r.out));
-  EXPECT_TRUE(json.has_value()) << "last stdout line is not a flat JSON object\n" << r.Describe();
-  return json.value_or(FlatJson{});
-}
 
 double Median(std::vector<double> values) {
   if (values.empty()) return std::nan("");

@@ -38,6 +38,9 @@ using plx::testing::CommandResult;
 using plx::testing::FlatJson;
 using plx::testing::JsonNumber;
 using plx::testing::LastLine;
+using plx::testing::LastLineJson;
+using plx::testing::JoinFields;
+using plx::testing::ReadRows;
 using plx::testing::ListTree;
 using plx::testing::ParseFlatJson;
 using plx::testing::ReadFileToString;
@@ -245,35 +248,6 @@ class DaemonProcess {
   pid_t pid_ = -1;
   int port_ = -1;
 };
-
-// Whitespace-separated fields of the non-comment, non-blank lines of a text file.
-std::vector<std::vector<std::string>> ReadRows(const std::string& path) {
-  std::vector<std::vector<std::string>> rows;
-  std::istringstream in(ReadFileToString(path));
-  std::string line;
-  while (std::getline(in, line)) {
-    std::istringstream fields(line);
-    std::vector<std::string> row;
-    for (std::string f; fields >> f;) row.push_back(f);
-    if (!row.empty() && row[0][0] != '#') rows.push_back(std::move(row));
-  }
-  return rows;
-}
-
-std::string JoinFields(const std::vector<std::string>& fields, size_t first, size_t count) {
-  std::string out;
-  for (size_t i = first; i < first + count && i < fields.size(); ++i) {
-    if (!out.empty()) out += ' ';
-    out += fields[i];
-  }
-  return out;
-}
-
-FlatJson LastLineJson(const CommandResult& r) {
-  const std::optional<FlatJson> json = ParseFlatJson(LastLine(r.out));
-  EXPECT_TRUE(json.has_value()) << "last stdout line is not a flat JSON object\n" << r.Describe();
-  return json.value_or(FlatJson{});
-}
 
 // `maps --json` prints one object per map and line.
 std::optional<FlatJson> MapJson(const CommandResult& r, const std::string& name) {
