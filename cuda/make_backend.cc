@@ -12,17 +12,12 @@
 #endif
 
 namespace plx {
-namespace {
-// Debian's abseil has its own string_view type.
-absl::string_view Absl(std::string_view s) { return absl::string_view(s.data(), s.size()); }
-}  // namespace
-
-absl::StatusOr<BackendKind> ParseBackendKind(std::string_view text, std::string_view flag) {
+absl::StatusOr<BackendKind> ParseBackendKind(absl::string_view text, absl::string_view flag) {
   if (text == "cpu") return BackendKind::kCpu;
   if (text == "cuda") return BackendKind::kCuda;
   if (text == "auto") return BackendKind::kAuto;
   return absl::InvalidArgumentError(
-      absl::StrCat(Absl(flag), " must be cpu, cuda or auto, got \"", Absl(text), "\""));
+      absl::StrCat(flag, " must be cpu, cuda or auto, got \"", text, "\""));
 }
 
 bool BuiltWithCuda() {
@@ -73,7 +68,7 @@ absl::StatusOr<std::unique_ptr<Backend>> MakeBackend(BackendKind kind, int cuda_
 #endif
 }
 
-absl::StatusOr<std::vector<int>> ParseGpuList(std::string_view text) {
+absl::StatusOr<std::vector<int>> ParseGpuList(absl::string_view text) {
   const int devices = CudaDeviceCount();
   std::vector<int> ids;
   if (text == "all") {
@@ -81,12 +76,12 @@ absl::StatusOr<std::vector<int>> ParseGpuList(std::string_view text) {
     return ids;
   }
   std::set<int> seen;
-  for (absl::string_view part : absl::StrSplit(Absl(text), ',')) {
+  for (absl::string_view part : absl::StrSplit(text, ',')) {
     part = absl::StripAsciiWhitespace(part);
     int id = -1;
     if (!absl::SimpleAtoi(part, &id) || id < 0) {
       return absl::InvalidArgumentError(
-          absl::StrCat("--gpus: expected \"all\" or device ids like 0,1; got \"", Absl(text), "\""));
+          absl::StrCat("--gpus: expected \"all\" or device ids like 0,1; got \"", text, "\""));
     }
     if (!seen.insert(id).second) {
       return absl::InvalidArgumentError(absl::StrCat("--gpus: device ", id, " is listed twice"));

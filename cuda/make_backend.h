@@ -5,10 +5,10 @@
 
 #include <memory>
 #include <string>
-#include <string_view>
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
 #include "core/kernels/backend.h"
 
 namespace plx {
@@ -16,7 +16,8 @@ namespace plx {
 enum class BackendKind { kCpu, kCuda, kAuto };
 
 // "cpu", "cuda" or "auto"; InvalidArgument naming `flag` otherwise.
-absl::StatusOr<BackendKind> ParseBackendKind(std::string_view text, std::string_view flag = "--backend");
+absl::StatusOr<BackendKind> ParseBackendKind(absl::string_view text,
+                                             absl::string_view flag = "--backend");
 
 // Whether this binary was built with the CUDA backend.
 bool BuiltWithCuda();
@@ -37,6 +38,6 @@ absl::StatusOr<std::unique_ptr<Backend>> MakeBackend(BackendKind kind, int cuda_
 
 // "0,2" -> {0, 2}; "all" -> every visible device; InvalidArgument for bad or repeated ids or
 // ids not below CudaDeviceCount().
-absl::StatusOr<std::vector<int>> ParseGpuList(std::string_view text);
+absl::StatusOr<std::vector<int>> ParseGpuList(absl::string_view text);
 
 }  // namespace plx
