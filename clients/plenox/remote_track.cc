@@ -58,6 +58,10 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
   const std::string map_name = flags.GetString("map");
   const std::string out = flags.GetString("out");
   if (absl::Status s = CheckOutputDirectory(out); !s.ok()) return ReportError(kCommand, s);
+  const std::string timings = flags.GetString("timings");
+  if (!timings.empty()) {
+    if (absl::Status s = CheckOutputDirectory(timings); !s.ok()) return ReportError(kCommand, s);
+  }
 
   std::unique_ptr<RemoteClient> client = ConnectOrReport(kCommand, remote, &exit_code);
   if (!client) return exit_code;
@@ -134,7 +138,15 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
     return ReportError(kCommand, client->ToStatus(finished));
   }
 
-  if (const std::string timings = flags.GetString("timings"); !timings.empty()) {
+  // The trajectory first: it is the result; the timings are extra.
+  if (absl::Status s = WriteTumTrajectory(
+          out, trajectory,
+          absl::StrFormat("plenox track: %s on map %s at %s (mode %s)", dataset.name(), map_name,
+                          client->server(), mode));
+      !s.ok()) {
+    return ReportError(kCommand, s);
+  }
+  if (!timings.empty()) {
     std::string text = "# frame timestamp roundtrip_ms daemon_ms (frames 1..; 0 is the start)\n";
     for (size_t k = 0; k < roundtrip_ms.size(); ++k) {
       absl::StrAppendFormat(&text, "%d %.6f %.3f %.3f\n", static_cast<int>(k + 1),
@@ -143,13 +155,6 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
     if (absl::Status s = WriteFileAtomically(timings, text, "cannot write --timings"); !s.ok()) {
       return ReportError(kCommand, s);
     }
-  }
-  if (absl::Status s = WriteTumTrajectory(
-          out, trajectory,
-          absl::StrFormat("plenox track: %s on map %s at %s (mode %s)", dataset.name(), map_name,
-                          client->server(), mode));
-      !s.ok()) {
-    return ReportError(kCommand, s);
   }
   const double median = Percentile(latency_ms, 0.5), p95 = Percentile(latency_ms, 0.95);
   line.Finish(absl::StrFormat(

@@ -532,6 +532,19 @@ TEST_F(RemoteCliTest, UnknownMapIsNotFoundAndWritesNothing) {
   }
 }
 
+// An unwritable --timings is refused before any frame is streamed, so no tracking is lost.
+TEST_F(RemoteCliTest, TimingsIntoAMissingFolderFailsBeforeTracking) {
+  ScopedTempDir work("plenox_remote_timings");
+  const CommandResult r = Remote({"track", "--map", kMap, "--dataset", *dataset_, "--out",
+                                  "t.txt", "--timings", "no/such/folder/times.txt"},
+                                 work.path());
+  EXPECT_EQ(r.exit_code, kExitFailure) << r.Describe();
+  EXPECT_THAT(r.err, AllOf(StartsWith("plenox track: "), HasSubstr("no/such/folder")))
+      << r.Describe();
+  EXPECT_THAT(r.err, Not(HasSubstr("tracking "))) << "frames were streamed\n" << r.Describe();
+  EXPECT_THAT(ListTree(work.path()), IsEmpty()) << r.Describe();
+}
+
 // A daemon with --auth-token-file: every call needs "authorization: Bearer <token>".
 TEST(RemoteCliAuthTest, TheTokenFromTokenFileIsRequiredAndSent) {
   ScopedTempDir root("plenox_remote_auth");
