@@ -58,16 +58,29 @@ absl::Status WriteTemp(const std::string& temp, const std::string& bytes, const 
 
 }  // namespace
 
+absl::Status CheckParentDirectory(const std::string& path, const std::string& what) {
+  fs::path dir = fs::path(path).parent_path();
+  if (dir.empty()) dir = ".";
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) {
+    return absl::NotFoundError(absl::StrCat(what, ": directory ", dir.string(), " does not exist"));
+  }
+  return absl::OkStatus();
+}
+
+void SyncParentDirectory(const std::string& path) {
+  fs::path dir = fs::path(path).parent_path();
+  if (dir.empty()) dir = ".";
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return;
+  ::fsync(fd);
+  ::close(fd);
+}
+
 absl::Status WriteFilesAtomically(const std::vector<std::pair<std::string, std::string>>& files,
                                   const std::string& what) {
-  for (const auto& [path, bytes] : files) {
-    fs::path dir = fs::path(path).parent_path();
-    if (dir.empty()) dir = ".";
-    std::error_code ec;
-    if (!fs::is_directory(dir, ec)) {
-      return absl::NotFoundError(
-          absl::StrCat(what, ": directory ", dir.string(), " does not exist"));
-    }
+  for (const auto& file : files) {
+    if (absl::Status s = CheckParentDirectory(file.first, what); !s.ok()) return s;
   }
   std::vector<std::string> temps;
   const auto remove_temps = [&] {
@@ -88,6 +101,7 @@ absl::Status WriteFilesAtomically(const std::vector<std::pair<std::string, std::
       return s;
     }
   }
+  for (const auto& file : files) SyncParentDirectory(file.first);
   return absl::OkStatus();
 }
 

@@ -12,6 +12,14 @@
 
 namespace plx {
 
+// NotFound naming `what` unless the folder `path` would be written into exists (writers that
+// stream large files themselves check this before doing any work).
+absl::Status CheckParentDirectory(const std::string& path, const std::string& what);
+
+// Makes a rename into the folder of `path` durable (fsync of the folder). Best effort: some file
+// systems refuse fsync on directories, and the file is complete and in place by then.
+void SyncParentDirectory(const std::string& path);
+
 // `files`: (path, bytes). Errors name `what` and the file: NotFound when a target's directory
 // does not exist, PermissionDenied for access errors, Unavailable for other I/O errors.
 absl::Status WriteFilesAtomically(const std::vector<std::pair<std::string, std::string>>& files,

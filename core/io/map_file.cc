@@ -9,15 +9,14 @@
 #include <cerrno>
 #include <cmath>
 #include <cstring>
-#include <filesystem>
 #include <limits>
-#include <system_error>
 #include <utility>
 #include <vector>
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
+#include "core/io/atomic_write.h"
 #include "core/io/checksum.h"
 
 namespace plx {
@@ -429,17 +428,9 @@ class TempFile {
   bool committed_ = false;
 };
 
-// Makes the rename itself durable. Best effort: some file systems refuse fsync on directories,
-// and the new file is already complete and in place by now.
-void SyncDirectory(const std::string& dir) {
-  ScopedFd fd(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
-  if (fd.get() >= 0) ::fsync(fd.get());
-}
-
 }  // namespace
 
 absl::Status SaveMap(const PlenoxelMap& map, const std::string& path) {
-  namespace fs = std::filesystem;
   const SparseGrid& grid = map.grid;
   const std::string what = absl::StrCat("cannot save map to ", path);
   // Refuse to write anything LoadMap would reject.
@@ -458,13 +449,7 @@ absl::Status SaveMap(const PlenoxelMap& map, const std::string& path) {
                                             " bricks"));
   }
 
-  fs::path dir = fs::path(path).parent_path();
-  if (dir.empty()) dir = ".";
-  std::error_code ec;
-  if (!fs::is_directory(dir, ec)) {
-    return absl::NotFoundError(
-        absl::StrCat(what, ": directory ", dir.string(), " does not exist"));
-  }
+  PLX_RETURN_IF_ERROR(CheckParentDirectory(path, what));
 
   const std::string temp_path = absl::StrCat(path, ".tmp.", ::getpid());
   ScopedFd fd(::open(temp_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644));
@@ -498,7 +483,7 @@ absl::Status SaveMap(const PlenoxelMap& map, const std::string& path) {
     return ErrnoError(err, absl::StrCat(what, ": renaming ", temp_path, " failed"));
   }
   temp.Commit();
-  SyncDirectory(dir.string());
+  SyncParentDirectory(path);
   return absl::OkStatus();
 }
 
