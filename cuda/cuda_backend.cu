@@ -6,6 +6,7 @@
 #include <cinttypes>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <mutex>
 #include <unordered_map>
 
@@ -13,6 +14,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/common/status_macros.h"
 #include "core/common/unified_allocator.h"
 #include "cuda/cuda_status.h"
 #include "cuda/kernels_cuda.h"
@@ -40,8 +42,17 @@ void ManagedDeallocate(void* block, size_t, void*) {
   (void)cudaFree(block);
 }
 
+// Copies where the pages are (device to device for a map's bricks): cloning a brick for a new
+// map version never pulls it to the host. Synchronous, like the Backend calls.
+void ManagedCopy(void* dst, const void* src, size_t bytes, void*) {
+  if (cudaMemcpy(dst, src, bytes, cudaMemcpyDefault) != cudaSuccess) {
+    (void)cudaGetLastError();
+    std::memcpy(dst, src, bytes);  // managed memory is host-accessible: correct, only slower
+  }
+}
+
 const UnifiedMemoryHooks kManagedHooks{&ManagedAllocate, &ManagedDeallocate, nullptr,
-                                       "cuda-managed"};
+                                       "cuda-managed", &ManagedCopy};
 
 void InstallManagedMemoryOnce() {
   static std::once_flag once;
@@ -100,45 +111,49 @@ class CudaBackend final : public Backend {
   std::string name() const override { return name_; }
   int parallelism() const override { return sm_count_; }
 
-  void RenderPixels(const GridView& grid, const CameraView& camera, const int32_t* pixels,
-                    int64_t count, const RenderOptions& options, float* color, float* depth,
-                    float* opacity, float* median_depth) override {
-    Begin("RenderPixels");
-    CheckGrid(grid, "grid");
-    Check(pixels, "pixels");
-    Check(color, "color");
-    Check(depth, "depth");
-    Check(opacity, "opacity");
-    Check(median_depth, "median_depth");
+  absl::Status DoRenderPixels(const GridView& grid, const CameraView& camera,
+                              const int32_t* pixels, int64_t count, const RenderOptions& options,
+                              float* color, float* depth, float* opacity,
+                              float* median_depth) override {
+    PLX_RETURN_IF_ERROR(Begin("RenderPixels"));
+    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
+    PLX_RETURN_IF_ERROR(Check(pixels, "pixels"));
+    PLX_RETURN_IF_ERROR(Check(color, "color"));
+    PLX_RETURN_IF_ERROR(Check(depth, "depth"));
+    PLX_RETURN_IF_ERROR(Check(opacity, "opacity"));
+    PLX_RETURN_IF_ERROR(Check(median_depth, "median_depth"));
     PrefetchGrid(grid);
     cuda::RenderPixels(ctx_, grid, camera, pixels, count, options, color, depth, opacity,
                        median_depth);
-    Finish();
+    return Finish();
   }
 
-  void MappingForwardBackward(const GridView& grid, const GridGradView& grad,
-                              const TrainingRaysView& rays, const MappingBatchParams& params,
-                              MappingRayLoss* losses) override {
-    Begin("MappingForwardBackward");
-    CheckGrid(grid, "grid");
-    CheckGrad(grad);
-    Check(rays.frames, "rays.frames");
-    Check(rays.ray_frame, "rays.ray_frame");
-    Check(rays.ray_pixel, "rays.ray_pixel");
-    Check(losses, "losses");
+  absl::Status DoMappingForwardBackward(const GridView& grid, const GridGradView& grad,
+                                        const TrainingRaysView& rays,
+                                        const MappingBatchParams& params,
+                                        MappingRayLoss* losses) override {
+    PLX_RETURN_IF_ERROR(Begin("MappingForwardBackward"));
+    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
+    PLX_RETURN_IF_ERROR(CheckGrad(grad));
+    PLX_RETURN_IF_ERROR(Check(rays.frames, "rays.frames"));
+    PLX_RETURN_IF_ERROR(Check(rays.ray_frame, "rays.ray_frame"));
+    PLX_RETURN_IF_ERROR(Check(rays.ray_pixel, "rays.ray_pixel"));
+    PLX_RETURN_IF_ERROR(Check(losses, "losses"));
     PrefetchGrid(grid);
     PrefetchGrad(grid, grad);
     cuda::MappingForwardBackward(ctx_, grid, grad, rays, params, losses);
-    Finish();
+    return Finish();
   }
 
-  void RmsPropStep(const GridView& grid, const GridGradView& grad,
-                   const OptimizerStateView& state, const RmsPropParams& params) override {
-    Begin("RmsPropStep");
-    CheckGrid(grid, "grid");
-    CheckGrad(grad);
-    Check(state.rms_density, "state.rms_density");
-    Check(state.rms_sh, "state.rms_sh");
+  absl::Status DoRmsPropStep(const GridView& grid, const GridWriteView& write,
+                             const GridGradView& grad, const OptimizerStateView& state,
+                             const RmsPropParams& params) override {
+    PLX_RETURN_IF_ERROR(Begin("RmsPropStep"));
+    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
+    PLX_RETURN_IF_ERROR(CheckWrite(write, "write"));
+    PLX_RETURN_IF_ERROR(CheckGrad(grad));
+    PLX_RETURN_IF_ERROR(Check(state.rms_density, "state.rms_density"));
+    PLX_RETURN_IF_ERROR(Check(state.rms_sh, "state.rms_sh"));
     PrefetchGrid(grid);
     PrefetchGrad(grid, grad);
     const size_t n = static_cast<size_t>(grid.num_vertices());
@@ -146,79 +161,85 @@ class CudaBackend final : public Backend {
     Prefetch(state.rms_sh, n * kShCoeffCount * sizeof(float));
     RmsPropParams sliced = params;
     sliced.brick_slices = kRmsPropBrickSlices;
-    cuda::RmsPropStep(ctx_, grid, grad, state, sliced);
-    Finish();
+    cuda::RmsPropStep(ctx_, grid, write, grad, state, sliced);
+    return Finish();
   }
 
-  void FuseDepth(const GridView& grid, int64_t first_vertex, int64_t vertex_count,
-                 const TrainingFrameView* frames, int num_frames,
-                 const FusionParams& params) override {
-    Begin("FuseDepth");
-    CheckGrid(grid, "grid");
-    Check(frames, "frames");
+  absl::Status DoFuseDepth(const GridView& grid, const GridWriteView& write, int64_t first_vertex,
+                           int64_t vertex_count, const TrainingFrameView* frames, int num_frames,
+                           const FusionParams& params) override {
+    PLX_RETURN_IF_ERROR(Begin("FuseDepth"));
+    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
+    PLX_RETURN_IF_ERROR(CheckWrite(write, "write"));
+    PLX_RETURN_IF_ERROR(Check(frames, "frames"));
     // Once per allocation round, so every frame's images are checked too.
     for (int f = 0; f < num_frames && frames != nullptr; ++f) {
-      Check(frames[f].color, "frames[].color");
-      Check(frames[f].depth, "frames[].depth");
+      PLX_RETURN_IF_ERROR(Check(frames[f].color, "frames[].color"));
+      PLX_RETURN_IF_ERROR(Check(frames[f].depth, "frames[].depth"));
     }
     PrefetchGrid(grid);
-    cuda::FuseDepth(ctx_, grid, first_vertex, vertex_count, frames, num_frames, params);
-    Finish();
+    cuda::FuseDepth(ctx_, grid, write, first_vertex, vertex_count, frames, num_frames, params);
+    return Finish();
   }
 
-  void RefreshOccupancy(const GridView& grid, const int64_t* active_blocks, int64_t count,
-                        float threshold) override {
-    Begin("RefreshOccupancy");
-    CheckGrid(grid, "grid");
-    Check(active_blocks, "active_blocks");
+  absl::Status DoRefreshOccupancy(const GridView& grid, const GridWriteView& write,
+                                  const int64_t* active_blocks, int64_t count,
+                                  float threshold) override {
+    PLX_RETURN_IF_ERROR(Begin("RefreshOccupancy"));
+    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
+    PLX_RETURN_IF_ERROR(Check(write.cell_bits, "write.cell_bits"));
+    PLX_RETURN_IF_ERROR(Check(active_blocks, "active_blocks"));
     PrefetchGrid(grid);
-    cuda::RefreshOccupancy(ctx_, grid, active_blocks, count, threshold);
-    Finish();
+    cuda::RefreshOccupancy(ctx_, grid, write, active_blocks, count, threshold);
+    return Finish();
   }
 
-  void ComputeTrackingTerms(const GridView& grid, const TrainingFrameView& frame,
-                            const int32_t* pixels, int64_t count, const TrackingParams& params,
-                            TrackingRayTerm* terms) override {
-    Begin("ComputeTrackingTerms");
-    CheckGrid(grid, "grid");
-    Check(frame.color, "frame.color");
-    Check(frame.depth, "frame.depth");
-    Check(pixels, "pixels");
-    Check(terms, "terms");
+  absl::Status DoComputeTrackingTerms(const GridView& grid, const TrainingFrameView& frame,
+                                      const int32_t* pixels, int64_t count,
+                                      const TrackingParams& params,
+                                      TrackingRayTerm* terms) override {
+    PLX_RETURN_IF_ERROR(Begin("ComputeTrackingTerms"));
+    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
+    PLX_RETURN_IF_ERROR(Check(frame.color, "frame.color"));
+    PLX_RETURN_IF_ERROR(Check(frame.depth, "frame.depth"));
+    PLX_RETURN_IF_ERROR(Check(pixels, "pixels"));
+    PLX_RETURN_IF_ERROR(Check(terms, "terms"));
     PrefetchGrid(grid);
     cuda::ComputeTrackingTerms(ctx_, grid, frame, pixels, count, params, terms);
-    Finish();
+    return Finish();
   }
 
-  TrackingSums ReduceTrackingTerms(const TrackingRayTerm* terms, int64_t count,
-                                   TrackingLoss loss, float huber_k,
-                                   const float scale[2]) override {
-    Begin("ReduceTrackingTerms");
-    Check(terms, "terms");
-    const TrackingSums sums = cuda::ReduceTrackingTerms(ctx_, terms, count, loss, huber_k, scale);
-    Finish();
-    return sums;
+  absl::Status DoReduceTrackingTerms(const TrackingRayTerm* terms, int64_t count,
+                                     TrackingLoss loss, float huber_k, const float scale[2],
+                                     TrackingSums* sums) override {
+    PLX_RETURN_IF_ERROR(Begin("ReduceTrackingTerms"));
+    PLX_RETURN_IF_ERROR(Check(terms, "terms"));
+    PLX_RETURN_IF_ERROR(cuda::ReduceTrackingTerms(ctx_, terms, count, loss, huber_k, scale, sums));
+    return Finish();
   }
 
-  void ResampleGrid(const GridView& target, const GridView& source) override {
-    Begin("ResampleGrid");
-    CheckGrid(target, "target");
-    CheckGrid(source, "source");
+  absl::Status DoResampleGrid(const GridView& target, const GridWriteView& target_write,
+                              const GridView& source) override {
+    PLX_RETURN_IF_ERROR(Begin("ResampleGrid"));
+    PLX_RETURN_IF_ERROR(CheckGrid(target, "target"));
+    PLX_RETURN_IF_ERROR(CheckWrite(target_write, "target_write"));
+    PLX_RETURN_IF_ERROR(CheckGrid(source, "source"));
     PrefetchGrid(target);
     PrefetchGrid(source);
-    cuda::ResampleGrid(ctx_, target, source);
-    Finish();
+    cuda::ResampleGrid(ctx_, target, target_write, source);
+    return Finish();
   }
 
-  void AddTvGradient(const GridView& grid, const GridGradView& grad, int64_t first_vertex,
-                     int64_t vertex_count, float lambda_density, float lambda_sh) override {
-    Begin("AddTvGradient");
-    CheckGrid(grid, "grid");
-    CheckGrad(grad);
+  absl::Status DoAddTvGradient(const GridView& grid, const GridGradView& grad,
+                               int64_t first_vertex, int64_t vertex_count, float lambda_density,
+                               float lambda_sh) override {
+    PLX_RETURN_IF_ERROR(Begin("AddTvGradient"));
+    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
+    PLX_RETURN_IF_ERROR(CheckGrad(grad));
     PrefetchGrid(grid);
     PrefetchGrad(grid, grad);
     cuda::AddTvGradient(ctx_, grid, grad, first_vertex, vertex_count, lambda_density, lambda_sh);
-    Finish();
+    return Finish();
   }
 
  private:
@@ -233,34 +254,39 @@ class CudaBackend final : public Backend {
 
   // Every call: this thread's current device is ours (a worker thread may serve several), and
   // no error of an earlier, unrelated runtime call is left pending.
-  void Begin(const char* method) {
+  absl::Status Begin(const char* method) {
     method_ = method;
-    PLX_CUDA_CHECK(cudaSetDevice(device_));
+    PLX_CUDA_RETURN_IF_ERROR(cudaSetDevice(device_));
     (void)cudaGetLastError();
+    return absl::OkStatus();
   }
 
-  // Launch errors show at once, execution errors at the synchronisation.
-  void Finish() {
-    if (const cudaError_t e = cudaGetLastError(); e != cudaSuccess) Fatal(e, "kernel launch");
+  // Launch errors show at once, execution errors at the synchronisation. Either fails this call
+  // only; a sticky device error (an illegal address) fails every later call of this backend
+  // too, each with the same message, while the other backends of the process keep working.
+  absl::Status Finish() {
+    if (const cudaError_t e = cudaGetLastError(); e != cudaSuccess) return Failed(e, "kernel launch");
     if (const cudaError_t e = cudaStreamSynchronize(stream_); e != cudaSuccess) {
-      Fatal(e, "kernel execution");
+      return Failed(e, "kernel execution");
     }
+    return absl::OkStatus();
   }
 
-  [[noreturn]] void Fatal(cudaError_t error, const char* what) const {
-    std::fprintf(stderr, "plenoxd: %s::%s: %s failed: %s (%s)\n", name_.c_str(), method_, what,
-                 cudaGetErrorName(error), cudaGetErrorString(error));
-    std::fflush(stderr);
-    std::abort();
+  absl::Status Failed(cudaError_t error, const char* what) const {
+    const std::string message = absl::StrFormat("%s::%s: %s failed: %s (%s)", name_, method_,
+                                                what, cudaGetErrorName(error),
+                                                cudaGetErrorString(error));
+    if (error == cudaErrorMemoryAllocation) return absl::ResourceExhaustedError(message);
+    return absl::InternalError(message);
   }
 
   // Views must point at memory this device can read (core/kernels/backend.h): managed memory
   // (UnifiedVector after the backend exists), its own device memory, or pinned host memory.
   // One driver lookup per pointer (about a microsecond), skipped when the device reads
-  // pageable memory anyway. A violation aborts with the argument's name instead of faulting
+  // pageable memory anyway. A violation fails the call with the argument's name instead of faulting
   // inside a kernel.
-  void Check(const void* p, const char* what) const {
-    if (p == nullptr || pageable_access_) return;
+  absl::Status Check(const void* p, const char* what) const {
+    if (p == nullptr || pageable_access_) return absl::OkStatus();
     cudaPointerAttributes attr;
     const cudaError_t e = cudaPointerGetAttributes(&attr, p);
     if (e != cudaSuccess) (void)cudaGetLastError();
@@ -269,33 +295,39 @@ class CudaBackend final : public Backend {
         (attr.type == cudaMemoryTypeManaged ||
          (attr.type == cudaMemoryTypeDevice && attr.device == device_) ||
          (attr.type == cudaMemoryTypeHost && attr.devicePointer != nullptr));
-    if (readable) return;
-    std::fprintf(stderr,
-                 "plenoxd: %s::%s: `%s` (%p) is %s memory this GPU cannot read. Arrays passed to "
-                 "the CUDA backend must be UnifiedVector memory allocated after the backend was "
-                 "created (core/common/unified_allocator.h, core/kernels/backend.h).\n",
-                 name_.c_str(), method_, what, p,
-                 e != cudaSuccess                          ? "unknown"
-                 : attr.type == cudaMemoryTypeDevice       ? "another device's"
-                                                           : "ordinary host");
-    std::fflush(stderr);
-    std::abort();
+    if (readable) return absl::OkStatus();
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "%s::%s: `%s` (%p) is %s memory this GPU cannot read. Arrays passed to the CUDA backend "
+        "must be UnifiedVector memory allocated after the backend was created "
+        "(core/common/unified_allocator.h, core/kernels/backend.h).",
+        name_, method_, what, p,
+        e != cudaSuccess                    ? "unknown"
+        : attr.type == cudaMemoryTypeDevice ? "another device's"
+                                            : "ordinary host"));
   }
 
-  void CheckGrid(const GridView& g, const char* what) const {
-    Check(g.density, absl::StrCat(what, ".density").c_str());
-    Check(g.sh, absl::StrCat(what, ".sh").c_str());
-    Check(g.brick_slot, absl::StrCat(what, ".brick_slot").c_str());
-    Check(g.block_cells, absl::StrCat(what, ".block_cells").c_str());
-    Check(g.cell_bits, absl::StrCat(what, ".cell_bits").c_str());
-    Check(g.brick_origin, absl::StrCat(what, ".brick_origin").c_str());
+  // The brick tables are checked, not each brick: bricks come from the same UnifiedVector
+  // hooks as the tables (core/grid/brick_storage.h).
+  absl::Status CheckGrid(const GridView& g, const char* what) const {
+    PLX_RETURN_IF_ERROR(Check(g.brick_density, absl::StrCat(what, ".brick_density").c_str()));
+    PLX_RETURN_IF_ERROR(Check(g.brick_sh, absl::StrCat(what, ".brick_sh").c_str()));
+    PLX_RETURN_IF_ERROR(Check(g.brick_slot, absl::StrCat(what, ".brick_slot").c_str()));
+    PLX_RETURN_IF_ERROR(Check(g.block_cells, absl::StrCat(what, ".block_cells").c_str()));
+    PLX_RETURN_IF_ERROR(Check(g.cell_bits, absl::StrCat(what, ".cell_bits").c_str()));
+    return Check(g.brick_origin, absl::StrCat(what, ".brick_origin").c_str());
   }
 
-  void CheckGrad(const GridGradView& g) const {
-    Check(g.density, "grad.density");
-    Check(g.sh, "grad.sh");
-    Check(g.touched, "grad.touched");
-    Check(g.brick_touched, "grad.brick_touched");
+  absl::Status CheckWrite(const GridWriteView& w, const char* what) const {
+    PLX_RETURN_IF_ERROR(Check(w.brick_density, absl::StrCat(what, ".brick_density").c_str()));
+    PLX_RETURN_IF_ERROR(Check(w.brick_sh, absl::StrCat(what, ".brick_sh").c_str()));
+    return Check(w.cell_bits, absl::StrCat(what, ".cell_bits").c_str());
+  }
+
+  absl::Status CheckGrad(const GridGradView& g) const {
+    PLX_RETURN_IF_ERROR(Check(g.density, "grad.density"));
+    PLX_RETURN_IF_ERROR(Check(g.sh, "grad.sh"));
+    PLX_RETURN_IF_ERROR(Check(g.touched, "grad.touched"));
+    return Check(g.brick_touched, "grad.brick_touched");
   }
 
   // Managed pages move on demand (one fault per page group) or in bulk when prefetched. Each
@@ -316,10 +348,12 @@ class CudaBackend final : public Backend {
     }
   }
 
+  // Bricks are separate allocations (copy-on-write versions share them), too small and too
+  // many to prefetch one by one: they migrate on first touch, and stay on the device while only
+  // kernels write them (docs/GPU.md, "Copy-on-write versions").
   void PrefetchGrid(const GridView& g) {
-    const size_t n = static_cast<size_t>(g.num_vertices());
-    Prefetch(g.density, n * sizeof(float));
-    Prefetch(g.sh, n * kShCoeffCount * sizeof(float));
+    Prefetch(g.brick_slot, static_cast<size_t>(g.dims[0]) * g.dims[1] * g.dims[2] *
+                               sizeof(int32_t));
   }
 
   void PrefetchGrad(const GridView& g, const GridGradView& grad) {

@@ -1,10 +1,6 @@
-// CUDA runtime errors as absl::Status (for code that can return one) and a checked call for
-// void contexts (Backend methods, destructors' callers), which aborts with the location and
-// CUDA's message: a failed launch or a sticky device error cannot be recovered from there.
+// CUDA runtime errors as absl::Status: every CUDA call of the project returns one, so a failed
+// launch or allocation fails one request instead of the process (core/kernels/backend.h).
 #pragma once
-
-#include <cstdio>
-#include <cstdlib>
 
 #include <cuda_runtime.h>
 
@@ -33,22 +29,6 @@ inline absl::Status CudaStatus(cudaError_t error, const char* expr, const char* 
   }
 }
 
-// Prints the error and aborts (used where no Status can be returned).
-[[noreturn]] inline void CudaFatal(cudaError_t error, const char* expr, const char* file,
-                                   int line) {
-  std::fprintf(stderr, "plenoxd: fatal CUDA error at %s:%d: %s failed: %s (%s)\n", file, line,
-               expr, cudaGetErrorName(error), cudaGetErrorString(error));
-  std::fflush(stderr);
-  std::abort();
-}
-
-// Prints a failed status and aborts (void contexts that got a Status from a helper).
-[[noreturn]] inline void FatalStatus(const absl::Status& status) {
-  std::fprintf(stderr, "plenoxd: fatal CUDA error: %s\n", status.ToString().c_str());
-  std::fflush(stderr);
-  std::abort();
-}
-
 }  // namespace plx::cuda
 
 // Returns an absl::Status from the enclosing function when the CUDA call fails.
@@ -57,14 +37,5 @@ inline absl::Status CudaStatus(cudaError_t error, const char* expr, const char* 
     const cudaError_t plx_cuda_error_ = (expr);                                        \
     if (plx_cuda_error_ != cudaSuccess) {                                              \
       return ::plx::cuda::CudaStatus(plx_cuda_error_, #expr, __FILE__, __LINE__);      \
-    }                                                                                  \
-  } while (false)
-
-// Aborts with the location and CUDA's message when the call fails (void contexts).
-#define PLX_CUDA_CHECK(expr)                                                           \
-  do {                                                                                 \
-    const cudaError_t plx_cuda_error_ = (expr);                                        \
-    if (plx_cuda_error_ != cudaSuccess) {                                              \
-      ::plx::cuda::CudaFatal(plx_cuda_error_, #expr, __FILE__, __LINE__);              \
     }                                                                                  \
   } while (false)

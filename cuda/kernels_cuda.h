@@ -2,6 +2,7 @@
 // (core/kernels/kernel_declarations.inc), compiled by nvcc from the same *_impl.h sources.
 #pragma once
 
+#include "absl/status/status.h"
 #include "core/grid/grid_view.h"
 #include "core/kernels/depth_fusion.h"
 #include "core/kernels/kernel_types.h"

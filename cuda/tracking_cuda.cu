@@ -75,28 +75,27 @@ __global__ void __launch_bounds__(kReduceThreads)
 
 }  // namespace
 
-TrackingSums ReduceTrackingTerms(const ExecContext& ctx, const TrackingRayTerm* terms,
+absl::Status ReduceTrackingTerms(const ExecContext& ctx, const TrackingRayTerm* terms,
                                  int64_t count, TrackingLoss loss, float huber_k,
-                                 const float scale[2]) {
-  TrackingSums total;
-  total.Clear();
-  if (count <= 0) return total;
+                                 const float scale[2], TrackingSums* sums) {
+  sums->Clear();
+  if (count <= 0) return absl::OkStatus();
   const int blocks = static_cast<int>(
       std::min<int64_t>(kMaxReduceBlocks, (count + kReduceThreads - 1) / kReduceThreads));
   // partial[0, blocks) per block, partial[blocks] the total.
   absl::StatusOr<DeviceBuffer<TrackingSums>> partial =
       DeviceBuffer<TrackingSums>::Create(static_cast<size_t>(blocks) + 1, ctx.stream);
-  if (!partial.ok()) FatalStatus(partial.status());
+  if (!partial.ok()) return partial.status();
   AccumulateTermsKernel<<<blocks, kReduceThreads, 0, ctx.stream>>>(
       terms, count, loss, huber_k, scale[0], scale[1], partial->data());
-  PLX_CUDA_CHECK(cudaGetLastError());
+  PLX_CUDA_RETURN_IF_ERROR(cudaGetLastError());
   AddPartialsKernel<<<1, kReduceThreads, 0, ctx.stream>>>(partial->data(), blocks,
                                                          partial->data() + blocks);
-  PLX_CUDA_CHECK(cudaGetLastError());
-  PLX_CUDA_CHECK(cudaMemcpyAsync(&total, partial->data() + blocks, sizeof(TrackingSums),
-                                 cudaMemcpyDeviceToHost, ctx.stream));
-  PLX_CUDA_CHECK(cudaStreamSynchronize(ctx.stream));
-  return total;
+  PLX_CUDA_RETURN_IF_ERROR(cudaGetLastError());
+  PLX_CUDA_RETURN_IF_ERROR(cudaMemcpyAsync(sums, partial->data() + blocks, sizeof(TrackingSums),
+                                           cudaMemcpyDeviceToHost, ctx.stream));
+  PLX_CUDA_RETURN_IF_ERROR(cudaStreamSynchronize(ctx.stream));
+  return absl::OkStatus();
 }
 
 cudaError_t ProbeKernelImage() {

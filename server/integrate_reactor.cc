@@ -145,8 +145,8 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
     absl::StatusOr<MapVersion> latest = state_->maps->Latest(map_name_);
     if (latest.ok()) {
       // The job continues the published map on its own copy; readers keep the published one.
-      mapper_ = std::make_unique<Mapper>(options_, backend,
-                                         std::make_unique<PlenoxelMap>(*latest->map));
+      mapper_ = std::make_unique<Mapper>(
+          options_, backend, std::make_unique<PlenoxelMap>(latest->map->ShareCopy()));
     } else {
       status = latest.status();
     }
@@ -189,10 +189,11 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
       (finishing || (unpublished_keyframes_ > 0 && SecondsSince(last_publish_) > publish_gap) ||
        SecondsSince(last_publish_) > 3.0 * publish_gap)) {
     const auto snapshot_start = std::chrono::steady_clock::now();
-    std::shared_ptr<PlenoxelMap> snapshot(mapper_->Snapshot());
+    absl::StatusOr<std::shared_ptr<const PlenoxelMap>> snapshot = mapper_->Publish();
     last_snapshot_s_ = snapshot_s = SecondsSince(snapshot_start);
     absl::StatusOr<uint64_t> version =
-        state_->maps->Publish(map_name_, std::move(snapshot), unpublished_keyframes_);
+        snapshot.ok() ? state_->maps->Publish(map_name_, *std::move(snapshot), unpublished_keyframes_)
+                      : snapshot.status();
     if (version.ok()) {
       version_ = *version;
       unpublished_keyframes_ = 0;

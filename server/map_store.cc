@@ -75,8 +75,9 @@ absl::StatusOr<MapStatus> MapStore::Create(const std::string& name, float voxel_
         absl::StrCat("the daemon holds its maximum of ", options_.max_maps, " maps"));
   }
   Entry e;
-  e.map = std::make_shared<PlenoxelMap>(voxel_size);
-  e.map->grid.set_occupancy_fresh();  // empty: nothing to refresh
+  auto empty = std::make_shared<PlenoxelMap>(voxel_size);
+  empty->grid.set_occupancy_fresh();  // empty: nothing to refresh
+  e.map = std::move(empty);
   auto [it, inserted] = maps_.emplace(name, std::move(e));
   return StatusOf(name, it->second);
 }
@@ -119,7 +120,7 @@ absl::StatusOr<MapStatus> MapStore::Save(const std::string& name) {
   if (options_.data_dir.empty()) {
     return absl::FailedPreconditionError("the daemon has no --data-dir to save maps to");
   }
-  std::shared_ptr<PlenoxelMap> map;
+  std::shared_ptr<const PlenoxelMap> map;
   uint64_t version = 0;
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -146,8 +147,9 @@ absl::StatusOr<MapStatus> MapStore::Load(const std::string& name) {
   }
   PLX_ASSIGN_OR_RETURN(std::unique_ptr<PlenoxelMap> loaded, LoadMap(path));
   // Published maps are shared by concurrent readers, so they must not need a lazy refresh.
-  RefreshOccupancyIfStale(*MakeCpuBackend(), loaded->grid, loaded->render.sigma_threshold);
-  std::shared_ptr<PlenoxelMap> map(std::move(loaded));
+  PLX_RETURN_IF_ERROR(
+      RefreshOccupancyIfStale(*MakeCpuBackend(), loaded->grid, loaded->render.sigma_threshold));
+  std::shared_ptr<const PlenoxelMap> map(std::move(loaded));
   std::lock_guard<std::mutex> lock(mutex_);
   auto it = maps_.find(name);
   if (it == maps_.end()) {
@@ -195,7 +197,11 @@ void MapStore::EndMapping(const std::string& name) {
 }
 
 absl::StatusOr<uint64_t> MapStore::Publish(const std::string& name,
-                                           std::shared_ptr<PlenoxelMap> map, int keyframes_added) {
+                                           std::shared_ptr<const PlenoxelMap> map,
+                                           int keyframes_added) {
+  if (map->grid.occupancy_stale()) {
+    return absl::InternalError("a map version was published with stale occupancy");
+  }
   const int64_t bytes = map->grid.Memory().total_bytes();
   if (bytes > options_.max_map_bytes) {
     return absl::ResourceExhaustedError(absl::StrCat(

@@ -34,9 +34,9 @@ struct MapStatus {
   std::string source;
 };
 
-// A published map. The map must not be modified (its occupancy is already exact).
+// A published map: immutable, shared by every reader, its occupancy exact.
 struct MapVersion {
-  std::shared_ptr<PlenoxelMap> map;
+  std::shared_ptr<const PlenoxelMap> map;
   uint64_t version = 0;
 };
 
@@ -61,15 +61,15 @@ class MapStore {
   absl::Status BeginMapping(const std::string& name);
   void EndMapping(const std::string& name);
   // Publishes a new version from the lease holder; RESOURCE_EXHAUSTED over the memory limit.
-  absl::StatusOr<uint64_t> Publish(const std::string& name, std::shared_ptr<PlenoxelMap> map,
-                                   int keyframes_added);
+  absl::StatusOr<uint64_t> Publish(const std::string& name,
+                                   std::shared_ptr<const PlenoxelMap> map, int keyframes_added);
 
   int64_t TotalBytes() const;
   int size() const;
 
  private:
   struct Entry {
-    std::shared_ptr<PlenoxelMap> map;
+    std::shared_ptr<const PlenoxelMap> map;
     uint64_t version = 1;
     int keyframes = 0;
     bool dirty = false;

@@ -365,7 +365,12 @@ grpc::ServerUnaryReactor* PlenoxdService::Render(grpc::CallbackServerContext* co
           Finish(reactor, "Render", absl::UnavailableError("plenoxd is shutting down"));
           return;
         }
-        const RenderedView view = RenderView(*backend, *map.map, pose, k);
+        absl::StatusOr<RenderedView> rendered_view = RenderView(*backend, *map.map, pose, k);
+        if (!rendered_view.ok()) {
+          Finish(reactor, "Render", rendered_view.status());
+          return;
+        }
+        const RenderedView& view = *rendered_view;
         int64_t rendered = 0;
         for (float o : view.opacity.data) rendered += o >= kRenderedOpacity;
         response->set_coverage(static_cast<double>(rendered) / std::max<int64_t>(1, view.opacity.num_pixels()));

@@ -121,6 +121,7 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
     pending_.reset();
   }
   pb::PoseEstimate estimate;
+  absl::Status failure;
   if (work) {
     // Follow the mapping job: newer published versions replace the one being tracked against.
     absl::StatusOr<MapVersion> latest = state_->maps->Latest(map_name_);
@@ -141,7 +142,13 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
       result.state = TrackingState::kOk;
       result.reason = work->initial_pose ? "initial pose" : "initial pose (frame prior or identity)";
     } else {
-      result = tracker_->Track(frame, work->frame.calibration.pinhole, frame.world_T_camera);
+      absl::StatusOr<TrackingResult> tracked =
+          tracker_->Track(frame, work->frame.calibration.pinhole, frame.world_T_camera);
+      if (tracked.ok()) {
+        result = *std::move(tracked);
+      } else {
+        failure = tracked.status();  // the backend's (memory, device): this stream ends
+      }
     }
     estimate.set_timestamp(frame.timestamp);
     PoseToProto(result.pose, estimate.mutable_pose());
@@ -157,6 +164,12 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
     state_->metrics->ObserveTrackLatency(seconds);
   }
   std::lock_guard<std::mutex> lock(mutex_);
+  if (!failure.ok()) {
+    busy_ = false;
+    LogEvent("error", "track_failed", {{"map", map_name_}, {"error", failure.ToString()}});
+    FailLocked(failure);
+    return;
+  }
   if (work && !finished_) {
     estimate.set_dropped(dropped_);
     dropped_ = 0;

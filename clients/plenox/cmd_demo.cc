@@ -90,8 +90,11 @@ int RunDemo(const std::vector<std::string>& args) {
   // One held-out view, rendered next to what the sensor saw.
   const int shown = held_out[held_out.size() / 2];
   const RgbdFrame& truth = dataset->frames()[shown];
-  const RenderedView view = RenderView(*backend, *mapped->map, *truth.world_T_camera,
-                                       dataset->calibration().pinhole);
+  absl::StatusOr<RenderedView> rendered = RenderView(*backend, *mapped->map,
+                                                     *truth.world_T_camera,
+                                                     dataset->calibration().pinhole);
+  if (!rendered.ok()) return ReportError("demo", rendered.status());
+  const RenderedView& view = *rendered;
   const std::string render_color = (out / "heldout_render_color.png").string();
   const std::string render_depth = (out / "heldout_render_depth.png").string();
   const std::string truth_color = (out / "heldout_sensor_color.png").string();

@@ -49,7 +49,9 @@ int RunRender(const std::vector<std::string>& args) {
 
   absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(flags.GetString("map"));
   if (!map.ok()) return ReportError("render", map.status());
-  const RenderedView view = RenderView(*backend, **map, *pose, *k);
+  absl::StatusOr<RenderedView> rendered_view = RenderView(*backend, **map, *pose, *k);
+  if (!rendered_view.ok()) return ReportError("render", rendered_view.status());
+  const RenderedView& view = *rendered_view;
   // Both images are written under temporary names and renamed only when both were written, so
   // a failed render leaves no output behind.
   std::vector<std::pair<std::string, std::string>> files;

@@ -2,6 +2,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <cstring>
 
 namespace plx {
 namespace {
@@ -63,5 +64,15 @@ void UnifiedDeallocate(void* data, size_t bytes) noexcept {
 }
 
 const UnifiedMemoryHooks& UnifiedBlockHooks(const void* data) { return *HeaderOf(data)->hooks; }
+
+void UnifiedCopy(void* dst, const void* src, size_t bytes) {
+  if (bytes == 0) return;
+  const UnifiedMemoryHooks* hooks = CurrentHooks().load(std::memory_order_acquire);
+  if (hooks->copy != nullptr) {
+    hooks->copy(dst, src, bytes, hooks->context);
+  } else {
+    std::memcpy(dst, src, bytes);
+  }
+}
 
 }  // namespace plx

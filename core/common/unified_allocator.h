@@ -24,6 +24,9 @@ struct UnifiedMemoryHooks {
   void (*deallocate)(void* block, size_t bytes, void* context) = nullptr;
   void* context = nullptr;
   const char* name = "";
+  // Copies `bytes` between two blocks of these hooks where the data lives (CUDA: on the device,
+  // without migrating pages to the host); null: memcpy.
+  void (*copy)(void* dst, const void* src, size_t bytes, void* context) = nullptr;
 };
 
 // Alignment of every UnifiedVector's data (a cache line; also the header size).
@@ -43,6 +46,11 @@ void UnifiedDeallocate(void* data, size_t bytes) noexcept;
 
 // The hooks that allocated `data` (a pointer UnifiedAllocate returned).
 const UnifiedMemoryHooks& UnifiedBlockHooks(const void* data);
+
+// Copies `bytes` from `src` to `dst` (any memory the current hooks' copy handles: the CUDA
+// hooks copy between any host, managed or device addresses) where the data lives; copy-on-write
+// map versions clone bricks and indexes with it.
+void UnifiedCopy(void* dst, const void* src, size_t bytes);
 
 template <typename T>
 class UnifiedAllocator {

@@ -19,45 +19,61 @@ class CpuBackend final : public Backend {
   std::string name() const override { return "cpu"; }
   int parallelism() const override { return ctx_.pool->num_threads(); }
 
-  void RenderPixels(const GridView& grid, const CameraView& camera, const int32_t* pixels,
-                    int64_t count, const RenderOptions& options, float* color, float* depth,
-                    float* opacity, float* median_depth) override {
+  absl::Status DoRenderPixels(const GridView& grid, const CameraView& camera,
+                              const int32_t* pixels, int64_t count, const RenderOptions& options,
+                              float* color, float* depth, float* opacity,
+                              float* median_depth) override {
     cpu::RenderPixels(ctx_, grid, camera, pixels, count, options, color, depth, opacity,
                       median_depth);
+    return absl::OkStatus();
   }
-  void MappingForwardBackward(const GridView& grid, const GridGradView& grad,
-                              const TrainingRaysView& rays, const MappingBatchParams& params,
-                              MappingRayLoss* losses) override {
+  absl::Status DoMappingForwardBackward(const GridView& grid, const GridGradView& grad,
+                                        const TrainingRaysView& rays,
+                                        const MappingBatchParams& params,
+                                        MappingRayLoss* losses) override {
     cpu::MappingForwardBackward(ctx_, grid, grad, rays, params, losses);
+    return absl::OkStatus();
   }
-  void RmsPropStep(const GridView& grid, const GridGradView& grad,
-                   const OptimizerStateView& state, const RmsPropParams& params) override {
-    cpu::RmsPropStep(ctx_, grid, grad, state, params);
+  absl::Status DoRmsPropStep(const GridView& grid, const GridWriteView& write,
+                             const GridGradView& grad, const OptimizerStateView& state,
+                             const RmsPropParams& params) override {
+    cpu::RmsPropStep(ctx_, grid, write, grad, state, params);
+    return absl::OkStatus();
   }
-  void FuseDepth(const GridView& grid, int64_t first_vertex, int64_t vertex_count,
-                 const TrainingFrameView* frames, int num_frames,
-                 const FusionParams& params) override {
-    cpu::FuseDepth(ctx_, grid, first_vertex, vertex_count, frames, num_frames, params);
+  absl::Status DoFuseDepth(const GridView& grid, const GridWriteView& write, int64_t first_vertex,
+                           int64_t vertex_count, const TrainingFrameView* frames, int num_frames,
+                           const FusionParams& params) override {
+    cpu::FuseDepth(ctx_, grid, write, first_vertex, vertex_count, frames, num_frames, params);
+    return absl::OkStatus();
   }
-  void RefreshOccupancy(const GridView& grid, const int64_t* active_blocks, int64_t count,
-                        float threshold) override {
-    cpu::RefreshOccupancy(ctx_, grid, active_blocks, count, threshold);
+  absl::Status DoRefreshOccupancy(const GridView& grid, const GridWriteView& write,
+                                  const int64_t* active_blocks, int64_t count,
+                                  float threshold) override {
+    cpu::RefreshOccupancy(ctx_, grid, write, active_blocks, count, threshold);
+    return absl::OkStatus();
   }
-  void ComputeTrackingTerms(const GridView& grid, const TrainingFrameView& frame,
-                            const int32_t* pixels, int64_t count, const TrackingParams& params,
-                            TrackingRayTerm* terms) override {
+  absl::Status DoComputeTrackingTerms(const GridView& grid, const TrainingFrameView& frame,
+                                      const int32_t* pixels, int64_t count,
+                                      const TrackingParams& params,
+                                      TrackingRayTerm* terms) override {
     cpu::ComputeTrackingTerms(ctx_, grid, frame, pixels, count, params, terms);
+    return absl::OkStatus();
   }
-  TrackingSums ReduceTrackingTerms(const TrackingRayTerm* terms, int64_t count, TrackingLoss loss,
-                                   float huber_k, const float scale[2]) override {
-    return cpu::ReduceTrackingTerms(ctx_, terms, count, loss, huber_k, scale);
+  absl::Status DoReduceTrackingTerms(const TrackingRayTerm* terms, int64_t count,
+                                     TrackingLoss loss, float huber_k, const float scale[2],
+                                     TrackingSums* sums) override {
+    return cpu::ReduceTrackingTerms(ctx_, terms, count, loss, huber_k, scale, sums);
   }
-  void ResampleGrid(const GridView& target, const GridView& source) override {
-    cpu::ResampleGrid(ctx_, target, source);
+  absl::Status DoResampleGrid(const GridView& target, const GridWriteView& target_write,
+                              const GridView& source) override {
+    cpu::ResampleGrid(ctx_, target, target_write, source);
+    return absl::OkStatus();
   }
-  void AddTvGradient(const GridView& grid, const GridGradView& grad, int64_t first_vertex,
-                     int64_t vertex_count, float lambda_density, float lambda_sh) override {
+  absl::Status DoAddTvGradient(const GridView& grid, const GridGradView& grad,
+                               int64_t first_vertex, int64_t vertex_count, float lambda_density,
+                               float lambda_sh) override {
     cpu::AddTvGradient(ctx_, grid, grad, first_vertex, vertex_count, lambda_density, lambda_sh);
+    return absl::OkStatus();
   }
 
  private:

@@ -2,6 +2,7 @@
 #pragma once
 
 #include "core/cpu/parallel_for.h"
+#include "absl/status/status.h"
 #include "core/grid/grid_view.h"
 #include "core/kernels/depth_fusion.h"
 #include "core/kernels/kernel_types.h"

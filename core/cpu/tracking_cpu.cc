@@ -9,9 +9,9 @@
 
 namespace plx::cpu {
 
-TrackingSums ReduceTrackingTerms(const ExecContext& ctx, const TrackingRayTerm* terms,
+absl::Status ReduceTrackingTerms(const ExecContext& ctx, const TrackingRayTerm* terms,
                                  int64_t count, TrackingLoss loss, float huber_k,
-                                 const float scale[2]) {
+                                 const float scale[2], TrackingSums* sums) {
   // Fixed chunks, each summed by whichever thread takes it, then added in chunk order.
   constexpr int64_t kChunk = 256;
   const int64_t chunks = (count + kChunk - 1) / kChunk;
@@ -25,10 +25,9 @@ TrackingSums ReduceTrackingTerms(const ExecContext& ctx, const TrackingRayTerm* 
       }
     }
   });
-  TrackingSums total;
-  total.Clear();
-  for (const TrackingSums& s : partial) total.Add(s);
-  return total;
+  sums->Clear();
+  for (const TrackingSums& s : partial) sums->Add(s);
+  return absl::OkStatus();
 }
 
 }  // namespace plx::cpu

@@ -30,7 +30,7 @@ std::vector<int> HeldOutFrames(int num_frames, int every, int max_frames) {
   return picked;
 }
 
-absl::StatusOr<MapEvalResult> EvaluateMap(Backend& backend, PlenoxelMap& map,
+absl::StatusOr<MapEvalResult> EvaluateMap(Backend& backend, const PlenoxelMap& map,
                                           const RgbdDataset& dataset,
                                           const std::vector<int>& frame_indices,
                                           const MapEvalOptions& options) {
@@ -65,7 +65,7 @@ absl::StatusOr<MapEvalResult> EvaluateMap(Backend& backend, PlenoxelMap& map,
       std::swap(valid[i], valid[pick(rng)]);
     }
     valid.resize(n);
-    const RenderedPixels px = RenderPixels(backend, map, *pose, k, valid);
+    PLX_ASSIGN_OR_RETURN(const RenderedPixels px, RenderPixels(backend, map, *pose, k, valid));
     double sq = 0.0;
     for (size_t i = 0; i < n; ++i) {
       const int32_t p = valid[i];

@@ -29,7 +29,7 @@ struct MapEvalResult {
 };
 
 // Evaluates `map` on dataset frames `frame_indices` (each must have ground truth).
-absl::StatusOr<MapEvalResult> EvaluateMap(Backend& backend, PlenoxelMap& map,
+absl::StatusOr<MapEvalResult> EvaluateMap(Backend& backend, const PlenoxelMap& map,
                                           const RgbdDataset& dataset,
                                           const std::vector<int>& frame_indices,
                                           const MapEvalOptions& options = {});

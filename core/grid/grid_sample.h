@@ -55,14 +55,14 @@ PLX_HD void LocateCell(const GridViewT<T>& grid, const Vec3<T>& q, CellSample<T>
 
 template <typename T>
 PLX_HD void GatherCornerDensity(const GridViewT<T>& grid, const CellSample<T>& s, T values[8]) {
-  for (int k = 0; k < 8; ++k) values[k] = s.slots[k] >= 0 ? grid.density[s.slots[k]] : T(0);
+  for (int k = 0; k < 8; ++k) values[k] = s.slots[k] >= 0 ? grid.Density(s.slots[k]) : T(0);
 }
 
 template <typename T>
 PLX_HD T SampleDensity(const GridViewT<T>& grid, const CellSample<T>& s) {
   T v = T(0);
   for (int k = 0; k < 8; ++k) {
-    if (s.slots[k] >= 0) v += s.weights[k] * grid.density[s.slots[k]];
+    if (s.slots[k] >= 0) v += s.weights[k] * grid.Density(s.slots[k]);
   }
   return v;
 }
@@ -73,7 +73,7 @@ PLX_HD void SampleSh(const GridViewT<T>& grid, const CellSample<T>& s, T sh[kShC
   for (int j = 0; j < kShCoeffCount; ++j) sh[j] = T(0);
   for (int k = 0; k < 8; ++k) {
     if (s.slots[k] < 0) continue;
-    const T* src = grid.sh + s.slots[k] * kShCoeffCount;
+    const T* src = grid.Sh(s.slots[k]);
     const T w = s.weights[k];
     for (int j = 0; j < kShCoeffCount; ++j) sh[j] += w * src[j];
   }

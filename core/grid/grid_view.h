@@ -18,10 +18,15 @@ inline constexpr int kBrickEdge = 1 << kBrickShift;                         // v
 inline constexpr int kBrickVertices = kBrickEdge * kBrickEdge * kBrickEdge;  // 512
 inline constexpr int kValuesPerVertex = 1 + kShCoeffCount;                  // 28 floats
 
+// Read-only: a published map is shared by many readers at once, so the view through which
+// kernels read a grid cannot write to it (the writers get a GridWriteViewT besides).
 template <typename T>
 struct GridViewT {
-  T* density = nullptr;                   // [num_bricks * 512]
-  T* sh = nullptr;                        // [num_bricks * 512 * 27], channel-major per vertex
+  // Per brick slot: its 512 densities and its 512 * 27 SH coefficients (channel-major per
+  // vertex). Tables rather than one array so that map versions can share unchanged bricks
+  // (copy-on-write, see SparseGrid); vertex ids are still slot * 512 + local.
+  const T* const* brick_density = nullptr;  // [num_bricks] -> [512]
+  const T* const* brick_sh = nullptr;       // [num_bricks] -> [512 * 27]
   const int32_t* brick_slot = nullptr;    // [dims.x * dims.y * dims.z], x fastest; -1 = empty
   // Per index block: -1 when none of its cells touches a stored vertex (the march skips the
   // whole block), else the offset of its 512 occupancy bits in cell_bits (in 64-bit words).
@@ -29,7 +34,7 @@ struct GridViewT {
   // One bit per cell, x fastest: set unless every corner of the cell is known to have density
   // at or below the map's threshold. Such cells contribute nothing and, because of the ReLU,
   // receive no gradient, so skipping them is exact. Conservative: a set bit may be stale.
-  uint64_t* cell_bits = nullptr;
+  const uint64_t* cell_bits = nullptr;
   const int32_t* brick_origin = nullptr;  // [num_bricks * 3] vertex coords of each brick's corner
   int32_t dims[3] = {0, 0, 0};            // index size in bricks
   T origin[3] = {0, 0, 0};                // world position of vertex (0, 0, 0) of the index
@@ -38,6 +43,14 @@ struct GridViewT {
 
   PLX_HD int64_t num_vertices() const { return num_bricks * kBrickVertices; }
   PLX_HD int32_t vertex_extent(int axis) const { return dims[axis] * kBrickEdge; }
+
+  // Parameters of stored vertex `vertex` (slot * 512 + local).
+  PLX_HD T Density(int64_t vertex) const {
+    return brick_density[vertex >> (3 * kBrickShift)][vertex & (kBrickVertices - 1)];
+  }
+  PLX_HD const T* Sh(int64_t vertex) const {
+    return brick_sh[vertex >> (3 * kBrickShift)] + (vertex & (kBrickVertices - 1)) * kShCoeffCount;
+  }
 
   PLX_HD bool BlockInside(int bx, int by, int bz) const {
     return bx >= 0 && by >= 0 && bz >= 0 && bx < dims[0] && by < dims[1] && bz < dims[2];
@@ -75,18 +88,6 @@ struct GridViewT {
     v[2] = brick_origin[3 * brick + 2] + (local >> (2 * kBrickShift));
   }
 
-  // Marks the 8 cells that have vertex (vx, vy, vz) as a corner as occupied (thread-safe).
-  PLX_HD void MarkCellsAroundVertex(int vx, int vy, int vz) const {
-    for (int d = 0; d < 8; ++d) {
-      const int cx = vx - (d & 1), cy = vy - ((d >> 1) & 1), cz = vz - ((d >> 2) & 1);
-      if (cx < 0 || cy < 0 || cz < 0) continue;
-      const int32_t bits = BlockCells(cx >> kBrickShift, cy >> kBrickShift, cz >> kBrickShift);
-      if (bits < 0) continue;
-      const int lx = cx & (kBrickEdge - 1), ly = cy & (kBrickEdge - 1), lz = cz & (kBrickEdge - 1);
-      AtomicOr(cell_bits + bits + lz, uint64_t{1} << (ly * kBrickEdge + lx));
-    }
-  }
-
   // World position -> continuous vertex coordinates.
   PLX_HD Vec3<T> ToGrid(const Vec3<T>& p) const {
     const T inv = T(1) / voxel_size;
@@ -97,7 +98,39 @@ struct GridViewT {
   }
 };
 
+// What the kernels that change a grid (fusion, the optimiser, resampling, occupancy refresh)
+// may write, beside the grid's read view: only a mapping job's own, unpublished grid hands one
+// out (SparseGrid::write_view), after making the bricks it will write private to it.
+template <typename T>
+struct GridWriteViewT {
+  T* const* brick_density = nullptr;  // same tables as the read view, writable
+  T* const* brick_sh = nullptr;
+  uint64_t* cell_bits = nullptr;
+
+  PLX_HD T& Density(int64_t vertex) const {
+    return brick_density[vertex >> (3 * kBrickShift)][vertex & (kBrickVertices - 1)];
+  }
+  PLX_HD T* Sh(int64_t vertex) const {
+    return brick_sh[vertex >> (3 * kBrickShift)] + (vertex & (kBrickVertices - 1)) * kShCoeffCount;
+  }
+
+  // Marks the 8 cells that have vertex (vx, vy, vz) of `grid` as a corner as occupied
+  // (thread-safe).
+  PLX_HD void MarkCellsAroundVertex(const GridViewT<T>& grid, int vx, int vy, int vz) const {
+    for (int d = 0; d < 8; ++d) {
+      const int cx = vx - (d & 1), cy = vy - ((d >> 1) & 1), cz = vz - ((d >> 2) & 1);
+      if (cx < 0 || cy < 0 || cz < 0) continue;
+      const int32_t bits =
+          grid.BlockCells(cx >> kBrickShift, cy >> kBrickShift, cz >> kBrickShift);
+      if (bits < 0) continue;
+      const int lx = cx & (kBrickEdge - 1), ly = cy & (kBrickEdge - 1), lz = cz & (kBrickEdge - 1);
+      AtomicOr(cell_bits + bits + lz, uint64_t{1} << (ly * kBrickEdge + lx));
+    }
+  }
+};
+
 using GridView = GridViewT<float>;
+using GridWriteView = GridWriteViewT<float>;
 
 // Gradient buffers with the same slot layout as GridView, plus a per-vertex "touched" flag so
 // the optimiser only visits vertices that received gradient.

@@ -24,7 +24,7 @@ PLX_HD void ComputeBlockOccupancy(const GridViewT<T>& grid, int64_t block_linear
       for (int x = 0; x < kSpan; ++x) {
         const int64_t slot = grid.VertexSlot(bx * kBrickEdge + x, by * kBrickEdge + y,
                                              bz * kBrickEdge + z);
-        if (slot >= 0 && grid.density[slot] > threshold) r |= static_cast<uint16_t>(1u << x);
+        if (slot >= 0 && grid.Density(slot) > threshold) r |= static_cast<uint16_t>(1u << x);
       }
       row[z][y] = r;
     }

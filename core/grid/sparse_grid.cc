@@ -1,9 +1,13 @@
 #include "core/grid/sparse_grid.h"
 
 #include <algorithm>
+#include <cstring>
 #include <limits>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "core/common/allocation_guard.h"
+#include "core/common/status_macros.h"
 
 namespace plx {
 namespace {
@@ -13,6 +17,108 @@ constexpr int32_t kGrowthMargin = 4;
 }  // namespace
 
 SparseGrid::SparseGrid(float voxel_size) : voxel_size_(voxel_size) {}
+
+SparseGrid::BrickStorage SparseGrid::NewBrickStorage() {
+  constexpr size_t kBytes = kBrickFloats * sizeof(float);
+  float* data = static_cast<float*>(UnifiedAllocate(kBytes));  // throws std::bad_alloc
+  return BrickStorage(data, [](float* p) { UnifiedDeallocate(p, kBytes); });
+}
+
+void SparseGrid::SetBrick(int64_t slot, BrickStorage storage) {
+  density_table_[slot] = storage.get();
+  sh_table_[slot] = storage.get() + kBrickVertices;
+  bricks_[slot] = std::move(storage);
+}
+
+void SparseGrid::ClonePrivate(int64_t slot) {
+  BrickStorage copy = NewBrickStorage();
+  UnifiedCopy(copy.get(), bricks_[slot].get(), kBrickFloats * sizeof(float));
+  SetBrick(slot, std::move(copy));
+  brick_shared_[slot] = 0;
+}
+
+float* SparseGrid::mutable_brick_density(int64_t slot) {
+  if (brick_shared_[slot]) ClonePrivate(slot);
+  return density_table_[slot];
+}
+
+float* SparseGrid::mutable_brick_sh(int64_t slot) {
+  if (brick_shared_[slot]) ClonePrivate(slot);
+  return sh_table_[slot];
+}
+
+int64_t SparseGrid::MakePrivate(const uint8_t* brick_flags) {
+  int64_t cloned = 0;
+  for (int64_t slot = 0; slot < num_bricks(); ++slot) {
+    if (brick_flags[slot] != 0 && brick_shared_[slot]) {
+      ClonePrivate(slot);
+      ++cloned;
+    }
+  }
+  return cloned;
+}
+
+int64_t SparseGrid::num_shared_bricks() const {
+  return std::count(brick_shared_.begin(), brick_shared_.end(), uint8_t{1});
+}
+
+namespace {
+// Room for `n` elements, growing geometrically like push_back would.
+template <typename Vector>
+void ReserveGeometric(Vector& v, size_t n) {
+  if (v.capacity() < n) v.reserve(std::max(n, 2 * v.capacity()));
+}
+
+// An index array copied where it lives (see UnifiedCopy): on the CUDA backend a publish copies
+// device pages on the device.
+template <typename T>
+UnifiedVector<T> CopyOf(const UnifiedVector<T>& source) {
+  UnifiedVector<T> copy(source.size());
+  UnifiedCopy(copy.data(), source.data(), source.size() * sizeof(T));
+  return copy;
+}
+}  // namespace
+
+SparseGrid SparseGrid::ShareCopy() const {
+  SparseGrid copy(voxel_size_);
+  copy.brick_coords_ = brick_coords_;
+  copy.bricks_ = bricks_;
+  copy.brick_shared_.assign(bricks_.size(), 1);
+  copy.density_table_ = CopyOf(density_table_);
+  copy.sh_table_ = CopyOf(sh_table_);
+  copy.index_min_ = index_min_;
+  copy.index_dims_ = index_dims_;
+  copy.brick_slot_ = CopyOf(brick_slot_);
+  copy.block_cells_ = CopyOf(block_cells_);
+  copy.cell_bits_ = CopyOf(cell_bits_);
+  copy.active_blocks_ = CopyOf(active_blocks_);
+  copy.occupancy_stale_ = occupancy_stale_;
+  copy.brick_origin_ = CopyOf(brick_origin_);
+  return copy;
+}
+
+SparseGrid SparseGrid::Publish() {
+  std::fill(brick_shared_.begin(), brick_shared_.end(), uint8_t{1});
+  return ShareCopy();
+}
+
+std::vector<float> SparseGrid::DensityValues() const {
+  std::vector<float> values(static_cast<size_t>(num_vertices()));
+  for (int64_t slot = 0; slot < num_bricks(); ++slot) {
+    std::memcpy(values.data() + slot * kBrickVertices, density_table_[slot],
+                kBrickVertices * sizeof(float));
+  }
+  return values;
+}
+
+std::vector<float> SparseGrid::ShValues() const {
+  constexpr int64_t kShPerBrick = int64_t{kBrickVertices} * kShCoeffCount;
+  std::vector<float> values(static_cast<size_t>(num_vertices() * kShCoeffCount));
+  for (int64_t slot = 0; slot < num_bricks(); ++slot) {
+    std::memcpy(values.data() + slot * kShPerBrick, sh_table_[slot], kShPerBrick * sizeof(float));
+  }
+  return values;
+}
 
 int64_t SparseGrid::IndexOf(const BrickCoord& b) const {
   const int64_t x = b.x - index_min_[0], y = b.y - index_min_[1], z = b.z - index_min_[2];
@@ -120,27 +226,46 @@ void SparseGrid::SetBrickOrigin(int64_t slot) {
 
 absl::StatusOr<int64_t> SparseGrid::AllocateBricks(absl::Span<const BrickCoord> bricks,
                                                    float initial_density) {
-  if (absl::Status s = GrowIndexToCover(bricks); !s.ok()) return s;
-  int64_t added = 0;
-  for (const BrickCoord& b : bricks) {
-    const int64_t i = IndexOf(b);
-    if (brick_slot_[i] >= 0) continue;
-    if (num_bricks() >= std::numeric_limits<int32_t>::max() / kBrickVertices) {
-      return absl::ResourceExhaustedError("too many bricks for 32-bit slot indices");
+  return CatchAllocationFailure("allocating bricks", [&]() -> absl::StatusOr<int64_t> {
+    PLX_RETURN_IF_ERROR(GrowIndexToCover(bricks));
+    int64_t added = 0;
+    for (const BrickCoord& b : bricks) {
+      const int64_t i = IndexOf(b);
+      if (brick_slot_[i] >= 0) continue;
+      if (num_bricks() >= std::numeric_limits<int32_t>::max() / kBrickVertices) {
+        return absl::ResourceExhaustedError("too many bricks for 32-bit slot indices");
+      }
+      // Everything that can throw std::bad_alloc happens before the grid changes, so a failed
+      // allocation leaves a consistent grid with the bricks added so far.
+      BrickStorage storage = NewBrickStorage();
+      const size_t n = brick_coords_.size() + 1;
+      ReserveGeometric(density_table_, n);
+      ReserveGeometric(sh_table_, n);
+      ReserveGeometric(brick_coords_, n);
+      ReserveGeometric(bricks_, n);
+      ReserveGeometric(brick_shared_, n);
+      ReserveGeometric(brick_origin_, 3 * n);
+      ReserveGeometric(cell_bits_, cell_bits_.size() + 8 * kBrickEdge);
+      ReserveGeometric(active_blocks_, active_blocks_.size() + 8);
+      std::fill(storage.get(), storage.get() + kBrickVertices, initial_density);
+      std::fill(storage.get() + kBrickVertices, storage.get() + kBrickFloats, 0.0f);
+      brick_slot_[i] = static_cast<int32_t>(num_bricks());
+      brick_coords_.push_back(b);
+      bricks_.emplace_back();
+      brick_shared_.push_back(0);
+      density_table_.push_back(nullptr);
+      sh_table_.push_back(nullptr);
+      SetBrick(num_bricks() - 1, std::move(storage));
+      brick_origin_.resize(3 * brick_coords_.size());
+      SetBrickOrigin(num_bricks() - 1);
+      for (int d = 0; d < 8; ++d) {
+        ActivateBlock(IndexOf({b.x - (d & 1), b.y - ((d >> 1) & 1), b.z - ((d >> 2) & 1)}));
+      }
+      occupancy_stale_ = true;
+      ++added;
     }
-    brick_slot_[i] = static_cast<int32_t>(num_bricks());
-    brick_coords_.push_back(b);
-    brick_origin_.resize(3 * brick_coords_.size());
-    SetBrickOrigin(num_bricks() - 1);
-    for (int d = 0; d < 8; ++d) {
-      ActivateBlock(IndexOf({b.x - (d & 1), b.y - ((d >> 1) & 1), b.z - ((d >> 2) & 1)}));
-    }
-    occupancy_stale_ = true;
-    ++added;
-  }
-  density_.resize(num_vertices(), initial_density);
-  sh_.resize(num_vertices() * kShCoeffCount, 0.0f);
-  return added;
+    return added;
+  });
 }
 
 std::array<float, 3> SparseGrid::VertexPosition(int64_t slot, int local) const {
@@ -155,10 +280,11 @@ GridMemory SparseGrid::Memory() const {
   GridMemory m;
   m.bricks = num_bricks();
   m.vertices = num_vertices();
-  m.parameter_bytes =
-      static_cast<int64_t>((density_.size() + sh_.size()) * sizeof(float));
+  m.parameter_bytes = num_bricks() * kBrickFloats * static_cast<int64_t>(sizeof(float));
   m.index_bytes = static_cast<int64_t>((brick_slot_.size() + block_cells_.size() +
                                         brick_origin_.size()) * sizeof(int32_t) +
+                                       (density_table_.size() + sh_table_.size()) *
+                                           sizeof(float*) +
                                        cell_bits_.size() * sizeof(uint64_t) +
                                        active_blocks_.size() * sizeof(int64_t));
   return m;

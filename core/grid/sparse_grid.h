@@ -1,11 +1,19 @@
 // Owner of the sparse brick grid (DESIGN.md §5). Bricks of 8x8x8 vertices are stored in
 // allocation order ("slots"); a dense coarse index over the current bounds maps brick
 // coordinates to slots and grows when bricks appear outside it. Kernels see it as a GridView;
-// every array a kernel reads is a UnifiedVector, so the GPU backend reads it in place.
+// every array a kernel reads is UnifiedVector memory, so the GPU backend reads it in place.
+//
+// Copy-on-write versions: each brick's parameters (512 densities, 512 * 27 SH coefficients) are
+// a separately owned block, shared between the grids of several map versions. Publish() gives
+// readers a grid that shares every brick (it copies only the index and the brick tables), and
+// marks the writer's bricks shared; the writer clones a shared brick before it first writes it
+// (MakePrivate), so a publish costs in proportion to the bricks changed since the last one and
+// unchanged bricks are stored once.
 #pragma once
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -35,12 +43,20 @@ struct GridMemory {
   int64_t total_bytes() const { return parameter_bytes + index_bytes; }
 };
 
+// Floats per brick: 512 densities, then 512 * 27 SH coefficients.
+inline constexpr int64_t kBrickFloats = int64_t{kBrickVertices} * kValuesPerVertex;
+
 class SparseGrid {
  public:
   // The coarse index is capped so a runaway allocation fails cleanly instead of eating memory.
   static constexpr int64_t kMaxIndexEntries = int64_t{1} << 27;
 
   explicit SparseGrid(float voxel_size);
+  // Copies would silently share bricks without marking them: use Publish or ShareCopy.
+  SparseGrid(const SparseGrid&) = delete;
+  SparseGrid& operator=(const SparseGrid&) = delete;
+  SparseGrid(SparseGrid&&) = default;
+  SparseGrid& operator=(SparseGrid&&) = default;
 
   float voxel_size() const { return voxel_size_; }
   int64_t num_bricks() const { return static_cast<int64_t>(brick_coords_.size()); }
@@ -63,19 +79,27 @@ class SparseGrid {
   // World position of vertex `local` (0..511, x fastest) of the brick in `slot`.
   std::array<float, 3> VertexPosition(int64_t slot, int local) const;
 
-  // Mutable view for kernels; invalidated by AllocateBricks.
-  GridView view() { return ViewOf(density_.data(), sh_.data()); }
+  // Read view for kernels; invalidated by AllocateBricks and MakePrivate.
+  GridView view() const {
+    return ViewOf<float>(density_table_.data(), sh_table_.data());
+  }
+  // What the writing kernels may change: the parameters of private bricks (new ones, and those
+  // passed through MakePrivate since the last Publish) and the cell occupancy bits. Only a grid
+  // nobody else reads hands one out; invalidated like view().
+  GridWriteView write_view() {
+    return GridWriteView{density_table_.data(), sh_table_.data(), cell_bits_.data()};
+  }
 
-  // This grid's index with other value arrays of the same slot layout (double-precision copies
-  // in tests, device mirrors).
+  // This grid's index with other per-brick value tables of the same slot layout
+  // (double-precision copies in tests, see ContiguousBrickTables).
   template <typename T>
-  GridViewT<T> ViewOf(T* density, T* sh) const {
+  GridViewT<T> ViewOf(const T* const* brick_density, const T* const* brick_sh) const {
     GridViewT<T> v;
-    v.density = density;
-    v.sh = sh;
+    v.brick_density = brick_density;
+    v.brick_sh = brick_sh;
     v.brick_slot = brick_slot_.data();
     v.block_cells = block_cells_.data();
-    v.cell_bits = const_cast<uint64_t*>(cell_bits_.data());
+    v.cell_bits = cell_bits_.data();
     v.brick_origin = brick_origin_.data();
     for (int a = 0; a < 3; ++a) {
       v.dims[a] = index_dims_[a];
@@ -86,10 +110,32 @@ class SparseGrid {
     return v;
   }
 
-  UnifiedVector<float>& density() { return density_; }
-  const UnifiedVector<float>& density() const { return density_; }
-  UnifiedVector<float>& sh() { return sh_; }
-  const UnifiedVector<float>& sh() const { return sh_; }
+  // Host access to one brick's parameters: 512 densities (x fastest) and 512 * 27 SH.
+  const float* brick_density(int64_t slot) const { return density_table_[slot]; }
+  const float* brick_sh(int64_t slot) const { return sh_table_[slot]; }
+  // The same for writing: clones the brick first when another version shares it.
+  float* mutable_brick_density(int64_t slot);
+  float* mutable_brick_sh(int64_t slot);
+  float density(int64_t vertex) const {
+    return density_table_[vertex / kBrickVertices][vertex % kBrickVertices];
+  }
+  const float* sh(int64_t vertex) const {
+    return sh_table_[vertex / kBrickVertices] + (vertex % kBrickVertices) * kShCoeffCount;
+  }
+  // Every vertex's density [num_vertices] / SH [num_vertices * 27] in slot order (copies, for
+  // comparisons and exports).
+  std::vector<float> DensityValues() const;
+  std::vector<float> ShValues() const;
+
+  // Copy-on-write. Publish: a grid for readers that shares every brick with this one, after
+  // which this grid treats all its bricks as shared. ShareCopy: the same from a grid that is not
+  // written any more (a published version), e.g. to continue mapping it.
+  SparseGrid Publish();
+  SparseGrid ShareCopy() const;
+  // Clones every shared brick whose flag in `brick_flags` [num_bricks] is non-zero, so kernels
+  // may write it; returns how many were cloned.
+  int64_t MakePrivate(const uint8_t* brick_flags);
+  int64_t num_shared_bricks() const;
 
   GridMemory Memory() const;
 
@@ -108,16 +154,24 @@ class SparseGrid {
   const std::array<int32_t, 3>& index_dims() const { return index_dims_; }
 
  private:
+  // One brick's parameters, owned jointly by every grid version that contains it.
+  using BrickStorage = std::shared_ptr<float>;
+  static BrickStorage NewBrickStorage();
+
   absl::Status GrowIndexToCover(absl::Span<const BrickCoord> bricks);
   void RebuildIndex();
   void SetBrickOrigin(int64_t slot);
   void ActivateBlock(int64_t index);
   int64_t IndexOf(const BrickCoord& b) const;
+  void SetBrick(int64_t slot, BrickStorage storage);
+  void ClonePrivate(int64_t slot);
 
   float voxel_size_;
   std::vector<BrickCoord> brick_coords_;  // per slot
-  UnifiedVector<float> density_;          // [num_vertices]
-  UnifiedVector<float> sh_;               // [num_vertices * 27]
+  std::vector<BrickStorage> bricks_;      // per slot
+  std::vector<uint8_t> brick_shared_;     // per slot: 1 = another version may read it
+  UnifiedVector<float*> density_table_;   // per slot: bricks_[slot].get()
+  UnifiedVector<float*> sh_table_;        // per slot: bricks_[slot].get() + 512
   std::array<int32_t, 3> index_min_ = {0, 0, 0};
   std::array<int32_t, 3> index_dims_ = {0, 0, 0};
   UnifiedVector<int32_t> brick_slot_;     // coarse index
@@ -126,6 +180,22 @@ class SparseGrid {
   UnifiedVector<int64_t> active_blocks_;  // index position of each active block
   bool occupancy_stale_ = true;
   UnifiedVector<int32_t> brick_origin_;   // [num_bricks * 3] index vertex coords of brick corners
+};
+
+// Brick tables over contiguous per-vertex arrays in a grid's slot layout, for
+// SparseGrid::ViewOf (e.g. double-precision copies of a grid in tests).
+template <typename T>
+struct ContiguousBrickTables {
+  ContiguousBrickTables(T* density, T* sh, int64_t num_bricks) {
+    for (int64_t b = 0; b < num_bricks; ++b) {
+      density_table.push_back(density + b * kBrickVertices);
+      sh_table.push_back(sh + b * kBrickVertices * kShCoeffCount);
+    }
+  }
+  GridViewT<T> ViewOf(const SparseGrid& grid) const {
+    return grid.ViewOf<T>(density_table.data(), sh_table.data());
+  }
+  std::vector<T*> density_table, sh_table;
 };
 
 }  // namespace plx

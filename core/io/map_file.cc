@@ -406,8 +406,14 @@ void WriteMap(const PlenoxelMap& map, MapWriter& w) {
     w.I32(b.y);
     w.I32(b.z);
   }
-  w.Floats(grid.density().data(), grid.density().size());
-  w.Floats(grid.sh().data(), grid.sh().size());
+  // Bricks are stored apart in memory (copy-on-write versions) but contiguously in the file:
+  // every brick's densities, then every brick's SH.
+  for (int64_t slot = 0; slot < grid.num_bricks(); ++slot) {
+    w.Floats(grid.brick_density(slot), kDensityFloatsPerBrick);
+  }
+  for (int64_t slot = 0; slot < grid.num_bricks(); ++slot) {
+    w.Floats(grid.brick_sh(slot), kShFloatsPerBrick);
+  }
 }
 
 // The temp file, removed again unless the save reached its rename.
@@ -443,11 +449,6 @@ absl::Status SaveMap(const PlenoxelMap& map, const std::string& path) {
                                                    " bytes, the limit is ", kMaxMapSourceBytes));
   }
   const int64_t bricks = grid.num_bricks();
-  if (grid.density().size() != static_cast<size_t>(bricks * kDensityFloatsPerBrick) ||
-      grid.sh().size() != static_cast<size_t>(bricks * kShFloatsPerBrick)) {
-    return absl::InternalError(absl::StrCat(what, ": grid arrays do not match its ", bricks,
-                                            " bricks"));
-  }
 
   PLX_RETURN_IF_ERROR(CheckParentDirectory(path, what));
 
@@ -530,11 +531,16 @@ absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMap(const std::string& path) {
                                             " bricks, the file has ", n));
   }
   int64_t offset = header.header_bytes + n * kTableBytesPerBrick;
-  PLX_RETURN_IF_ERROR(ReadFloatsAt(file.fd.get(), offset, map->grid.density().data(),
-                                   map->grid.density().size(), path));
-  offset += n * kDensityFloatsPerBrick * static_cast<int64_t>(sizeof(float));
-  PLX_RETURN_IF_ERROR(ReadFloatsAt(file.fd.get(), offset, map->grid.sh().data(),
-                                   map->grid.sh().size(), path));
+  for (int64_t slot = 0; slot < n; ++slot) {
+    PLX_RETURN_IF_ERROR(ReadFloatsAt(file.fd.get(), offset, map->grid.mutable_brick_density(slot),
+                                     kDensityFloatsPerBrick, path));
+    offset += kDensityFloatsPerBrick * static_cast<int64_t>(sizeof(float));
+  }
+  for (int64_t slot = 0; slot < n; ++slot) {
+    PLX_RETURN_IF_ERROR(ReadFloatsAt(file.fd.get(), offset, map->grid.mutable_brick_sh(slot),
+                                     kShFloatsPerBrick, path));
+    offset += kShFloatsPerBrick * static_cast<int64_t>(sizeof(float));
+  }
   return map;
 }
 

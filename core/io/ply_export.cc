@@ -20,13 +20,12 @@ void AppendFloat(std::string* out, float v) {
 
 PlyExport ExportSurfacePointsPly(const PlenoxelMap& map, float min_density) {
   const SparseGrid& grid = map.grid;
-  const GridView view = grid.ViewOf(const_cast<float*>(grid.density().data()),
-                                    const_cast<float*>(grid.sh().data()));
+  const GridView view = grid.view();
   std::string body;
   int64_t points = 0;
   const float c0 = 0.28209479177387814f;
   for (int64_t vertex = 0; vertex < grid.num_vertices(); ++vertex) {
-    if (!(grid.density()[vertex] > min_density)) continue;
+    if (!(view.Density(vertex) > min_density)) continue;
     int v[3];
     view.VertexCoords(vertex, v);
     bool surface = false;
@@ -35,7 +34,7 @@ PlyExport ExportSurfacePointsPly(const PlenoxelMap& map, float min_density) {
         int n[3] = {v[0], v[1], v[2]};
         n[axis] += step;
         const int64_t slot = view.VertexSlot(n[0], n[1], n[2]);
-        surface = slot < 0 || !(grid.density()[slot] > min_density);
+        surface = slot < 0 || !(view.Density(slot) > min_density);
       }
     }
     if (!surface) continue;
@@ -43,7 +42,7 @@ PlyExport ExportSurfacePointsPly(const PlenoxelMap& map, float min_density) {
     AppendFloat(&body, p.x);
     AppendFloat(&body, p.y);
     AppendFloat(&body, p.z);
-    const float* sh = grid.sh().data() + vertex * kShCoeffCount;
+    const float* sh = view.Sh(vertex);
     for (int c = 0; c < 3; ++c) {
       const float value = std::clamp(c0 * sh[c * kShBasisCount] + 0.5f, 0.0f, 1.0f);
       body.push_back(static_cast<char>(static_cast<uint8_t>(std::lround(value * 255.0f))));

@@ -7,18 +7,19 @@
 
 namespace plx::PLX_BACKEND_NS {
 
-void FuseDepth(const ExecContext& ctx, const GridView& grid, int64_t first_vertex,
-               int64_t vertex_count, const TrainingFrameView* frames, int num_frames,
-               const FusionParams& params) {
+void FuseDepth(const ExecContext& ctx, const GridView& grid, const GridWriteView& write,
+               int64_t first_vertex, int64_t vertex_count, const TrainingFrameView* frames,
+               int num_frames, const FusionParams& params) {
   const GridView g = grid;
+  const GridWriteView w = write;
   const FusionParams p = params;
   ParallelFor(ctx, vertex_count, [=] PLX_HD_LAMBDA(int64_t i) {
     const int64_t vertex = first_vertex + i;
     int v[3];
     g.VertexCoords(vertex, v);
     const VertexFusion f = FuseVertex(g.VertexPosition(v[0], v[1], v[2]), frames, num_frames, p);
-    g.density[vertex] = f.density;
-    float* sh = g.sh + vertex * kShCoeffCount;
+    w.Density(vertex) = f.density;
+    float* sh = w.Sh(vertex);
     for (int j = 0; j < kShCoeffCount; ++j) sh[j] = 0.0f;
     for (int c = 0; c < 3; ++c) sh[c * kShBasisCount] = ShDcForColor(f.color[c]);
   });

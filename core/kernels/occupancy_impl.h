@@ -7,14 +7,15 @@
 
 namespace plx::PLX_BACKEND_NS {
 
-void RefreshOccupancy(const ExecContext& ctx, const GridView& grid, const int64_t* active_blocks,
-                      int64_t count, float threshold) {
+void RefreshOccupancy(const ExecContext& ctx, const GridView& grid, const GridWriteView& write,
+                      const int64_t* active_blocks, int64_t count, float threshold) {
   const GridView g = grid;
+  uint64_t* const cell_bits = write.cell_bits;
   ParallelFor(ctx, count, [=] PLX_HD_LAMBDA(int64_t i) {
     const int64_t block = active_blocks[i];
     uint64_t bits[kBrickEdge];
     ComputeBlockOccupancy(g, block, threshold, bits);
-    uint64_t* out = g.cell_bits + g.block_cells[block];
+    uint64_t* out = cell_bits + g.block_cells[block];
     for (int z = 0; z < kBrickEdge; ++z) out[z] = bits[z];
   });
 }

@@ -17,17 +17,18 @@ PLX_HD float RmsPropUpdate(float* value, float* rms, float g, float lr, float be
 }
 
 // Updates the density and SH of one touched vertex and clears its gradients.
-PLX_HD void UpdateVertex(const GridView& g, const GridGradView& gg, const OptimizerStateView& s,
-                         const RmsPropParams& p, int64_t i) {
-  const float before = g.density[i];
-  RmsPropUpdate(g.density + i, s.rms_density + i, gg.density[i], p.lr_density, p.beta, p.epsilon);
+PLX_HD void UpdateVertex(const GridView& g, const GridWriteView& w, const GridGradView& gg,
+                         const OptimizerStateView& s, const RmsPropParams& p, int64_t i) {
+  float& density = w.Density(i);
+  const float before = density;
+  RmsPropUpdate(&density, s.rms_density + i, gg.density[i], p.lr_density, p.beta, p.epsilon);
   gg.density[i] = 0.0f;
-  if (before <= p.sigma_threshold && g.density[i] > p.sigma_threshold) {
+  if (before <= p.sigma_threshold && density > p.sigma_threshold) {
     int v[3];
     g.VertexCoords(i, v);
-    g.MarkCellsAroundVertex(v[0], v[1], v[2]);
+    w.MarkCellsAroundVertex(g, v[0], v[1], v[2]);
   }
-  float* sh = g.sh + i * kShCoeffCount;
+  float* sh = w.Sh(i);
   float* sh_grad = gg.sh + i * kShCoeffCount;
   float* sh_rms = s.rms_sh + i * kShCoeffCount;
   // Branch-free so the compiler vectorises it: a coefficient without gradient (a clamped colour
@@ -46,9 +47,11 @@ PLX_HD void UpdateVertex(const GridView& g, const GridGradView& gg, const Optimi
 
 namespace plx::PLX_BACKEND_NS {
 
-void RmsPropStep(const ExecContext& ctx, const GridView& grid, const GridGradView& grad,
-                 const OptimizerStateView& state, const RmsPropParams& params) {
+void RmsPropStep(const ExecContext& ctx, const GridView& grid, const GridWriteView& write,
+                 const GridGradView& grad, const OptimizerStateView& state,
+                 const RmsPropParams& params) {
   const GridView g = grid;
+  const GridWriteView w = write;
   const GridGradView gg = grad;
   const OptimizerStateView s = state;
   const RmsPropParams p = params;
@@ -65,7 +68,7 @@ void RmsPropStep(const ExecContext& ctx, const GridView& grid, const GridGradVie
     for (int64_t i = first; i < first + per_slice; ++i) {
       if (gg.touched[i] == 0) continue;
       gg.touched[i] = 0;
-      UpdateVertex(g, gg, s, p, i);
+      UpdateVertex(g, w, gg, s, p, i);
     }
   });
   ParallelFor(ctx, g.num_bricks, [=] PLX_HD_LAMBDA(int64_t brick) { gg.brick_touched[brick] = 0; });

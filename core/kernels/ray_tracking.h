@@ -83,7 +83,7 @@ PLX_HD RayPoseJacobian<T> RenderRayPoseJacobian(const GridViewT<T>& grid,
         corner_color[0][k] = corner_color[1][k] = corner_color[2][k] = T(0);
         continue;
       }
-      const T* src = grid.sh + s.slots[k] * kShCoeffCount;
+      const T* src = grid.Sh(s.slots[k]);
       for (int c = 0; c < 3; ++c) {
         T v = T(0);
         for (int b = 0; b < kShBasisCount; ++b) v += src[c * kShBasisCount + b] * basis[b];

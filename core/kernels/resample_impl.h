@@ -7,24 +7,26 @@
 
 namespace plx::PLX_BACKEND_NS {
 
-void ResampleGrid(const ExecContext& ctx, const GridView& target, const GridView& source) {
+void ResampleGrid(const ExecContext& ctx, const GridView& target,
+                  const GridWriteView& target_write, const GridView& source) {
   const GridView dst = target;
+  const GridWriteView out = target_write;
   const GridView src = source;
   ParallelFor(ctx, dst.num_vertices(), [=] PLX_HD_LAMBDA(int64_t vertex) {
     int v[3];
     dst.VertexCoords(vertex, v);
     const Vec3f q = src.ToGrid(dst.VertexPosition(v[0], v[1], v[2]));
-    float* sh = dst.sh + vertex * kShCoeffCount;
+    float* sh = out.Sh(vertex);
     bool inside = true;
     for (int a = 0; a < 3; ++a) inside = inside && q[a] >= 0.0f && q[a] <= src.vertex_extent(a) - 1;
     if (!inside) {
-      dst.density[vertex] = 0.0f;
+      out.Density(vertex) = 0.0f;
       for (int j = 0; j < kShCoeffCount; ++j) sh[j] = 0.0f;
       return;
     }
     CellSample<float> s;
     LocateCell(src, q, &s);
-    dst.density[vertex] = SampleDensity(src, s);
+    out.Density(vertex) = SampleDensity(src, s);
     SampleSh(src, s, sh);
   });
 }

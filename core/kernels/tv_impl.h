@@ -24,7 +24,7 @@ void AddTvGradient(const ExecContext& ctx, const GridView& grid, const GridGradV
     float values[4], grads[4];
     if (lambda_density > 0.0f) {
       // Unstored neighbours read as empty space (zero density).
-      for (int k = 0; k < 4; ++k) values[k] = slots[k] >= 0 ? g.density[slots[k]] : 0.0f;
+      for (int k = 0; k < 4; ++k) values[k] = slots[k] >= 0 ? g.Density(slots[k]) : 0.0f;
       TvGradient(values, lambda_density, grads);
       for (int k = 0; k < 4; ++k) {
         if (slots[k] < 0) continue;
@@ -36,7 +36,7 @@ void AddTvGradient(const ExecContext& ctx, const GridView& grid, const GridGradV
       // Unstored neighbours take the centre's value: no colour edge at the map's border.
       for (int j = 0; j < kShCoeffCount; ++j) {
         for (int k = 0; k < 4; ++k) {
-          values[k] = g.sh[(slots[k] >= 0 ? slots[k] : vertex) * kShCoeffCount + j];
+          values[k] = g.Sh(slots[k] >= 0 ? slots[k] : vertex)[j];
         }
         TvGradient(values, lambda_sh, grads);
         for (int k = 0; k < 4; ++k) {

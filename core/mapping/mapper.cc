@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
+#include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
 #include "core/geometry/kernel_camera.h"
 #include "core/mapping/learning_rate.h"
@@ -45,9 +46,12 @@ Mapper::Mapper(const MapperOptions& options, Backend* backend, std::unique_ptr<P
   ResizeOptimizerBuffers();
 }
 
-std::unique_ptr<PlenoxelMap> Mapper::Snapshot() {
-  RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold);
-  return std::make_unique<PlenoxelMap>(*map_);
+absl::StatusOr<std::shared_ptr<const PlenoxelMap>> Mapper::Publish() {
+  PLX_RETURN_IF_ERROR(RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold));
+  return CatchAllocationFailure("publishing the map",
+                                [&]() -> absl::StatusOr<std::shared_ptr<const PlenoxelMap>> {
+                                  return std::make_shared<const PlenoxelMap>(map_->Publish());
+                                });
 }
 
 absl::Status Mapper::ValidateOptions(const MapperOptions& o) {
@@ -118,10 +122,11 @@ absl::Status Mapper::AllocateAndInitialize() {
   const int64_t new_vertices = map_->grid.num_vertices() - first_new_vertex;
   if (options_.initialize_from_depth && new_vertices > 0) {
     const UnifiedVector<TrainingFrameView>& frames = training_.frame_views();
-    backend_->FuseDepth(map_->grid.view(), first_new_vertex, new_vertices, frames.data(),
-                        static_cast<int>(frames.size()), options_.fusion);
+    PLX_RETURN_IF_ERROR(backend_->FuseDepth(map_->grid.view(), map_->grid.write_view(),
+                                            first_new_vertex, new_vertices, frames.data(),
+                                            static_cast<int>(frames.size()), options_.fusion));
   }
-  RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold);
+  PLX_RETURN_IF_ERROR(RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold));
   ResizeOptimizerBuffers();
   summary_.allocation_s += Seconds(start);
   summary_.keyframes = training_.num_frames();
@@ -134,10 +139,11 @@ absl::Status Mapper::Upsample() {
   auto fine = std::make_unique<PlenoxelMap>(options_.voxel_size);
   fine->render = map_->render;
   PLX_RETURN_IF_ERROR(AllocateFrames(0, *fine, options_.voxel_size));
-  RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold);
-  backend_->ResampleGrid(fine->grid.view(), map_->grid.view());
+  PLX_RETURN_IF_ERROR(RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold));
+  PLX_RETURN_IF_ERROR(
+      backend_->ResampleGrid(fine->grid.view(), fine->grid.write_view(), map_->grid.view()));
   map_ = std::move(fine);
-  RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold);
+  PLX_RETURN_IF_ERROR(RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold));
   for (auto* buffer : {&grad_density_, &grad_sh_, &rms_density_, &rms_sh_}) buffer->clear();
   touched_.clear();
   brick_touched_.clear();
@@ -197,23 +203,29 @@ absl::StatusOr<MappingSummary> Mapper::Optimize(const MappingProgressCallback& p
     const GridView grid = map_->grid.view();
     const GridGradView grad = grad_view();
     batch.seed = options_.seed + static_cast<uint32_t>(iteration_) * 7919u;
-    backend_->MappingForwardBackward(grid, grad, rays, batch, losses_.data());
+    PLX_RETURN_IF_ERROR(backend_->MappingForwardBackward(grid, grad, rays, batch, losses_.data()));
     if ((options_.tv_density > 0 || options_.tv_sh > 0) && fraction < options_.tv_until) {
       const int64_t first = static_cast<int64_t>(
           HashIndex(batch.seed ^ 0x5bd1e995u, 0, static_cast<uint64_t>(grid.num_vertices())));
-      backend_->AddTvGradient(grid, grad, first, tv_count, options_.tv_density, options_.tv_sh);
+      PLX_RETURN_IF_ERROR(backend_->AddTvGradient(grid, grad, first, tv_count,
+                                                  options_.tv_density, options_.tv_sh));
     }
     rms.lr_density = static_cast<float>(
         LogLinearLearningRate(options_.lr_density_start, options_.lr_density_end, fraction));
     rms.lr_sh =
         static_cast<float>(LogLinearLearningRate(options_.lr_sh_start, options_.lr_sh_end, fraction));
-    backend_->RmsPropStep(grid, grad, state_view(), rms);
+    // The step writes the bricks that received gradient: clone those a published version
+    // still shares (copy-on-write), then take the views again (the tables changed).
+    summary_.cloned_bricks += map_->grid.MakePrivate(brick_touched_.data());
+    PLX_RETURN_IF_ERROR(backend_->RmsPropStep(map_->grid.view(), map_->grid.write_view(), grad,
+                                              state_view(), rms));
     ++iteration_;
     ++done;
     if (done % kOccupancyRefreshInterval == 0) {
       // Densities only mark cells occupied on the way up; drop the cells that emptied since.
       map_->grid.mark_occupancy_stale();
-      RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold);
+      PLX_RETURN_IF_ERROR(
+          RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold));
     }
 
     const bool report = progress && (done % options_.progress_every == 0 || done == 1);

@@ -79,6 +79,7 @@ struct MappingSummary {
   GridMemory memory;
   int64_t optimizer_bytes = 0;  // gradients + RMSProp state
   bool upsampled = false;       // coarse-to-fine switched to the final voxel size
+  int64_t cloned_bricks = 0;    // bricks copied because a published version shared them
 };
 
 // Return false to stop the optimisation early (cancellation).
@@ -113,9 +114,10 @@ class Mapper {
     return options_.max_iterations > 0 && iteration_ >= options_.max_iterations;
   }
 
-  // A copy of the current map with exact cell occupancy, for readers that must not see
-  // the optimiser's writes (the daemon's published versions).
-  std::unique_ptr<PlenoxelMap> Snapshot();
+  // A version of the current map for readers (the daemon's published versions), with exact
+  // cell occupancy. Copy-on-write: it shares every brick with the mapper's map, which clones a
+  // brick before its next change, so this costs the index, not the bricks.
+  absl::StatusOr<std::shared_ptr<const PlenoxelMap>> Publish();
 
   PlenoxelMap& map() { return *map_; }
   std::unique_ptr<PlenoxelMap> ReleaseMap() { return std::move(map_); }

@@ -3,13 +3,17 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/common/allocation_guard.h"
+#include "core/common/status_macros.h"
 #include "core/geometry/kernel_camera.h"
 
 namespace plx {
 
-RenderedPixels RenderPixels(Backend& backend, PlenoxelMap& map, const SE3& world_T_camera,
-                            const PinholeIntrinsics& intrinsics,
-                            const std::vector<int32_t>& pixels) {
+absl::StatusOr<RenderedPixels> RenderPixels(Backend& backend, const PlenoxelMap& map,
+                                            const SE3& world_T_camera,
+                                            const PinholeIntrinsics& intrinsics,
+                                            const std::vector<int32_t>& pixels) {
+  return CatchAllocationFailure("rendering", [&]() -> absl::StatusOr<RenderedPixels> {
   const int64_t n = pixels.empty() ? static_cast<int64_t>(intrinsics.width) * intrinsics.height
                                    : static_cast<int64_t>(pixels.size());
   RenderedPixels out;
@@ -24,19 +28,19 @@ RenderedPixels RenderPixels(Backend& backend, PlenoxelMap& map, const SE3& world
     }
     return out;
   }
-  RefreshOccupancyIfStale(backend, map.grid, map.render.sigma_threshold);
   // The caller's pixel list is ordinary host memory; a GPU backend reads the unified copy.
   const UnifiedVector<int32_t> pixel_ids(pixels.begin(), pixels.end());
-  backend.RenderPixels(map.grid.view(), ToKernelCamera(world_T_camera, intrinsics),
-                       pixel_ids.empty() ? nullptr : pixel_ids.data(), n, map.render,
-                       out.color.data(), out.depth.data(), out.opacity.data(),
-                       out.median_depth.data());
+  PLX_RETURN_IF_ERROR(backend.RenderPixels(
+      map.grid.view(), ToKernelCamera(world_T_camera, intrinsics),
+      pixel_ids.empty() ? nullptr : pixel_ids.data(), n, map.render, out.color.data(),
+      out.depth.data(), out.opacity.data(), out.median_depth.data()));
   return out;
+  });
 }
 
-RenderedView RenderView(Backend& backend, PlenoxelMap& map, const SE3& world_T_camera,
-                        const PinholeIntrinsics& k) {
-  const RenderedPixels px = RenderPixels(backend, map, world_T_camera, k);
+absl::StatusOr<RenderedView> RenderView(Backend& backend, const PlenoxelMap& map,
+                                        const SE3& world_T_camera, const PinholeIntrinsics& k) {
+  PLX_ASSIGN_OR_RETURN(const RenderedPixels px, RenderPixels(backend, map, world_T_camera, k));
   RenderedView view;
   view.color = ColorImage(k.width, k.height, 3);
   view.z_depth = DepthImage(k.width, k.height, 1);

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "absl/status/statusor.h"
 #include "core/common/unified_allocator.h"
 #include "core/geometry/image.h"
 #include "core/geometry/intrinsics.h"
@@ -31,10 +32,12 @@ struct RenderedPixels {
 };
 
 // Renders the given pixel ids (v * width + u); all pixels in order when `pixels` is empty.
-// `pixels` may be host memory (it is copied into a UnifiedVector for the backend).
-RenderedPixels RenderPixels(Backend& backend, PlenoxelMap& map, const SE3& world_T_camera,
-                            const PinholeIntrinsics& intrinsics,
-                            const std::vector<int32_t>& pixels = {});
+// `pixels` may be host memory (it is copied into a UnifiedVector for the backend). The map is
+// only read (a published version; see Tracker for occupancy). Errors: the backend's.
+absl::StatusOr<RenderedPixels> RenderPixels(Backend& backend, const PlenoxelMap& map,
+                                            const SE3& world_T_camera,
+                                            const PinholeIntrinsics& intrinsics,
+                                            const std::vector<int32_t>& pixels = {});
 
 struct RenderedView {
   ColorImage color;    // clamped to [0, 1]
@@ -42,7 +45,8 @@ struct RenderedView {
   Image<float> opacity;
 };
 
-RenderedView RenderView(Backend& backend, PlenoxelMap& map, const SE3& world_T_camera,
-                        const PinholeIntrinsics& intrinsics);
+absl::StatusOr<RenderedView> RenderView(Backend& backend, const PlenoxelMap& map,
+                                        const SE3& world_T_camera,
+                                        const PinholeIntrinsics& intrinsics);
 
 }  // namespace plx

@@ -6,7 +6,7 @@
 namespace plx {
 
 absl::StatusOr<TrackDatasetResult> TrackDataset(
-    const RgbdDataset& dataset, PlenoxelMap& map, Backend& backend, const TrackerOptions& options,
+    const RgbdDataset& dataset, const PlenoxelMap& map, Backend& backend, const TrackerOptions& options,
     const std::function<bool(int, const TrackingResult&)>& progress) {
   PLX_RETURN_IF_ERROR(Tracker::ValidateOptions(options));
   if (dataset.size() == 0) return absl::InvalidArgumentError("the dataset has no frames");
@@ -28,7 +28,7 @@ absl::StatusOr<TrackDatasetResult> TrackDataset(
   const PinholeIntrinsics& k = dataset.calibration().pinhole;
   for (int i = 1; i < dataset.size(); ++i) {
     PLX_ASSIGN_OR_RETURN(RgbdFrame frame, dataset.LoadFrame(i));
-    TrackingResult r = tracker.Track(frame, k);
+    PLX_ASSIGN_OR_RETURN(TrackingResult r, tracker.Track(frame, k));
     ms.push_back(r.milliseconds);
     out.lost += r.state == TrackingState::kLost;
     out.degraded += r.state == TrackingState::kDegraded;

@@ -7,6 +7,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/common/status_macros.h"
 #include "core/geometry/kernel_camera.h"
 
 namespace plx {
@@ -32,7 +33,7 @@ const char* TrackingStateName(TrackingState state) {
   return "?";
 }
 
-Tracker::Tracker(PlenoxelMap* map, Backend* backend, const TrackerOptions& options)
+Tracker::Tracker(const PlenoxelMap* map, Backend* backend, const TrackerOptions& options)
     : map_(map), backend_(backend), options_(options) {}
 
 absl::Status Tracker::ValidateOptions(const TrackerOptions& o) {
@@ -81,18 +82,22 @@ void Tracker::SamplePixels(const RgbdFrame& frame, int count) {
   for (int32_t& p : pixels_) p = valid_pixels_[pick(rng)];
 }
 
-TrackingSums Tracker::Evaluate(const SE3& pose, const RgbdFrame& frame,
-                               const PinholeIntrinsics& k, int rays, TrackingLoss loss,
-                               float scale[2], bool estimate_scale) {
+absl::StatusOr<TrackingSums> Tracker::Evaluate(const SE3& pose, const RgbdFrame& frame,
+                                               const PinholeIntrinsics& k, int rays,
+                                               TrackingLoss loss, float scale[2],
+                                               bool estimate_scale) {
   TrainingFrameView view;
   view.camera = ToKernelCamera(pose, k);
   view.color = frame.color.data.data();
   view.depth = frame.depth.data.data();
   terms_.resize(static_cast<size_t>(rays));
-  backend_->ComputeTrackingTerms(map_->grid.view(), view, pixels_.data(), rays, options_.params,
-                                 terms_.data());
+  PLX_RETURN_IF_ERROR(backend_->ComputeTrackingTerms(map_->grid.view(), view, pixels_.data(),
+                                                     rays, options_.params, terms_.data()));
   if (estimate_scale) RobustScales(rays, scale);
-  return backend_->ReduceTrackingTerms(terms_.data(), rays, loss, options_.huber_k, scale);
+  TrackingSums sums;
+  PLX_RETURN_IF_ERROR(
+      backend_->ReduceTrackingTerms(terms_.data(), rays, loss, options_.huber_k, scale, &sums));
+  return sums;
 }
 
 void Tracker::RobustScales(int rays, float scale[2]) {
@@ -114,8 +119,8 @@ void Tracker::RobustScales(int rays, float scale[2]) {
   }
 }
 
-void Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* pose,
-                             TrackingResult* result, TrackingSums* last) {
+absl::Status Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrinsics& k,
+                                     SE3* pose, TrackingResult* result, TrackingSums* last) {
   const int total = static_cast<int>(pixels_.size());
   const int coarse_rays = std::max(16, total / options_.coarse_divisor);
   const int coarse_iterations = options_.coarse_divisor > 1 ? options_.iterations / 2 : 0;
@@ -131,8 +136,9 @@ void Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrinsics& k,
     bool have_accepted = false;
     double lambda = 1e-4;
     for (int it = 0; it < budget; ++it, ++iteration) {
-      TrackingSums sums = Evaluate(*pose, frame, k, rays, TrackingLoss::kHuber, scale,
-                                   options_.adaptive_scale && it == 0);
+      PLX_ASSIGN_OR_RETURN(TrackingSums sums,
+                           Evaluate(*pose, frame, k, rays, TrackingLoss::kHuber, scale,
+                                    options_.adaptive_scale && it == 0));
       scale[0] = std::max(scale[0], color_stretch);
       const double cost = sums.valid_rays > 0 ? sums.cost / sums.residual_count : HUGE_VAL;
       const double accepted_cost =
@@ -142,7 +148,7 @@ void Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrinsics& k,
         if (!have_accepted) {
           *last = sums;
           result->iterations = iteration + 1;
-          return;
+          return absl::OkStatus();
         }
         *pose = accepted;
         sums = accepted_sums;
@@ -168,10 +174,11 @@ void Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrinsics& k,
     }
   }
   result->iterations = iteration;
+  return absl::OkStatus();
 }
 
-void Tracker::RunAdam(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* pose,
-                      TrackingResult* result, TrackingSums* last) {
+absl::Status Tracker::RunAdam(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* pose,
+                              TrackingResult* result, TrackingSums* last) {
   Vector6d m = Vector6d::Zero(), v = Vector6d::Zero();
   const double beta1 = 0.9, beta2 = 0.999, eps = 1e-8;
   TrackingParams saved = options_.params;
@@ -180,8 +187,13 @@ void Tracker::RunAdam(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* p
     SamplePixels(frame, options_.rays);  // the reference draws new rays every step
     ++frame_counter_;
     float unit[2] = {1.0f, 1.0f};
-    const TrackingSums sums = Evaluate(*pose, frame, k, static_cast<int>(pixels_.size()),
-                                       TrackingLoss::kL1, unit, false);
+    absl::StatusOr<TrackingSums> evaluated = Evaluate(
+        *pose, frame, k, static_cast<int>(pixels_.size()), TrackingLoss::kL1, unit, false);
+    if (!evaluated.ok()) {
+      options_.params = saved;
+      return evaluated.status();
+    }
+    const TrackingSums& sums = *evaluated;
     *last = sums;
     if (sums.valid_rays < kPoseDim) break;
     const Vector6d g = Eigen::Map<const Eigen::Matrix<double, 6, 1>>(sums.g) / sums.valid_rays;
@@ -199,8 +211,9 @@ void Tracker::RunAdam(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* p
   // Score the final pose with the Gauss-Newton residuals so states mean the same in both modes.
   SamplePixels(frame, options_.rays);
   float unit[2] = {1.0f, 1.0f};
-  *last = Evaluate(*pose, frame, k, static_cast<int>(pixels_.size()), TrackingLoss::kHuber, unit,
-                   false);
+  PLX_ASSIGN_OR_RETURN(*last, Evaluate(*pose, frame, k, static_cast<int>(pixels_.size()),
+                                       TrackingLoss::kHuber, unit, false));
+  return absl::OkStatus();
 }
 
 void Tracker::Classify(const SE3& predicted, const TrackingSums& last,
@@ -236,8 +249,9 @@ void Tracker::Classify(const SE3& predicted, const TrackingSums& last,
   }
 }
 
-TrackingResult Tracker::Track(const RgbdFrame& frame, const PinholeIntrinsics& k,
-                              const std::optional<SE3>& prior) {
+absl::StatusOr<TrackingResult> Tracker::Track(const RgbdFrame& frame,
+                                              const PinholeIntrinsics& k,
+                                              const std::optional<SE3>& prior) {
   const auto start = std::chrono::steady_clock::now();
   TrackingResult result;
   const SE3 predicted = prior ? *prior : Predict(frame.timestamp);
@@ -249,14 +263,13 @@ TrackingResult Tracker::Track(const RgbdFrame& frame, const PinholeIntrinsics& k
                         frame.depth.width == k.width && frame.depth.height == k.height &&
                         frame.color.channels == 3 && frame.depth.channels == 1;
   if (sizes_ok && map_->grid.num_bricks() > 0) {
-    RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold);
     options_.params.render = map_->render;
     if (options_.mode == TrackingMode::kGaussNewton) {
       SamplePixels(frame, options_.rays);
       ++frame_counter_;
-      if (!pixels_.empty()) RunGaussNewton(frame, k, &pose, &result, &last);
+      if (!pixels_.empty()) PLX_RETURN_IF_ERROR(RunGaussNewton(frame, k, &pose, &result, &last));
     } else {
-      RunAdam(frame, k, &pose, &result, &last);
+      PLX_RETURN_IF_ERROR(RunAdam(frame, k, &pose, &result, &last));
     }
   }
   result.pose = pose;

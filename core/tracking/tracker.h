@@ -81,38 +81,43 @@ struct TrackingResult {
 
 class Tracker {
  public:
-  // `map` and `backend` must outlive the tracker; the map is only read.
-  Tracker(PlenoxelMap* map, Backend* backend, const TrackerOptions& options);
+  // `map` and `backend` must outlive the tracker (or the next set_map). The map is only read:
+  // a published version shared with other readers, whose cell occupancy its publisher made
+  // exact (stale occupancy is still correct, only slower).
+  Tracker(const PlenoxelMap* map, Backend* backend, const TrackerOptions& options);
 
   static absl::Status ValidateOptions(const TrackerOptions& options);
 
   // Switches to another version of the map (the daemon's readers follow mapping jobs); the pose
   // and motion model carry over.
-  void set_map(PlenoxelMap* map) { map_ = map; }
+  void set_map(const PlenoxelMap* map) { map_ = map; }
 
   // Starts from a known pose (e.g. the first frame's ground truth) at `timestamp`.
   void Reset(const SE3& world_T_camera, double timestamp);
 
   // Tracks one frame. `prior` (e.g. a headset's VIO pose) replaces the constant-velocity
-  // prediction as the initial guess.
-  TrackingResult Track(const RgbdFrame& frame, const PinholeIntrinsics& intrinsics,
-                       const std::optional<SE3>& prior = std::nullopt);
+  // prediction as the initial guess. Errors are the backend's (device, memory), not the
+  // frame's: a frame that cannot be tracked is a LOST result.
+  absl::StatusOr<TrackingResult> Track(const RgbdFrame& frame,
+                                       const PinholeIntrinsics& intrinsics,
+                                       const std::optional<SE3>& prior = std::nullopt);
 
  private:
   SE3 Predict(double timestamp) const;
   void SamplePixels(const RgbdFrame& frame, int count);
   // Computes the per-ray terms at `pose` and sums them with the noise stretched by `scale`
   // (colour, depth); when `estimate_scale` is set, first replaces `scale` by the robust spread.
-  TrackingSums Evaluate(const SE3& pose, const RgbdFrame& frame, const PinholeIntrinsics& k,
-                        int rays, TrackingLoss loss, float scale[2], bool estimate_scale);
-  void RunGaussNewton(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* pose,
-                      TrackingResult* result, TrackingSums* last);
-  void RunAdam(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* pose,
-               TrackingResult* result, TrackingSums* last);
+  absl::StatusOr<TrackingSums> Evaluate(const SE3& pose, const RgbdFrame& frame,
+                                        const PinholeIntrinsics& k, int rays, TrackingLoss loss,
+                                        float scale[2], bool estimate_scale);
+  absl::Status RunGaussNewton(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* pose,
+                              TrackingResult* result, TrackingSums* last);
+  absl::Status RunAdam(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* pose,
+                       TrackingResult* result, TrackingSums* last);
   void RobustScales(int rays, float scale[2]);
   void Classify(const SE3& predicted, const TrackingSums& last, TrackingResult* result) const;
 
-  PlenoxelMap* map_;
+  const PlenoxelMap* map_;
   Backend* backend_;
   TrackerOptions options_;
   SE3 last_pose_;

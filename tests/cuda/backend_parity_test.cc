@@ -45,8 +45,8 @@ float MaxAbs(const UnifiedVector<float>& v) {
 }
 
 // Elements where |a - b| > abs_tol + rel_tol * |a|.
-int64_t CountMismatches(const UnifiedVector<float>& a, const UnifiedVector<float>& b,
-                        double abs_tol, double rel_tol) {
+template <typename Floats>
+int64_t CountMismatches(const Floats& a, const Floats& b, double abs_tol, double rel_tol) {
   EXPECT_EQ(a.size(), b.size());
   int64_t bad = 0;
   for (size_t i = 0; i < std::min(a.size(), b.size()); ++i) {
@@ -161,8 +161,12 @@ PlenoxelMap* CudaParityTest::map_ = nullptr;
 // 1e-4 relative, opacity to 1e-3; at most 0.5% of pixels may differ more (discrete flips at
 // silhouettes and at the transmittance cut-off).
 TEST_F(CudaParityTest, RenderPixelsMatchesCpu) {
-  const RenderedPixels a = RenderPixels(*cpu_, *map_, pose(5), intrinsics());
-  const RenderedPixels b = RenderPixels(*cuda_, *map_, pose(5), intrinsics());
+  absl::StatusOr<RenderedPixels> rendered_a = RenderPixels(*cpu_, *map_, pose(5), intrinsics());
+  absl::StatusOr<RenderedPixels> rendered_b = RenderPixels(*cuda_, *map_, pose(5), intrinsics());
+  ASSERT_TRUE(rendered_a.ok()) << rendered_a.status();
+  ASSERT_TRUE(rendered_b.ok()) << rendered_b.status();
+  const RenderedPixels& a = *rendered_a;
+  const RenderedPixels& b = *rendered_b;
   const int64_t n = static_cast<int64_t>(a.opacity.size());
   ASSERT_EQ(n, int64_t{intrinsics().width} * intrinsics().height);
   const int64_t allowed = n / 200;
@@ -185,8 +189,12 @@ TEST_F(CudaParityTest, MappingGradientsMatchCpu) {
   const MappingBatchParams params = BatchParams();
   GradBuffers ga(map_->grid), gb(map_->grid);
   UnifiedVector<MappingRayLoss> la(params.batch_size), lb(params.batch_size);
-  cpu_->MappingForwardBackward(map_->grid.view(), ga.view(), set.rays_view(), params, la.data());
-  cuda_->MappingForwardBackward(map_->grid.view(), gb.view(), set.rays_view(), params, lb.data());
+  ASSERT_TRUE(
+      cpu_->MappingForwardBackward(map_->grid.view(), ga.view(), set.rays_view(), params, la.data())
+          .ok());
+  ASSERT_TRUE(cuda_->MappingForwardBackward(map_->grid.view(), gb.view(), set.rays_view(), params,
+                                            lb.data())
+                  .ok());
 
   int64_t loss_bad = 0;
   for (int64_t i = 0; i < params.batch_size; ++i) {
@@ -238,8 +246,11 @@ TEST_F(CudaParityTest, TrackingNormalEquationsMatchCpu) {
   TrackingParams params;
   params.render = map_->render;
   UnifiedVector<TrackingRayTerm> ta(n), tb(n);
-  cpu_->ComputeTrackingTerms(map_->grid.view(), view, pixels.data(), n, params, ta.data());
-  cuda_->ComputeTrackingTerms(map_->grid.view(), view, pixels.data(), n, params, tb.data());
+  ASSERT_TRUE(
+      cpu_->ComputeTrackingTerms(map_->grid.view(), view, pixels.data(), n, params, ta.data()).ok());
+  ASSERT_TRUE(
+      cuda_->ComputeTrackingTerms(map_->grid.view(), view, pixels.data(), n, params, tb.data())
+          .ok());
 
   int64_t term_bad = 0, valid = 0;
   for (int64_t i = 0; i < n; ++i) {
@@ -264,9 +275,10 @@ TEST_F(CudaParityTest, TrackingNormalEquationsMatchCpu) {
   for (TrackingLoss loss : {TrackingLoss::kHuber, TrackingLoss::kL1}) {
     const float scale[2] = {1.5f, 2.0f};
     const float huber_k = 1.345f;
-    const TrackingSums cpu = cpu_->ReduceTrackingTerms(ta.data(), n, loss, huber_k, scale);
-    const TrackingSums same = cuda_->ReduceTrackingTerms(ta.data(), n, loss, huber_k, scale);
-    const TrackingSums own = cuda_->ReduceTrackingTerms(tb.data(), n, loss, huber_k, scale);
+    TrackingSums cpu, same, own;
+    ASSERT_TRUE(cpu_->ReduceTrackingTerms(ta.data(), n, loss, huber_k, scale, &cpu).ok());
+    ASSERT_TRUE(cuda_->ReduceTrackingTerms(ta.data(), n, loss, huber_k, scale, &same).ok());
+    ASSERT_TRUE(cuda_->ReduceTrackingTerms(tb.data(), n, loss, huber_k, scale, &own).ok());
     double h_max = 0.0, g_max = 0.0;
     for (double h : cpu.H) h_max = std::max(h_max, std::fabs(h));
     for (double g : cpu.g) g_max = std::max(g_max, std::fabs(g));
@@ -298,11 +310,12 @@ TEST_F(CudaParityTest, TrackingNormalEquationsMatchCpu) {
 TEST_F(CudaParityTest, RmsPropStepMatchesCpu) {
   const TrainingSet set = MakeTrainingSet();
   const MappingBatchParams batch = BatchParams();
-  PlenoxelMap a = *map_, b = *map_;
+  PlenoxelMap a = map_->ShareCopy(), b = map_->ShareCopy();
   GradBuffers grads(map_->grid);
   UnifiedVector<MappingRayLoss> losses(batch.batch_size);
-  cpu_->MappingForwardBackward(map_->grid.view(), grads.view(), set.rays_view(), batch,
-                               losses.data());
+  ASSERT_TRUE(cpu_->MappingForwardBackward(map_->grid.view(), grads.view(), set.rays_view(),
+                                           batch, losses.data())
+                  .ok());
   const int64_t n = map_->grid.num_vertices();
   UnifiedVector<float> rms_da(n, 0.0f), rms_sa(n * kShCoeffCount, 0.0f);
   UnifiedVector<float> rms_db(n, 0.0f), rms_sb(n * kShCoeffCount, 0.0f);
@@ -312,8 +325,14 @@ TEST_F(CudaParityTest, RmsPropStepMatchesCpu) {
   params.sigma_threshold = map_->render.sigma_threshold;
   for (int step = 0; step < 2; ++step) {
     GradBuffers ga = grads, gb = grads;  // the step consumes (clears) them
-    cpu_->RmsPropStep(a.grid.view(), ga.view(), {rms_da.data(), rms_sa.data()}, params);
-    cuda_->RmsPropStep(b.grid.view(), gb.view(), {rms_db.data(), rms_sb.data()}, params);
+    a.grid.MakePrivate(ga.brick_touched.data());
+    b.grid.MakePrivate(gb.brick_touched.data());
+    ASSERT_TRUE(cpu_->RmsPropStep(a.grid.view(), a.grid.write_view(), ga.view(),
+                                  {rms_da.data(), rms_sa.data()}, params)
+                    .ok());
+    ASSERT_TRUE(cuda_->RmsPropStep(b.grid.view(), b.grid.write_view(), gb.view(),
+                                   {rms_db.data(), rms_sb.data()}, params)
+                    .ok());
     for (size_t v = 0; v < ga.touched.size(); ++v) {
       ASSERT_EQ(ga.touched[v], 0);
       ASSERT_EQ(gb.touched[v], 0) << "vertex " << v;
@@ -321,11 +340,11 @@ TEST_F(CudaParityTest, RmsPropStepMatchesCpu) {
     EXPECT_EQ(std::count(gb.density.begin(), gb.density.end(), 0.0f),
               static_cast<std::ptrdiff_t>(gb.density.size()));
   }
-  EXPECT_EQ(CountMismatches(a.grid.density(), b.grid.density(), 1e-7, 1e-5), 0);
-  EXPECT_EQ(CountMismatches(a.grid.sh(), b.grid.sh(), 1e-7, 1e-5), 0);
+  EXPECT_EQ(CountMismatches(a.grid.DensityValues(), b.grid.DensityValues(), 1e-7, 1e-5), 0);
+  EXPECT_EQ(CountMismatches(a.grid.ShValues(), b.grid.ShValues(), 1e-7, 1e-5), 0);
   EXPECT_EQ(CountMismatches(rms_da, rms_db, 1e-12, 1e-5), 0);
   EXPECT_EQ(CountMismatches(rms_sa, rms_sb, 1e-12, 1e-5), 0);
-  EXPECT_NE(CountMismatches(map_->grid.density(), a.grid.density(), 0.0, 0.0), 0)
+  EXPECT_NE(CountMismatches(map_->grid.DensityValues(), a.grid.DensityValues(), 0.0, 0.0), 0)
       << "the steps should change the map";
 }
 

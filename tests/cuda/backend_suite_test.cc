@@ -39,7 +39,8 @@ TEST_P(ReduceTest, ReduceTrackingTermsEqualsTheSerialSum) {
       TrackingSums serial;
       serial.Clear();
       for (const TrackingRayTerm& t : terms) AccumulateTrackingTerm(t, loss, 1.345f, scale, &serial);
-      const TrackingSums s = backend().ReduceTrackingTerms(terms.data(), count, loss, 1.345f, scale);
+      TrackingSums s;
+      ASSERT_TRUE(backend().ReduceTrackingTerms(terms.data(), count, loss, 1.345f, scale, &s).ok());
       auto near = [](double a, double b) { return std::fabs(a - b) <= 1e-9 * (1.0 + std::fabs(b)); };
       for (int i = 0; i < kNormalUpper; ++i) EXPECT_PRED2(near, s.H[i], serial.H[i]) << i;
       for (int i = 0; i < kPoseDim; ++i) EXPECT_PRED2(near, s.g[i], serial.g[i]) << i;
@@ -70,7 +71,9 @@ TEST_P(PipelineTest, MapsRendersAndTracksTheSyntheticRoom) {
   const PinholeIntrinsics& k = dataset->calibration().pinhole;
 
   const RgbdFrame& held_out = dataset->frames()[5];
-  const RenderedView view = RenderView(backend(), map, *held_out.world_T_camera, k);
+  absl::StatusOr<RenderedView> rendered = RenderView(backend(), map, *held_out.world_T_camera, k);
+  ASSERT_TRUE(rendered.ok()) << rendered.status();
+  const RenderedView& view = *rendered;
   double se = 0.0;
   for (size_t i = 0; i < view.color.data.size(); ++i) {
     const double e = view.color.data[i] - held_out.color.data[i];
@@ -85,7 +88,9 @@ TEST_P(PipelineTest, MapsRendersAndTracksTheSyntheticRoom) {
   const SE3 start = *frame.world_T_camera * SE3::Exp(offset);
   Tracker tracker(&map, &backend(), TrackerOptions());
   tracker.Reset(start, frame.timestamp - 1.0 / 30);
-  const TrackingResult r = tracker.Track(frame, k, start);
+  absl::StatusOr<TrackingResult> tracked = tracker.Track(frame, k, start);
+  ASSERT_TRUE(tracked.ok()) << tracked.status();
+  const TrackingResult& r = *tracked;
   EXPECT_EQ(r.state, TrackingState::kOk) << r.reason;
   EXPECT_LT((frame.world_T_camera->Inverse() * r.pose).translation().norm(), 5e-3);
 }

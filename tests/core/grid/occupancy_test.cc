@@ -8,6 +8,7 @@
 #include "core/grid/sparse_grid.h"
 #include "core/kernels/backend.h"
 #include "core/kernels/ray_render.h"
+#include "tests/grid_fill.h"
 
 namespace plx {
 namespace {
@@ -21,8 +22,8 @@ SparseGrid MakeSparseDensityGrid(std::mt19937& rng) {
       for (int z = -1; z <= 1; ++z) bricks.push_back({x, y, z});
   EXPECT_TRUE(grid.AllocateBricks(bricks).ok());
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
-  for (float& d : grid.density()) d = u(rng) < 0.05f ? 40.0f * u(rng) : -u(rng);
-  for (float& s : grid.sh()) s = 0.2f * (u(rng) - 0.5f);
+  testing::FillDensity(grid, [&] { return u(rng) < 0.05f ? 40.0f * u(rng) : -u(rng); });
+  testing::FillSh(grid, [&] { return 0.2f * (u(rng) - 0.5f); });
   return grid;
 }
 
@@ -31,7 +32,7 @@ TEST(OccupancyTest, RefreshedBitsMatchCornerDensities) {
   SparseGrid grid = MakeSparseDensityGrid(rng);
   std::unique_ptr<Backend> backend = MakeCpuBackend(2);
   ASSERT_TRUE(grid.occupancy_stale());
-  RefreshOccupancyIfStale(*backend, grid, 0.0f);
+  ASSERT_TRUE(RefreshOccupancyIfStale(*backend, grid, 0.0f).ok());
   EXPECT_FALSE(grid.occupancy_stale());
   const GridView g = grid.view();
   int occupied = 0, empty = 0;
@@ -46,7 +47,7 @@ TEST(OccupancyTest, RefreshedBitsMatchCornerDensities) {
           for (int c = 0; c < 8; ++c) {
             const int64_t slot = g.VertexSlot(bx * 8 + x + (c & 1), by * 8 + y + ((c >> 1) & 1),
                                               bz * 8 + z + ((c >> 2) & 1));
-            expect |= slot >= 0 && g.density[slot] > 0.0f;
+            expect |= slot >= 0 && g.Density(slot) > 0.0f;
           }
           EXPECT_EQ(g.CellOccupied(bits, x, y, z), expect);
           (expect ? occupied : empty)++;
@@ -72,7 +73,7 @@ TEST(OccupancyTest, SkippingEmptyCellsDoesNotChangeRenders) {
     rays.push_back({o, Normalized(target - o)});
     before.push_back(RenderRay(all_occupied, rays.back().first, rays.back().second, options));
   }
-  RefreshOccupancyIfStale(*backend, grid, options.sigma_threshold);
+  ASSERT_TRUE(RefreshOccupancyIfStale(*backend, grid, options.sigma_threshold).ok());
   const GridView refreshed = grid.view();
   int hits = 0;
   for (size_t r = 0; r < rays.size(); ++r) {
@@ -89,14 +90,14 @@ TEST(OccupancyTest, MarkingAVertexOccupiesItsEightCells) {
   SparseGrid grid(0.1f);
   ASSERT_TRUE(grid.AllocateBricks(std::vector<BrickCoord>{{0, 0, 0}, {1, 0, 0}}).ok());
   std::unique_ptr<Backend> backend = MakeCpuBackend(1);
-  for (float& d : grid.density()) d = 0.0f;
-  RefreshOccupancyIfStale(*backend, grid, 0.0f);
+  testing::FillDensity(grid, [] { return 0.0f; });
+  ASSERT_TRUE(RefreshOccupancyIfStale(*backend, grid, 0.0f).ok());
   GridView g = grid.view();
   // Vertex at local (0, 3, 3) of brick (1,0,0): its cells straddle blocks (0,..) and (1,..).
   const int ox = -grid.index_min()[0] * 8, oy = -grid.index_min()[1] * 8,
             oz = -grid.index_min()[2] * 8;
   const int vx = ox + 8, vy = oy + 3, vz = oz + 3;
-  g.MarkCellsAroundVertex(vx, vy, vz);
+  grid.write_view().MarkCellsAroundVertex(g, vx, vy, vz);
   for (int c = 0; c < 8; ++c) {
     const int cx = vx - (c & 1), cy = vy - ((c >> 1) & 1), cz = vz - ((c >> 2) & 1);
     EXPECT_TRUE(g.CellOccupied(g.BlockCells(cx >> 3, cy >> 3, cz >> 3), cx & 7, cy & 7, cz & 7));

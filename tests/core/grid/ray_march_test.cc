@@ -37,7 +37,8 @@ TEST(RayMarchTest, SkippingVisitsEverySampleThatTouchesStoredVertices) {
   for (int i = 0; i < 25; ++i) bricks.push_back({b(rng), b(rng), b(rng)});
   ASSERT_TRUE(grid.AllocateBricks(bricks).ok());
   std::vector<double> density(grid.num_vertices(), 1.0), sh(grid.num_vertices() * 27, 0.0);
-  const GridViewT<double> g = grid.ViewOf(density.data(), sh.data());
+  const ContiguousBrickTables<double> tables(density.data(), sh.data(), grid.num_bricks());
+  const GridViewT<double> g = tables.ViewOf(grid);
 
   std::normal_distribution<double> n(0, 1);
   int total_samples = 0;
@@ -69,7 +70,8 @@ TEST(RayMarchTest, StopsWhenTheVisitorSaysSo) {
   SparseGrid grid(0.1f);
   ASSERT_TRUE(grid.AllocateBricks(std::vector<BrickCoord>{{0, 0, 0}}).ok());
   std::vector<double> density(grid.num_vertices(), 1.0), sh(grid.num_vertices() * 27, 0.0);
-  const GridViewT<double> g = grid.ViewOf(density.data(), sh.data());
+  const ContiguousBrickTables<double> tables(density.data(), sh.data(), grid.num_bricks());
+  const GridViewT<double> g = tables.ViewOf(grid);
   int count = 0;
   MarchRay(g, Vec3d{0.35, 0.35, -1.0}, Vec3d{0, 0, 1}, 0.0, 5.0, 0.05,
            [&](double, const CellSample<double>&) { return ++count < 3; });
@@ -80,7 +82,8 @@ TEST(RayMarchTest, MissingTheGridVisitsNothing) {
   SparseGrid grid(0.1f);
   ASSERT_TRUE(grid.AllocateBricks(std::vector<BrickCoord>{{0, 0, 0}}).ok());
   std::vector<double> density(grid.num_vertices(), 1.0), sh(grid.num_vertices() * 27, 0.0);
-  const GridViewT<double> g = grid.ViewOf(density.data(), sh.data());
+  const ContiguousBrickTables<double> tables(density.data(), sh.data(), grid.num_bricks());
+  const GridViewT<double> g = tables.ViewOf(grid);
   int count = 0;
   MarchRay(g, Vec3d{50, 50, 50}, Vec3d{1, 0, 0}, 0.0, 10.0, 0.05,
            [&](double, const CellSample<double>&) { return ++count > 0; });

@@ -16,9 +16,9 @@ TEST(SparseGridTest, AllocatesBricksOnceAndFindsThem) {
   EXPECT_EQ(grid.FindBrick({1, 0, 0}), 1);
   EXPECT_EQ(grid.FindBrick({-3, 2, 5}), 2);
   EXPECT_EQ(grid.FindBrick({7, 7, 7}), -1);
-  EXPECT_EQ(grid.density().size(), 3u * 512);
-  EXPECT_FLOAT_EQ(grid.density()[100], 0.5f);
-  EXPECT_EQ(grid.sh().size(), 3u * 512 * 27);
+  EXPECT_EQ(grid.DensityValues().size(), 3u * 512);
+  EXPECT_FLOAT_EQ(grid.density(100), 0.5f);
+  EXPECT_EQ(grid.ShValues().size(), 3u * 512 * 27);
   // Allocating again adds nothing.
   EXPECT_EQ(*grid.AllocateBricks(bricks), 0);
 }
@@ -26,11 +26,11 @@ TEST(SparseGridTest, AllocatesBricksOnceAndFindsThem) {
 TEST(SparseGridTest, IndexGrowsAndKeepsSlots) {
   SparseGrid grid(0.05f);
   ASSERT_TRUE(grid.AllocateBricks(std::vector<BrickCoord>{{0, 0, 0}}).ok());
-  grid.density()[7] = 3.0f;
+  grid.mutable_brick_density(0)[7] = 3.0f;
   ASSERT_TRUE(grid.AllocateBricks(std::vector<BrickCoord>{{40, -30, 12}}).ok());
   EXPECT_EQ(grid.FindBrick({0, 0, 0}), 0);
   EXPECT_EQ(grid.FindBrick({40, -30, 12}), 1);
-  EXPECT_FLOAT_EQ(grid.density()[7], 3.0f);
+  EXPECT_FLOAT_EQ(grid.density(7), 3.0f);
   const auto& lo = grid.index_min();
   const auto& dims = grid.index_dims();
   EXPECT_LE(lo[0], 0);

@@ -29,6 +29,7 @@
 #include "core/render/render_view.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/grid_fill.h"
 #include "tests/test_util.h"
 
 namespace plx {
@@ -81,8 +82,8 @@ float Uniform(std::mt19937& rng, float lo, float hi) {
 
 void FillRandom(PlenoxelMap& map, uint32_t seed, float density_lo, float density_hi) {
   std::mt19937 rng(seed);
-  for (float& d : map.grid.density()) d = Uniform(rng, density_lo, density_hi);
-  for (float& s : map.grid.sh()) s = Uniform(rng, -0.5f, 0.5f);
+  testing::FillDensity(map.grid, [&] { return Uniform(rng, density_lo, density_hi); });
+  testing::FillSh(map.grid, [&] { return Uniform(rng, -0.5f, 0.5f); });
 }
 
 // A few bricks far apart and at negative coordinates, allocated in two calls so the slot order
@@ -95,9 +96,9 @@ std::unique_ptr<PlenoxelMap> MakeTestMap() {
   EXPECT_TRUE(map->grid.AllocateBricks(second).ok());
   FillRandom(*map, 1234u, -2.0f, 40.0f);
   // Values that arithmetic would disturb: the file layer must copy bits, never compute on them.
-  map->grid.density()[0] = -0.0f;
-  map->grid.density()[1] = std::numeric_limits<float>::denorm_min();
-  map->grid.sh()[2] = std::bit_cast<float>(0x7fc01234u);  // NaN with a payload
+  map->grid.mutable_brick_density(0)[0] = -0.0f;
+  map->grid.mutable_brick_density(0)[1] = std::numeric_limits<float>::denorm_min();
+  map->grid.mutable_brick_sh(0)[2] = std::bit_cast<float>(0x7fc01234u);  // NaN with a payload
   map->render.step_voxels = 0.37f;
   map->render.sigma_threshold = 0.02f;
   map->render.stop_transmittance = 3e-3f;
@@ -130,12 +131,16 @@ void ExpectSameMap(const PlenoxelMap& expected, const PlenoxelMap& actual) {
   for (const BrickCoord& b : expected.grid.brick_coords()) {
     EXPECT_EQ(expected.grid.FindBrick(b), actual.grid.FindBrick(b));
   }
-  ASSERT_EQ(expected.grid.density().size(), actual.grid.density().size());
-  ASSERT_EQ(expected.grid.sh().size(), actual.grid.sh().size());
-  EXPECT_EQ(0, std::memcmp(expected.grid.density().data(), actual.grid.density().data(),
-                           expected.grid.density().size() * sizeof(float)));
-  EXPECT_EQ(0, std::memcmp(expected.grid.sh().data(), actual.grid.sh().data(),
-                           expected.grid.sh().size() * sizeof(float)));
+  const std::vector<float> expected_density = expected.grid.DensityValues();
+  const std::vector<float> actual_density = actual.grid.DensityValues();
+  const std::vector<float> expected_sh = expected.grid.ShValues();
+  const std::vector<float> actual_sh = actual.grid.ShValues();
+  ASSERT_EQ(expected_density.size(), actual_density.size());
+  ASSERT_EQ(expected_sh.size(), actual_sh.size());
+  EXPECT_EQ(0, std::memcmp(expected_density.data(), actual_density.data(),
+                           expected_density.size() * sizeof(float)));
+  EXPECT_EQ(0, std::memcmp(expected_sh.data(), actual_sh.data(),
+                           expected_sh.size() * sizeof(float)));
 }
 
 class MapFileTest : public ::testing::Test {
@@ -213,8 +218,8 @@ TEST_F(MapFileTest, LoadedMapRendersBitIdentically) {
   k.width = 32;
   k.height = 24;
   const std::unique_ptr<Backend> backend = MakeCpuBackend(2);
-  const RenderedPixels a = RenderPixels(*backend, map, SE3::Identity(), k);
-  const RenderedPixels b = RenderPixels(*backend, **loaded, SE3::Identity(), k);
+  const RenderedPixels a = RenderPixels(*backend, map, SE3::Identity(), k).value();
+  const RenderedPixels b = RenderPixels(*backend, **loaded, SE3::Identity(), k).value();
   ASSERT_GT(*std::max_element(a.opacity.begin(), a.opacity.end()), 0.5f) << "map not in view";
   EXPECT_EQ(0, std::memcmp(a.color.data(), b.color.data(), a.color.size() * sizeof(float)));
   EXPECT_EQ(0, std::memcmp(a.depth.data(), b.depth.data(), a.depth.size() * sizeof(float)));

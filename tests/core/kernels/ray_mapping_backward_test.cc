@@ -37,7 +37,8 @@ class MappingBackwardTest : public ::testing::Test {
 
   // A linear functional of the rendering: L = a . colour + b depth.
   double Loss() {
-    const GridViewT<double> g = grid_.ViewOf(density_.data(), sh_.data());
+    const ContiguousBrickTables<double> tables(density_.data(), sh_.data(), grid_.num_bricks());
+    const GridViewT<double> g = tables.ViewOf(grid_);
     const RayRenderResult<double> r = RenderRay(g, origin_, dir_, options_);
     return a_[0] * r.color[0] + a_[1] * r.color[1] + a_[2] * r.color[2] + b_ * r.depth;
   }
@@ -51,7 +52,8 @@ class MappingBackwardTest : public ::testing::Test {
 };
 
 TEST_F(MappingBackwardTest, GradientsMatchCentralDifferences) {
-  GridViewT<double> g = grid_.ViewOf(density_.data(), sh_.data());
+  const ContiguousBrickTables<double> tables(density_.data(), sh_.data(), grid_.num_bricks());
+  GridViewT<double> g = tables.ViewOf(grid_);
   const RayRenderResult<double> fwd = RenderRay(g, origin_, dir_, options_);
   ASSERT_GT(fwd.samples, 10);
   ASSERT_GT(fwd.opacity, 0.5);

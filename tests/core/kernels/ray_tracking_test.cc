@@ -77,7 +77,8 @@ class RayPoseJacobianTest : public ::testing::Test {
     sh_.resize(grid_.num_vertices() * kShCoeffCount);
     // A smooth random field: sums of a few sinusoids, so the spatial gradients are informative.
     const double a = u(rng) * 6, b = u(rng) * 6, c = u(rng) * 6;
-    const GridViewT<double> g = grid_.ViewOf(density_.data(), sh_.data());
+    const ContiguousBrickTables<double> tables(density_.data(), sh_.data(), grid_.num_bricks());
+    const GridViewT<double> g = tables.ViewOf(grid_);
     for (int64_t i = 0; i < grid_.num_vertices(); ++i) {
       int v[3];
       g.VertexCoords(i, v);
@@ -101,7 +102,8 @@ class RayPoseJacobianTest : public ::testing::Test {
   }
 
   std::array<double, 5> Render(const SE3& pose, const Vec3d& d_camera) {
-    const GridViewT<double> g = grid_.ViewOf(density_.data(), sh_.data());
+    const ContiguousBrickTables<double> tables(density_.data(), sh_.data(), grid_.num_bricks());
+    const GridViewT<double> g = tables.ViewOf(grid_);
     const RigidTransform<double> X = ToRigidTransform<double>(pose);
     const RayRenderResult<double> r = RenderRay(g, X.translation(), X.Rotate(d_camera), options_);
     return {r.color[0], r.color[1], r.color[2], r.depth, r.opacity};
@@ -114,7 +116,8 @@ class RayPoseJacobianTest : public ::testing::Test {
 };
 
 TEST_F(RayPoseJacobianTest, MatchesCentralDifferencesOfTheRenderer) {
-  const GridViewT<double> g = grid_.ViewOf(density_.data(), sh_.data());
+  const ContiguousBrickTables<double> tables(density_.data(), sh_.data(), grid_.num_bricks());
+  const GridViewT<double> g = tables.ViewOf(grid_);
   int rays = 0;
   for (double dx : {-0.15, 0.0, 0.12}) {
     for (double dy : {-0.1, 0.07}) {

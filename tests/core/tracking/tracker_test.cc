@@ -39,7 +39,7 @@ class TrackerTest : public ::testing::Test {
     Tracker tracker(map_, backend_, options);
     const RgbdFrame& f = dataset_->frames()[frame];
     tracker.Reset(start, f.timestamp - 1.0 / 30);
-    return tracker.Track(f, dataset_->calibration().pinhole, start);
+    return tracker.Track(f, dataset_->calibration().pinhole, start).value();
   }
 
   static InMemoryDataset* dataset_;
@@ -94,7 +94,7 @@ TEST_F(TrackerTest, AWrongFrameSizeIsLost) {
   small.depth = DepthImage(8, 6, 1);
   Tracker tracker(map_, backend_, TrackerOptions());
   tracker.Reset(SE3(), 0.0);
-  const TrackingResult r = tracker.Track(small, dataset_->calibration().pinhole);
+  const TrackingResult r = tracker.Track(small, dataset_->calibration().pinhole).value();
   EXPECT_EQ(r.state, TrackingState::kLost);
   EXPECT_NE(r.reason.find("size"), std::string::npos) << r.reason;
 }
