@@ -6,7 +6,9 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
 #include "core/geometry/kernel_camera.h"
+#include "core/kernels/refresh_occupancy.h"
 #include "core/mapping/learning_rate.h"
+#include "core/math/hash.h"
 
 namespace plx {
 namespace {

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/geometry/kernel_camera.h"
+#include "core/kernels/refresh_occupancy.h"
 
 namespace plx {
 

@@ -8,6 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "core/geometry/kernel_camera.h"
+#include "core/kernels/refresh_occupancy.h"
 
 namespace plx {
 namespace {
