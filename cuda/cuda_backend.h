@@ -1,5 +1,5 @@
 // The CUDA backend (DESIGN.md §3): the kernel drivers of core/kernels compiled by nvcc, behind
-// the Backend interface. Plain C++ header (no CUDA types) so cuda/make_backend.cc, compiled by
+// the Backend interface. Plain C++ header (no CUDA types) so app/make_backend.cc, compiled by
 // the host compiler, can include it.
 //
 // Memory residency: kernels read and write the host owners' arrays in place. Creating the first

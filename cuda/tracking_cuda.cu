@@ -48,7 +48,7 @@ __device__ void BlockReduceSums(const TrackingSums& local, TrackingSums* out) {
 }
 
 // Pass 1: each thread accumulates a grid-strided subset of rays with the shared per-ray math
-// (AccumulateTrackingTerm, core/tracking/tracking_terms.h), then each block writes one partial.
+// (AccumulateTrackingTerm, core/kernels/tracking_terms.h), then each block writes one partial.
 __global__ void __launch_bounds__(kReduceThreads)
     AccumulateTermsKernel(const TrackingRayTerm* terms, int64_t count, TrackingLoss loss,
                           float huber_k, float color_scale, float depth_scale,

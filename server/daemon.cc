@@ -10,6 +10,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "core/cpu/cpu_backend.h"
 #include "server/log.h"
 
 #ifndef PLX_VERSION
@@ -39,26 +40,16 @@ class ReflectionOption final : public grpc::ServerBuilderOption {
   bool enabled_;
 };
 
-const char* BackendKindText(BackendKind kind) {
-  switch (kind) {
-    case BackendKind::kCpu: return "cpu";
-    case BackendKind::kCuda: return "cuda";
-    case BackendKind::kAuto: return "auto";
-  }
-  return "auto";
-}
-
 // The compute workers of DaemonOptions::backend / gpus, each with its own backend and queue.
 absl::StatusOr<std::vector<std::unique_ptr<DeviceWorker>>> MakeWorkers(const DaemonOptions& o) {
   std::vector<std::unique_ptr<DeviceWorker>> workers;
-  std::vector<int> gpus;
-  if (o.backend == BackendKind::kCpu) {
-    if (o.gpus) {
-      return absl::InvalidArgumentError("--gpus only applies with --backend cuda or auto");
-    }
-  } else if (o.gpus) {
+  if (absl::Status apply = CheckGpusApply(o.backend, o.gpus.has_value()); !apply.ok()) {
+    return apply;
+  }
+  std::vector<int> gpus;  // after the check, only with --backend cuda or auto
+  if (o.gpus) {
     gpus = *o.gpus;
-  } else {
+  } else if (o.backend != BackendKind::kCpu) {
     for (int i = 0; i < CudaDeviceCount(); ++i) gpus.push_back(i);
   }
   if (o.backend == BackendKind::kCuda && gpus.empty()) {

@@ -12,7 +12,7 @@
 
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
-#include "cuda/make_backend.h"
+#include "app/make_backend.h"
 #include "server/daemon_state.h"
 #include "server/metrics.h"
 #include "server/plenoxd_service.h"

@@ -9,8 +9,8 @@
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
-#include "core/common/flags.h"
-#include "cuda/make_backend.h"
+#include "app/flags.h"
+#include "app/make_backend.h"
 #include "server/daemon.h"
 
 namespace {
@@ -87,10 +87,11 @@ int main(int argc, char** argv) {
   absl::StatusOr<plx::BackendKind> backend = plx::ParseBackendKind(flags.GetString("backend"));
   if (!backend.ok()) return Usage(backend.status());
   options.backend = *backend;
+  if (absl::Status gpus_apply = plx::CheckGpusApply(options.backend, flags.IsSet("gpus"));
+      !gpus_apply.ok()) {
+    return Usage(gpus_apply);
+  }
   if (flags.IsSet("gpus")) {
-    if (options.backend == plx::BackendKind::kCpu) {
-      return Usage(absl::InvalidArgumentError("--gpus only applies with --backend cuda or auto"));
-    }
     absl::StatusOr<std::vector<int>> gpus = plx::ParseGpuList(flags.GetString("gpus"));
     if (!gpus.ok()) return Usage(gpus.status());
     options.gpus = *gpus;

@@ -4,8 +4,10 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
-#include "core/io/map_file.h"
+#include "core/cpu/cpu_backend.h"
+#include "core/formats/map_file.h"
 #include "core/kernels/backend.h"
+#include "core/kernels/refresh_occupancy.h"
 #include "server/proto_convert.h"
 
 namespace plx::server {

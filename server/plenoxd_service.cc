@@ -5,7 +5,7 @@
 #include <mutex>
 
 #include "absl/strings/str_cat.h"
-#include "core/io/ply_export.h"
+#include "core/formats/ply_export.h"
 #include "core/render/render_view.h"
 #include "server/grpc_status.h"
 #include "server/integrate_reactor.h"

@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "app/make_backend.h"
 #include "core/kernels/backend.h"
-#include "cuda/make_backend.h"
 
 namespace plx::testing {
 

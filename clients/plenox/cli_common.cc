@@ -10,8 +10,8 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "app/make_backend.h"
 #include "core/common/status_macros.h"
-#include "cuda/make_backend.h"
 
 namespace plx::cli {
 

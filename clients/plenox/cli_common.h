@@ -10,9 +10,9 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "core/common/flags.h"
+#include "app/flags.h"
 #include "core/kernels/backend.h"
-#include "core/io/dataset.h"
+#include "core/datasets/dataset.h"
 #include "core/mapping/mapper.h"
 #include "core/tracking/tracker.h"
 
@@ -91,7 +91,7 @@ absl::StatusOr<TrackerOptions> TrackerOptionsFromFlags(const FlagSet& flags);
 
 // --backend cpu|cuda|auto, --device N, --threads N: where an in-process command computes.
 void AddBackendFlags(FlagSet& flags);
-// Makes the backend the flags ask for (cuda/make_backend.h). On an error it prints it
+// Makes the backend the flags ask for (app/make_backend.h). On an error it prints it
 // ("plenox <command>: ...") and returns nullptr with *exit_code set: usage (2) for a bad flag
 // value (--backend bogus, --device -1, --device with --backend cpu), failure (1) when the
 // backend cannot be made (--backend cuda in a build without CUDA or on a machine without the

@@ -11,10 +11,10 @@
 #include "clients/plenox/synthetic_flags.h"
 #include "core/eval/map_metrics.h"
 #include "core/io/image_io.h"
-#include "core/io/map_file.h"
+#include "core/formats/map_file.h"
 #include "core/mapping/map_dataset.h"
 #include "core/eval/trajectory_metrics.h"
-#include "core/io/trajectory_file.h"
+#include "core/formats/trajectory_file.h"
 #include "core/render/render_view.h"
 #include "core/tracking/track_dataset.h"
 

@@ -5,7 +5,7 @@
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "core/eval/map_metrics.h"
-#include "core/io/map_file.h"
+#include "core/formats/map_file.h"
 
 namespace plx::cli {
 

@@ -7,7 +7,7 @@
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "core/eval/trajectory_metrics.h"
-#include "core/io/trajectory_file.h"
+#include "core/formats/trajectory_file.h"
 
 namespace plx::cli {
 namespace {

@@ -6,7 +6,7 @@
 #include "clients/plenox/commands.h"
 #include "clients/plenox/mapping_progress.h"
 #include "core/eval/map_metrics.h"
-#include "core/io/map_file.h"
+#include "core/formats/map_file.h"
 #include "core/mapping/map_dataset.h"
 
 namespace plx::cli {

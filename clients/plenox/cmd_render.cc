@@ -6,10 +6,10 @@
 #include "absl/strings/str_format.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
+#include "core/formats/map_file.h"
+#include "core/formats/pose_text.h"
 #include "core/io/atomic_write.h"
 #include "core/io/image_io.h"
-#include "core/io/map_file.h"
-#include "core/io/pose_text.h"
 #include "core/render/render_view.h"
 
 namespace plx::cli {

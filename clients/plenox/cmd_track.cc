@@ -4,8 +4,8 @@
 #include "absl/strings/str_format.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
-#include "core/io/map_file.h"
-#include "core/io/trajectory_file.h"
+#include "core/formats/map_file.h"
+#include "core/formats/trajectory_file.h"
 #include "core/tracking/track_dataset.h"
 
 namespace plx::cli {

@@ -5,8 +5,8 @@
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "clients/plenox/remote_client.h"
+#include "core/formats/pose_text.h"
 #include "core/io/atomic_write.h"
-#include "core/io/pose_text.h"
 
 namespace plx::cli {
 namespace {

@@ -11,7 +11,7 @@
 #include "clients/plenox/commands.h"
 #include "clients/plenox/remote_client.h"
 #include "core/io/atomic_write.h"
-#include "core/io/trajectory_file.h"
+#include "core/formats/trajectory_file.h"
 #include "core/tracking/tracker.h"
 
 namespace plx::cli {

@@ -2,8 +2,8 @@
 #pragma once
 
 #include "absl/status/statusor.h"
-#include "core/common/flags.h"
-#include "core/io/synthetic_sequence.h"
+#include "app/flags.h"
+#include "core/synthetic/synthetic_sequence.h"
 
 namespace plx::cli {
 

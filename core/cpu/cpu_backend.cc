@@ -1,8 +1,9 @@
 // Backend implementation on CPU threads: forwards to the plx::cpu kernel drivers.
+#include "core/cpu/cpu_backend.h"
+
 #include <memory>
 
 #include "core/cpu/kernels_cpu.h"
-#include "core/kernels/backend.h"
 
 namespace plx {
 namespace {

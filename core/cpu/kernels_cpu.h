@@ -6,7 +6,7 @@
 #include "core/grid/grid_view.h"
 #include "core/kernels/depth_fusion.h"
 #include "core/kernels/kernel_types.h"
-#include "core/tracking/tracking_terms.h"
+#include "core/kernels/tracking_terms.h"
 
 namespace plx::cpu {
 #include "core/kernels/kernel_declarations.inc"

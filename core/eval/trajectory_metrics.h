@@ -28,7 +28,7 @@
 
 #include "absl/status/statusor.h"
 #include "core/geometry/se3.h"
-#include "core/io/tum_dataset.h"  // StampedPose
+#include "core/geometry/stamped_pose.h"
 
 namespace plx {
 

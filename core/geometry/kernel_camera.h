@@ -5,6 +5,7 @@
 #include "core/geometry/intrinsics.h"
 #include "core/geometry/se3.h"
 #include "core/math/camera_ray.h"
+#include "core/math/rigid_transform.h"
 #include "core/math/vec3.h"
 
 namespace plx {

@@ -3,8 +3,8 @@
 
 #include <string>
 
+#include "core/grid/render_options.h"
 #include "core/grid/sparse_grid.h"
-#include "core/kernels/render_options.h"
 
 namespace plx {
 

@@ -1,4 +1,4 @@
-// CRC-64 for map files (core/io/map_file.h): detects torn writes, truncation that happens to
+// CRC-64 for map files (core/formats/map_file.h): detects torn writes, truncation that happens to
 // land on a plausible size, and bit rot in multi-gigabyte payloads.
 //
 // Variant: CRC-64/XZ (ECMA-182 polynomial 0x42F0E1EBA9EA3693, reflected, initial value and final

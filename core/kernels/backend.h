@@ -24,7 +24,7 @@
 #include "core/grid/grid_view.h"
 #include "core/kernels/depth_fusion.h"
 #include "core/kernels/kernel_types.h"
-#include "core/tracking/tracking_terms.h"
+#include "core/kernels/tracking_terms.h"
 
 namespace plx {
 
@@ -97,11 +97,7 @@ class Backend {
                                        float lambda_density, float lambda_sh) = 0;
 };
 
-// Makes the map's cell occupancy exact for its current densities when it is stale.
-class SparseGrid;
-absl::Status RefreshOccupancyIfStale(Backend& backend, SparseGrid& grid, float sigma_threshold);
-
-// The multithreaded CPU backend (num_threads <= 0: the process-wide pool, one per core).
-std::unique_ptr<Backend> MakeCpuBackend(int num_threads = 0);
+// RefreshOccupancyIfStale: core/kernels/refresh_occupancy.h. MakeCpuBackend:
+// core/cpu/cpu_backend.h.
 
 }  // namespace plx

@@ -8,6 +8,7 @@
 #include "core/common/host_device.h"
 #include "core/kernels/kernel_types.h"
 #include "core/math/depth_noise.h"
+#include "core/math/rigid_transform.h"
 #include "core/math/spherical_harmonics.h"
 #include "core/math/vec3.h"
 

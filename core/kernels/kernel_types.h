@@ -3,7 +3,7 @@
 
 #include <cstdint>
 
-#include "core/kernels/render_options.h"
+#include "core/grid/render_options.h"
 #include "core/math/camera_ray.h"
 #include "core/math/depth_noise.h"
 

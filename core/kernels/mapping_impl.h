@@ -7,6 +7,7 @@
 #include "core/kernels/kernel_types.h"
 #include "core/kernels/ray_mapping_backward.h"
 #include "core/kernels/ray_render.h"
+#include "core/math/hash.h"
 
 namespace plx::PLX_BACKEND_NS {
 

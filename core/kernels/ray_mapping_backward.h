@@ -6,8 +6,8 @@
 #include "core/common/host_device.h"
 #include "core/grid/grid_sample.h"
 #include "core/grid/ray_march.h"
+#include "core/grid/render_options.h"
 #include "core/kernels/ray_render.h"
-#include "core/kernels/render_options.h"
 #include "core/math/volume_render.h"
 
 namespace plx {

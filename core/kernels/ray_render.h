@@ -5,7 +5,7 @@
 #include "core/common/host_device.h"
 #include "core/grid/grid_sample.h"
 #include "core/grid/ray_march.h"
-#include "core/kernels/render_options.h"
+#include "core/grid/render_options.h"
 #include "core/math/spherical_harmonics.h"
 #include "core/math/volume_render.h"
 

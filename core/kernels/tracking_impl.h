@@ -4,7 +4,7 @@
 
 #include "core/kernels/kernel_types.h"
 #include "core/kernels/ray_tracking.h"
-#include "core/tracking/tracking_terms.h"
+#include "core/kernels/tracking_terms.h"
 
 namespace plx::PLX_BACKEND_NS {
 

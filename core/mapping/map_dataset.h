@@ -7,8 +7,8 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "core/datasets/dataset.h"
 #include "core/grid/plenoxel_map.h"
-#include "core/io/dataset.h"
 #include "core/kernels/backend.h"
 #include "core/mapping/mapper.h"
 

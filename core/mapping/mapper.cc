@@ -7,7 +7,9 @@
 #include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
 #include "core/geometry/kernel_camera.h"
+#include "core/kernels/refresh_occupancy.h"
 #include "core/mapping/learning_rate.h"
+#include "core/math/hash.h"
 
 namespace plx {
 namespace {

@@ -2,6 +2,7 @@
 #pragma once
 
 #include "core/common/host_device.h"
+#include "core/math/rigid_transform.h"
 #include "core/math/vec3.h"
 
 namespace plx {
@@ -31,21 +32,6 @@ PLX_HD void PixelRay(const CameraViewT<T>& cam, int u, int v, Vec3<T>* origin, V
   *range_per_z = norm;
   *origin = cam.world_T_camera.translation();
   *dir = cam.world_T_camera.Rotate(dc * (T(1) / norm));
-}
-
-// Stateless per-index random numbers (PCG hash), identical on both backends for the same seed.
-PLX_HD unsigned int PcgHash(unsigned int x) {
-  const unsigned int state = x * 747796405u + 2891336453u;
-  const unsigned int word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
-  return (word >> 22u) ^ word;
-}
-
-// Uniform integer in [0, n) for item `i` of draw `seed`.
-PLX_HD unsigned long long HashIndex(unsigned int seed, long long i, unsigned long long n) {
-  const unsigned int a = PcgHash(static_cast<unsigned int>(i) ^ PcgHash(seed));
-  const unsigned int b = PcgHash(a ^ static_cast<unsigned int>(i >> 32) ^ 0x9e3779b9u);
-  const unsigned long long r = (static_cast<unsigned long long>(a) << 32) | b;
-  return r % n;
 }
 
 }  // namespace plx

@@ -5,6 +5,7 @@
 #pragma once
 
 #include "core/common/host_device.h"
+#include "core/math/rigid_transform.h"
 #include "core/math/vec3.h"
 
 namespace plx {

@@ -6,6 +6,7 @@
 #include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
 #include "core/geometry/kernel_camera.h"
+#include "core/kernels/refresh_occupancy.h"
 
 namespace plx {
 

@@ -6,9 +6,9 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "core/datasets/dataset.h"
+#include "core/geometry/stamped_pose.h"
 #include "core/grid/plenoxel_map.h"
-#include "core/io/dataset.h"
-#include "core/io/tum_dataset.h"
 #include "core/kernels/backend.h"
 #include "core/tracking/tracker.h"
 

@@ -9,6 +9,7 @@
 #include "absl/strings/str_format.h"
 #include "core/common/status_macros.h"
 #include "core/geometry/kernel_camera.h"
+#include "core/kernels/refresh_occupancy.h"
 
 namespace plx {
 namespace {

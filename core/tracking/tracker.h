@@ -15,7 +15,7 @@
 #include "core/geometry/se3.h"
 #include "core/grid/plenoxel_map.h"
 #include "core/kernels/backend.h"
-#include "core/tracking/tracking_terms.h"
+#include "core/kernels/tracking_terms.h"
 
 namespace plx {
 

@@ -9,7 +9,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "cuda/make_backend.h"
+#include "app/make_backend.h"
 #include "tests/clients/cli_runner.h"
 #include "tests/test_util.h"
 

@@ -26,7 +26,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include "cuda/make_backend.h"
+#include "app/make_backend.h"
 #include "tests/clients/cli_runner.h"
 #include "tests/test_util.h"
 

@@ -1,4 +1,4 @@
-// The daemon's compute devices: --backend / --gpus parsing (cuda/make_backend.h), which workers
+// The daemon's compute devices: --backend / --gpus parsing (app/make_backend.h), which workers
 // Daemon::Start makes (one CPU worker without a GPU, a clear error for --backend cuda without
 // one), how the worker pool spreads streams and one-off tasks, and where the devices are
 // reported: Prometheus metrics and GetServerInfo.
@@ -11,7 +11,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "cuda/make_backend.h"
+#include "app/make_backend.h"
+#include "core/cpu/cpu_backend.h"
 #include "server/device_worker.h"
 #include "tests/server/daemon_fixture.h"
 

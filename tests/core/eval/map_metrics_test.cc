@@ -2,7 +2,8 @@
 
 #include <gtest/gtest.h>
 
-#include "core/io/synthetic_sequence.h"
+#include "core/cpu/cpu_backend.h"
+#include "core/synthetic/synthetic_sequence.h"
 
 namespace plx {
 namespace {

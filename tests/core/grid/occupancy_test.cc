@@ -5,9 +5,11 @@
 
 #include <gtest/gtest.h>
 
+#include "core/cpu/cpu_backend.h"
 #include "core/grid/sparse_grid.h"
 #include "core/kernels/backend.h"
 #include "core/kernels/ray_render.h"
+#include "core/kernels/refresh_occupancy.h"
 #include "tests/grid_fill.h"
 
 namespace plx {

@@ -12,7 +12,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "tests/core/io/io_fixtures.h"
+#include "tests/io_fixtures.h"
 #include "tests/test_util.h"
 
 namespace plx {

@@ -6,10 +6,11 @@
 #include <memory>
 
 #include "core/common/unified_allocator.h"
-#include "core/io/synthetic_sequence.h"
+#include "core/cpu/cpu_backend.h"
 #include "core/kernels/backend.h"
 #include "core/mapping/map_dataset.h"
 #include "core/mapping/training_set.h"
+#include "core/synthetic/synthetic_sequence.h"
 #include "tests/grad_buffers.h"
 
 namespace plx {

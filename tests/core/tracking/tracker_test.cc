@@ -2,9 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include "core/cpu/cpu_backend.h"
 #include "core/eval/map_metrics.h"
-#include "core/io/synthetic_sequence.h"
 #include "core/mapping/map_dataset.h"
+#include "core/synthetic/synthetic_sequence.h"
 #include "core/tracking/track_dataset.h"
 
 namespace plx {

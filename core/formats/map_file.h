@@ -1,0 +1,84 @@
+// Map files (DESIGN.md §5): a PlenoxelMap on disk, bit-exact, versioned and checksummed.
+//
+// Layout, format version 1. Every number is little-endian; floats are IEEE-754 binary32. Each
+// field is written on its own (never a memcpy of a struct), so padding and compiler layout
+// never reach the file.
+//
+//   offset    size      field
+//   0         8         magic "PLXMAP\r\n" (the \r\n shows up mangled after a text-mode copy)
+//   8         4         u32  format version (1)
+//   12        4         u32  header size H = 88 + L: bytes before the brick table
+//   16        4         f32  voxel size, metres (finite, > 0)
+//   20        4         f32  render.step_voxels
+//   24        4         f32  render.sigma_threshold
+//   28        4         f32  render.stop_transmittance
+//   32        4         f32  render.near
+//   36        4         f32  render.far
+//   40        12        f32  render.background[3]
+//   52        12        i32  index_min[3]   coarse index origin, in bricks (informational, below)
+//   64        12        i32  index_dims[3]  coarse index size, in bricks
+//   76        4         u32  L = source text length (at most kMaxMapSourceBytes)
+//   80        L         source text, raw bytes (no terminator)
+//   80+L      8         u64  N = brick count
+//   H         12 N      brick table: i32 x, y, z per brick, in slot order
+//   H+12N     2048 N    density payload: f32 [N * 512], slot-major, as SparseGrid stores it
+//   ...       55296 N   SH payload: f32 [N * 512 * 27], as SparseGrid stores it
+//   H+57356N  8         u64  CRC-64/XZ (core/io/checksum.h) of every preceding byte
+//
+// A file is therefore exactly H + 57356 N + 8 bytes; readers check that before allocating.
+//
+// Brick coordinates are absolute (brick b holds world vertices 8b .. 8b+7), so the brick table
+// alone places the map in the world. index_min/index_dims are the saved grid's coarse index
+// bounds (its GridView origin is index_min * 8 * voxel_size); the loader restores them before
+// allocating the bricks in table order, so payloads, slots and renders come back bit-identical.
+
+// Saving writes "<path>.tmp.<pid>" in the same directory, fsyncs it and renames it over `path`,
+// so readers only ever see the old file or the complete new one. Concurrent saves to the same
+// path from one process are not supported (they share the temp name).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "core/grid/plenoxel_map.h"
+#include "core/grid/render_options.h"
+
+namespace plx {
+
+inline constexpr char kMapFileMagic[8] = {'P', 'L', 'X', 'M', 'A', 'P', '\r', '\n'};
+inline constexpr uint32_t kMapFileVersion = 1;
+// Caps the source text so a corrupt length cannot make the reader allocate much.
+inline constexpr uint32_t kMaxMapSourceBytes = 64 * 1024;
+
+// What the header says, read without touching the payload (tools list maps with it).
+struct MapFileInfo {
+  uint32_t version = 0;
+  float voxel_size = 0.0f;
+  int64_t bricks = 0;
+  int64_t bytes = 0;  // file size
+  std::string source;
+  RenderOptions render;
+  std::array<int32_t, 3> index_min = {0, 0, 0};
+  std::array<int32_t, 3> index_dims = {0, 0, 0};
+};
+
+// Writes `map` to `path` atomically (temp file, fsync, rename). NotFound when the directory does
+// not exist (it is not created); other failures name the path and the system's reason, and
+// leave any previous file at `path` untouched and no temp file behind.
+absl::Status SaveMap(const PlenoxelMap& map, const std::string& path);
+
+// Reads a map file written by SaveMap. Errors name the file: NotFound (missing), InvalidArgument
+// (not a map file), Unimplemented (other format version), DataLoss (truncated, inconsistent
+// sizes, bad voxel size, checksum mismatch, duplicate bricks). The checksum is verified before
+// the grid is built; no allocation exceeds what the file's actual size can back.
+absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMap(const std::string& path);
+
+// Reads and validates the header only, including that the file size matches the brick count.
+// Does not verify the checksum (that needs the whole file; LoadMap does it).
+absl::StatusOr<MapFileInfo> ReadMapInfo(const std::string& path);
+
+}  // namespace plx

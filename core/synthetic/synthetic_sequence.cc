@@ -1,0 +1,236 @@
+#include "core/synthetic/synthetic_sequence.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <random>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "core/common/status_macros.h"
+#include "core/synthetic/synthetic_scene.h"
+
+namespace plx {
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// Camera path. Every frequency is a multiple of kOmega, so the path closes after one turn.
+
+constexpr double kOmega = 2.0 * M_PI / 12.0;  // rad/s: one turn in 12 s, 1 degree/frame at 30 fps
+constexpr double kTheta0 = -0.75;  // start angle: the first 2 s sweep from the crate to the cabinet
+constexpr double kEyeRadiusX = 1.0, kEyeRadiusY = 0.7;  // ellipse of camera centres (m)
+constexpr double kEyeHeight = 1.4, kEyeBob = 0.05;      // metres
+// The camera looks back across the room centre (heading = path angle + pi), so every view holds
+// floor, boxes, walls and often a corner, at 1.5-5 m. The heading turns at the same uniform
+// rate as the path angle, plus a small wobble; the pitch swings gently around 15 degrees down.
+constexpr double kYawWobble = 0.05;                                               // rad
+constexpr double kPitch = 15.0 * M_PI / 180.0, kPitchSwing = 4.0 * M_PI / 180.0;  // rad
+
+// Camera-to-world rotation of a camera at `eye` looking at `target` with world +z up, in
+// OpenCV axes (x right, y down, z forward).
+Eigen::Matrix3d LookAt(const Eigen::Vector3d& eye, const Eigen::Vector3d& target) {
+  const Eigen::Vector3d forward = (target - eye).normalized();
+  const Eigen::Vector3d right = forward.cross(Eigen::Vector3d::UnitZ()).normalized();
+  const Eigen::Vector3d down = forward.cross(right);
+  Eigen::Matrix3d rotation;
+  rotation.col(0) = right;
+  rotation.col(1) = down;
+  rotation.col(2) = forward;
+  return rotation;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Sensor corruption.
+
+uint64_t SplitMix64(uint64_t x) {
+  x += 0x9e3779b97f4a7c15ull;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
+  return x ^ (x >> 31);
+}
+
+// Marks about hole_fraction of the pixels: up to 30% of the budget on depth discontinuities
+// (where real sensors lose the return), the rest as small ellipses of 1.5-4.5 px radius at
+// 320x240 (scaled with the image), like the blobs a structured-light sensor misses.
+std::vector<uint8_t> MakeHoleMask(const DepthImage& depth, double hole_fraction,
+                                  std::mt19937_64& rng) {
+  const int w = depth.width, h = depth.height;
+  const int64_t n = depth.num_pixels();
+  std::vector<uint8_t> hole(n, 0);
+  const int64_t target = std::llround(hole_fraction * static_cast<double>(n));
+  if (target == 0) return hole;
+  auto z = [&](int u, int v) { return depth.data[static_cast<int64_t>(v) * w + u]; };
+
+  std::vector<int64_t> edges;
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const float z0 = z(u, v);
+      const float threshold = 0.04f * z0;  // planes in view change less per pixel at 320x240
+      const bool jump = (u + 1 < w && std::abs(z(u + 1, v) - z0) > threshold) ||
+                        (u > 0 && std::abs(z(u - 1, v) - z0) > threshold) ||
+                        (v + 1 < h && std::abs(z(u, v + 1) - z0) > threshold) ||
+                        (v > 0 && std::abs(z(u, v - 1) - z0) > threshold);
+      if (jump) edges.push_back(static_cast<int64_t>(v) * w + u);
+    }
+  }
+  int64_t count = 0;
+  if (!edges.empty()) {
+    const double keep = std::min(1.0, 0.3 * static_cast<double>(target) / edges.size());
+    std::bernoulli_distribution take(keep);
+    for (int64_t index : edges) {
+      if (take(rng)) {
+        hole[index] = 1;
+        ++count;
+      }
+    }
+  }
+
+  const double scale = std::sqrt(static_cast<double>(n) / (320.0 * 240.0));
+  std::uniform_real_distribution<double> pick_u(0.0, w), pick_v(0.0, h);
+  std::uniform_real_distribution<double> pick_radius(1.5 * scale, 4.5 * scale);
+  // A blob lands on at least one free pixel far more often than not; the cap only guards
+  // against pathological sizes.
+  for (int64_t attempt = 0; count < target && attempt < 100 * n; ++attempt) {
+    const double bu = pick_u(rng), bv = pick_v(rng);
+    const double ru = pick_radius(rng), rv = pick_radius(rng);
+    const int u0 = std::max(0, static_cast<int>(std::floor(bu - ru)));
+    const int u1 = std::min(w - 1, static_cast<int>(std::ceil(bu + ru)));
+    const int v0 = std::max(0, static_cast<int>(std::floor(bv - rv)));
+    const int v1 = std::min(h - 1, static_cast<int>(std::ceil(bv + rv)));
+    for (int v = v0; v <= v1 && count < target; ++v) {
+      for (int u = u0; u <= u1 && count < target; ++u) {
+        const double du = (u + 0.5 - bu) / ru, dv = (v + 0.5 - bv) / rv;
+        const int64_t index = static_cast<int64_t>(v) * w + u;
+        if (du * du + dv * dv <= 1.0 && !hole[index]) {
+          hole[index] = 1;
+          ++count;
+        }
+      }
+    }
+  }
+  return hole;
+}
+
+void CorruptDepth(const SyntheticOptions& options, int frame_index, DepthImage* depth) {
+  if (options.depth_noise <= 0.0 && options.hole_fraction <= 0.0) return;
+  // One generator per frame, seeded from (seed, index): frames can be made in any order.
+  std::mt19937_64 rng(SplitMix64(options.seed ^ SplitMix64(static_cast<uint64_t>(frame_index))));
+  const std::vector<uint8_t> hole = MakeHoleMask(*depth, options.hole_fraction, rng);
+  std::normal_distribution<double> gaussian(0.0, 1.0);
+  for (int64_t i = 0; i < depth->num_pixels(); ++i) {
+    float& z = depth->data[i];
+    if (hole[i] || z <= 0.0f) {
+      z = 0.0f;
+      continue;
+    }
+    if (options.depth_noise > 0.0) {
+      const double noisy = z + options.depth_noise * z * z * gaussian(rng);
+      z = noisy > 0.0 ? static_cast<float>(noisy) : 0.0f;  // a sensor reports no negative depth
+    }
+  }
+}
+
+}  // namespace
+
+absl::Status ValidateSyntheticOptions(const SyntheticOptions& options) {
+  if (options.width <= 0 || options.height <= 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("image size must be positive, got ", options.width, "x", options.height));
+  }
+  if (options.num_frames < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("num_frames must be >= 1, got ", options.num_frames));
+  }
+  if (!(std::isfinite(options.fps) && options.fps > 0)) {
+    return absl::InvalidArgumentError(absl::StrCat("fps must be positive, got ", options.fps));
+  }
+  if (!(std::isfinite(options.depth_noise) && options.depth_noise >= 0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("depth_noise must be >= 0, got ", options.depth_noise));
+  }
+  if (!(options.hole_fraction >= 0 && options.hole_fraction < 1)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("hole_fraction must be in [0, 1), got ", options.hole_fraction));
+  }
+  for (double value : {options.fx, options.fy, options.cx, options.cy}) {
+    if (!(std::isfinite(value) && value >= 0)) {
+      return absl::InvalidArgumentError(
+          "fx, fy, cx, cy must be finite and >= 0 (0 derives them from the image size)");
+    }
+  }
+  return ValidateCalibration(SyntheticCalibration(options));
+}
+
+CameraCalibration SyntheticCalibration(const SyntheticOptions& options) {
+  CameraCalibration calibration;
+  PinholeIntrinsics& k = calibration.pinhole;
+  k.width = options.width;
+  k.height = options.height;
+  k.fx = options.fx != 0 ? options.fx : 0.85 * options.width;
+  k.fy = options.fy != 0 ? options.fy : 0.85 * options.width;
+  k.cx = options.cx != 0 ? options.cx : 0.5 * options.width;
+  k.cy = options.cy != 0 ? options.cy : 0.5 * options.height;
+  calibration.depth_scale = options.depth_scale;
+  return calibration;
+}
+
+SE3 SyntheticCameraPoseAtTime(double seconds) {
+  const double phase = kOmega * seconds;
+  const double theta = kTheta0 + phase;
+  const Eigen::Vector3d eye(kEyeRadiusX * std::cos(theta), kEyeRadiusY * std::sin(theta),
+                            kEyeHeight + kEyeBob * std::sin(3.0 * phase));
+  const double heading = theta + M_PI + kYawWobble * std::sin(2.0 * phase);
+  const double pitch = -(kPitch + kPitchSwing * std::sin(phase + 1.0));
+  const Eigen::Vector3d forward(std::cos(pitch) * std::cos(heading),
+                                std::cos(pitch) * std::sin(heading), std::sin(pitch));
+  return SE3(LookAt(eye, eye + forward), eye);
+}
+
+SE3 SyntheticCameraPose(const SyntheticOptions& options, int frame_index) {
+  return SyntheticCameraPoseAtTime(frame_index / options.fps);
+}
+
+absl::StatusOr<InMemoryDataset> GenerateSyntheticSequence(const SyntheticOptions& options) {
+  PLX_RETURN_IF_ERROR(ValidateSyntheticOptions(options));
+  const CameraCalibration calibration = SyntheticCalibration(options);
+  const PinholeIntrinsics& k = calibration.pinhole;
+  std::vector<RgbdFrame> frames(options.num_frames);
+
+  auto make_frame = [&](int i, bool split_rows) {
+    RgbdFrame& frame = frames[i];
+    const SE3 pose = SyntheticCameraPose(options, i);
+    if (split_rows) {
+      frame = RenderSyntheticView(pose, k, /*supersampling=*/2);
+    } else {
+      frame.world_T_camera = pose;
+      frame.color = ColorImage(k.width, k.height, 3);
+      frame.depth = DepthImage(k.width, k.height, 1);
+      internal::RenderSyntheticRows(pose, k, /*supersampling=*/2, 0, k.height, &frame);
+    }
+    frame.timestamp = i / options.fps;
+    CorruptDepth(options, i, &frame.depth);
+  };
+
+  // Rows and frames are independent and noise is seeded per frame, so the split does not
+  // change the output: short sequences split each frame's rows over threads, longer ones give
+  // each thread whole frames (less synchronisation).
+  const int hardware = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  if (options.num_frames < hardware) {
+    for (int i = 0; i < options.num_frames; ++i) make_frame(i, /*split_rows=*/true);
+  } else {
+    std::atomic<int> next{0};
+    auto worker = [&] {
+      for (int i = next++; i < options.num_frames; i = next++) make_frame(i, false);
+    };
+    std::vector<std::thread> threads;
+    for (int t = 1; t < hardware; ++t) threads.emplace_back(worker);
+    worker();
+    for (std::thread& t : threads) t.join();
+  }
+
+  return InMemoryDataset(kSyntheticSequenceName, calibration, std::move(frames));
+}
+
+}  // namespace plx
