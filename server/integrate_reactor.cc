@@ -37,27 +37,30 @@ absl::Status IntegrateReactor::HandleFirstMessage() {
   absl::StatusOr<MapStatus> info = state_->maps->Info(map_name_);
   if (!info.ok()) return info.status();
   const pb::IntegrateOptions& o = request_.options();
-  options_ = MapperOptionsForVoxelSize(info->voxel_size);
-  if (o.rays_per_iteration() > 0) options_.batch_size = static_cast<int>(o.rays_per_iteration());
+  options_ = MappingSessionOptions();
+  options_.mapper = MapperOptionsForVoxelSize(info->voxel_size);
+  if (o.rays_per_iteration() > 0) {
+    options_.mapper.batch_size = static_cast<int>(o.rays_per_iteration());
+  }
   if (o.iterations_per_keyframe() > 0) {
-    iterations_per_keyframe_ = static_cast<int>(o.iterations_per_keyframe());
+    options_.iterations_per_keyframe = static_cast<int>(o.iterations_per_keyframe());
   }
   if (o.max_depth() > 0) {
-    options_.allocation.max_depth = o.max_depth();
-    options_.fusion.max_depth = o.max_depth();
+    options_.mapper.allocation.max_depth = o.max_depth();
+    options_.mapper.fusion.max_depth = o.max_depth();
   }
-  options_.max_iterations = 1;  // raised as keyframes arrive
-  if (absl::Status s = Mapper::ValidateOptions(options_); !s.ok()) {
+  if (o.iterations_per_keyframe() > static_cast<uint32_t>(kMaxIterationsPerKeyframe)) {
+    return absl::InvalidArgumentError(absl::StrCat("options.iterations_per_keyframe: at most ",
+                                                   kMaxIterationsPerKeyframe));
+  }
+  if (absl::Status s = ValidateMappingSessionOptions(options_); !s.ok()) {
     return absl::InvalidArgumentError(absl::StrCat("options: ", s.message()));
-  }
-  if (iterations_per_keyframe_ > 100000) {
-    return absl::InvalidArgumentError("options.iterations_per_keyframe: at most 100000");
   }
   if (absl::Status s = state_->maps->BeginMapping(map_name_); !s.ok()) return s;
   lease_ = true;
   job_id_ = state_->jobs->Create("integrate", map_name_);
   state_->jobs->Update(job_id_, JobState::kRunning, 0.0, "waiting for keyframes");
-  start_ = last_publish_ = std::chrono::steady_clock::now();
+  start_ = std::chrono::steady_clock::now();
   LogEvent("info", "mapping_started", {{"map", map_name_}, {"job", job_id_}});
   return absl::OkStatus();
 }
@@ -126,8 +129,8 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
       MaybeFinishLocked();
       return;
     }
-    // One keyframe per task: integrating one (brick allocation, depth fusion) is the longest
-    // step a task cannot split, and a tracking frame may be queued behind it.
+    // One keyframe per task into the session (it integrates one per step), so the decoded
+    // frames waiting stay bounded by kMaxQueuedKeyframes (backpressure on the client).
     if (!queue_.empty()) {
       frames.push_back(std::move(queue_.front()));
       queue_.pop_front();
@@ -138,66 +141,41 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
       StartRead(&request_);
     }
   }
+  // The mapping policy (budget, chunking, publishing) is the session's (core/mapping); this
+  // task only moves keyframes in and versions out.
   const auto task_start = std::chrono::steady_clock::now();
-  double integrate_s = 0.0, optimize_s = 0.0, snapshot_s = 0.0;
   absl::Status status = absl::OkStatus();
-  if (!mapper_ && !frames.empty()) {
+  if (!session_) {
     absl::StatusOr<MapVersion> latest = state_->maps->Latest(map_name_);
-    if (latest.ok()) {
-      // The job continues the published map on its own copy; readers keep the published one.
-      mapper_ = std::make_unique<Mapper>(
-          options_, backend, std::make_unique<PlenoxelMap>(latest->map->ShareCopy()));
+    absl::StatusOr<std::unique_ptr<MappingSession>> session =
+        latest.ok() ? MappingSession::Create(options_, backend, latest->map)
+                    : absl::StatusOr<std::unique_ptr<MappingSession>>(latest.status());
+    if (session.ok()) {
+      session_ = *std::move(session);
     } else {
-      status = latest.status();
+      status = session.status();
     }
   }
   for (DecodedFrame& f : frames) {
     if (!status.ok()) break;
     const SE3 pose = *f.frame.world_T_camera;
-    status = mapper_->AddKeyframe(std::move(f.frame), pose, f.calibration.pinhole);
-    if (status.ok()) {
-      ++integrated_;
-      ++unpublished_keyframes_;
-      state_->metrics->keyframes_integrated++;
-    }
+    status = session_->AddKeyframe(std::move(f.frame), pose, f.calibration.pinhole);
   }
-  if (status.ok() && mapper_ && !frames.empty()) {
-    const auto integrate_start = std::chrono::steady_clock::now();
-    status = mapper_->AllocateAndInitialize();
-    integrate_s = SecondsSince(integrate_start);
-    mapper_->set_max_iterations(iterations_per_keyframe_ * mapper_->training_set().num_frames());
-  }
-  bool optimised = false;
-  if (status.ok() && mapper_ && !mapper_->budget_spent() && mapper_->training_set().num_rays() > 0) {
-    const auto optimize_start = std::chrono::steady_clock::now();
-    absl::StatusOr<MappingSummary> summary = mapper_->Optimize(
-        [&](const MappingProgress&) { return true; }, kChunkIterations, kChunkSeconds);
-    optimize_s = SecondsSince(optimize_start);
-    if (summary.ok()) {
-      last_ = summary->last;
-      optimised = true;
+  MappingStepResult step;
+  if (status.ok()) {
+    absl::StatusOr<MappingStepResult> stepped = session_->Step(/*finish=*/input_closed);
+    if (stepped.ok()) {
+      step = *std::move(stepped);
     } else {
-      status = summary.status();
+      status = stepped.status();
     }
   }
-  const bool finishing = input_closed && (!mapper_ || mapper_->budget_spent() ||
-                                          mapper_->training_set().num_rays() == 0);
-  // Publishing copies the whole map on this worker, so large maps publish less often: the copy
-  // takes at most about a tenth of the worker's time.
-  const double publish_gap = std::max(1.0, 10.0 * last_snapshot_s_);
-  if (status.ok() && mapper_ &&
-      (finishing || (unpublished_keyframes_ > 0 && SecondsSince(last_publish_) > publish_gap) ||
-       SecondsSince(last_publish_) > 3.0 * publish_gap)) {
-    const auto snapshot_start = std::chrono::steady_clock::now();
-    absl::StatusOr<std::shared_ptr<const PlenoxelMap>> snapshot = mapper_->Publish();
-    last_snapshot_s_ = snapshot_s = SecondsSince(snapshot_start);
+  state_->metrics->keyframes_integrated += step.keyframes_integrated;
+  if (status.ok() && step.published) {
     absl::StatusOr<uint64_t> version =
-        snapshot.ok() ? state_->maps->Publish(map_name_, *std::move(snapshot), unpublished_keyframes_)
-                      : snapshot.status();
+        state_->maps->Publish(map_name_, step.published, step.keyframes_in_published);
     if (version.ok()) {
       version_ = *version;
-      unpublished_keyframes_ = 0;
-      last_publish_ = std::chrono::steady_clock::now();
     } else {
       status = version.status();
     }
@@ -207,32 +185,33 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
   if (const double task_s = SecondsSince(task_start); task_s > kSlowTaskSeconds) {
     LogEvent("warning", "slow_mapping_task",
              {{"map", map_name_}, {"job", job_id_}, {"seconds", absl::StrFormat("%.3f", task_s)},
-              {"integrate_s", absl::StrFormat("%.3f", integrate_s)},
-              {"optimize_s", absl::StrFormat("%.3f", optimize_s)},
-              {"snapshot_s", absl::StrFormat("%.3f", snapshot_s)}});
+              {"integrate_s", absl::StrFormat("%.3f", step.integrate_s)},
+              {"optimize_s", absl::StrFormat("%.3f", step.optimize_s)},
+              {"publish_s", absl::StrFormat("%.3f", step.publish_s)}});
   }
+  const MappingSessionProgress p = session_ ? session_->progress() : MappingSessionProgress();
+  const bool finishing = input_closed && session_ != nullptr && !session_->has_work();
   pb::MappingProgress progress;
   progress.set_job_id(job_id_);
-  progress.set_keyframes_integrated(static_cast<uint32_t>(integrated_));
-  progress.set_iterations(mapper_ ? static_cast<uint32_t>(mapper_->iterations_done()) : 0);
-  progress.set_train_psnr(last_.psnr);
-  progress.set_train_depth_l1_m(last_.depth_l1_m);
+  progress.set_keyframes_integrated(static_cast<uint32_t>(p.keyframes_integrated));
+  progress.set_iterations(static_cast<uint32_t>(p.iterations));
+  progress.set_train_psnr(p.train_psnr);
+  progress.set_train_depth_l1_m(p.train_depth_l1_m);
   progress.set_map_version(version_);
   progress.set_elapsed_s(SecondsSince(start_));
-  const double fraction =
-      mapper_ && iterations_per_keyframe_ > 0 && integrated_ > 0
-          ? std::min(1.0, double(mapper_->iterations_done()) / (iterations_per_keyframe_ * integrated_))
-          : 0.0;
+  integrated_ = p.keyframes_integrated;
 
   std::lock_guard<std::mutex> lock(mutex_);
   busy_ = false;
   progress.set_keyframes_received(received_);
   if (!status.ok()) {
+    LogEvent("error", "mapping_failed",
+             {{"map", map_name_}, {"job", job_id_}, {"error", status.ToString()}});
     FailLocked(status);
     return;
   }
   if (finished_) return;
-  if (finishing && queue_.empty()) {
+  if ((finishing && queue_.empty()) || (input_closed && session_ == nullptr)) {
     progress.set_done(true);
     done_sent_ = true;
     WriteLocked(std::move(progress));
@@ -241,14 +220,12 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
     MaybeFinishLocked();
     return;
   }
-  if (optimised || !frames.empty()) {
+  if (step.iterations > 0 || step.keyframes_integrated > 0) {
     WriteLocked(std::move(progress));
-    state_->jobs->Update(job_id_, JobState::kRunning, fraction,
+    state_->jobs->Update(job_id_, JobState::kRunning, p.fraction,
                          absl::StrFormat("%d keyframes integrated", integrated_));
   }
-  const bool more = !queue_.empty() || reading_done_ ||
-                    (mapper_ && !mapper_->budget_spent() && mapper_->training_set().num_rays() > 0);
-  if (more) ScheduleLocked();
+  if (!queue_.empty() || reading_done_ || (session_ && session_->has_work())) ScheduleLocked();
 }
 
 void IntegrateReactor::WriteLocked(pb::MappingProgress progress) {

@@ -14,7 +14,7 @@
 
 #include <grpcpp/grpcpp.h>
 
-#include "core/mapping/mapper.h"
+#include "core/mapping/mapping_session.h"
 #include "plenoxd/v1/plenoxd.grpc.pb.h"
 #include "server/daemon_state.h"
 #include "server/proto_convert.h"
@@ -31,11 +31,6 @@ class IntegrateReactor final : public grpc::ServerBidiReactor<plenoxd::v1::Integ
   void OnCancel() override;
   void OnDone() override;
 
-  // One scheduled mapping task runs at most this many iterations or this long (at least one
-  // iteration): a tracking frame queued behind it waits at most about kChunkSeconds plus one
-  // iteration, and scheduling between chunks costs next to nothing.
-  static constexpr int kChunkIterations = 10;
-  static constexpr double kChunkSeconds = 0.05;
   // A task longer than this is logged (slow_mapping_task) with where its time went.
   static constexpr double kSlowTaskSeconds = 0.3;
   // Keyframes decoded but not yet integrated before the stream stops reading (backpressure).
@@ -72,15 +67,11 @@ class IntegrateReactor final : public grpc::ServerBidiReactor<plenoxd::v1::Integ
   // Owned by the mapping task.
   std::string map_name_;
   std::string job_id_;
-  MapperOptions options_;
-  int iterations_per_keyframe_ = 50;
-  std::unique_ptr<Mapper> mapper_;
+  MappingSessionOptions options_;
+  std::unique_ptr<MappingSession> session_;
   int integrated_ = 0;
-  MappingProgress last_;  // training metrics of the latest chunk
-  int unpublished_keyframes_ = 0;
   uint64_t version_ = 0;
-  std::chrono::steady_clock::time_point start_, last_publish_;
-  double last_snapshot_s_ = 0.0;  // how long the last published copy of the map took
+  std::chrono::steady_clock::time_point start_;
 };
 
 }  // namespace plx::server

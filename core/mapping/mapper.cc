@@ -194,6 +194,10 @@ absl::StatusOr<MappingSummary> Mapper::Optimize(const MappingProgressCallback& p
       fraction = std::max(fraction, (summary_.optimization_s + elapsed) / options_.time_budget_s);
     }
     if (fraction >= 1.0) break;
+    // The schedule only moves forward: a budget raised as keyframes stream in (a mapping
+    // session) lowers iteration / budget, but the learning rate must not climb back up and
+    // shake the bricks that have already converged.
+    schedule_ = std::max(schedule_, fraction);
     if (max_new_iterations > 0 && done >= max_new_iterations) break;
     if (max_seconds > 0 && done > 0 && elapsed >= max_seconds) break;
     if (coarse_ && fraction >= options_.upsample_at) {
@@ -213,9 +217,9 @@ absl::StatusOr<MappingSummary> Mapper::Optimize(const MappingProgressCallback& p
                                                   options_.tv_density, options_.tv_sh));
     }
     rms.lr_density = static_cast<float>(
-        LogLinearLearningRate(options_.lr_density_start, options_.lr_density_end, fraction));
-    rms.lr_sh =
-        static_cast<float>(LogLinearLearningRate(options_.lr_sh_start, options_.lr_sh_end, fraction));
+        LogLinearLearningRate(options_.lr_density_start, options_.lr_density_end, schedule_));
+    rms.lr_sh = static_cast<float>(
+        LogLinearLearningRate(options_.lr_sh_start, options_.lr_sh_end, schedule_));
     // The step writes the bricks that received gradient: clone those a published version
     // still shares (copy-on-write), then take the views again (the tables changed).
     summary_.cloned_bricks += map_->grid.MakePrivate(brick_touched_.data());

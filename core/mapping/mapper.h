@@ -107,8 +107,12 @@ class Mapper {
   absl::StatusOr<MappingSummary> Optimize(const MappingProgressCallback& progress = nullptr,
                                           int max_new_iterations = 0, double max_seconds = 0.0);
 
-  // Raises or lowers the total iteration budget (e.g. as keyframes stream in).
+  // Raises or lowers the total iteration budget (e.g. as keyframes stream in). The learning
+  // rate follows the largest fraction of the budget reached so far, so raising the budget
+  // pauses its decay instead of restarting it.
   void set_max_iterations(int iterations) { options_.max_iterations = iterations; }
+  // Where the learning-rate schedule stands, in [0, 1].
+  double schedule_fraction() const { return schedule_; }
   int iterations_done() const { return iteration_; }
   bool budget_spent() const {
     return options_.max_iterations > 0 && iteration_ >= options_.max_iterations;
@@ -120,6 +124,7 @@ class Mapper {
   absl::StatusOr<std::shared_ptr<const PlenoxelMap>> Publish();
 
   PlenoxelMap& map() { return *map_; }
+  const PlenoxelMap& map() const { return *map_; }
   std::unique_ptr<PlenoxelMap> ReleaseMap() { return std::move(map_); }
   const TrainingSet& training_set() const { return training_; }
   const MappingSummary& summary() const { return summary_; }
@@ -140,6 +145,7 @@ class Mapper {
   int allocated_frames_ = 0;  // keyframes whose bricks exist
   bool coarse_ = false;       // the map is at twice the final voxel size
   int iteration_ = 0;
+  double schedule_ = 0.0;     // learning-rate schedule position: never decreases
   MappingSummary summary_;
 
   // Read and written by the backend's kernels: UnifiedVector (core/common/unified_allocator.h).

@@ -1,0 +1,195 @@
+#include "core/mapping/mapping_session.h"
+
+#include <algorithm>
+#include <chrono>
+#include <optional>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "core/common/allocation_guard.h"
+#include "core/common/status_macros.h"
+
+namespace plx {
+namespace {
+
+double NowSeconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+}  // namespace
+
+absl::Status ValidateMappingSessionOptions(const MappingSessionOptions& o) {
+  if (o.iterations_per_keyframe <= 0 || o.iterations_per_keyframe > kMaxIterationsPerKeyframe) {
+    return absl::InvalidArgumentError(absl::StrCat("iterations_per_keyframe must be in [1, ",
+                                                   kMaxIterationsPerKeyframe, "], got ",
+                                                   o.iterations_per_keyframe));
+  }
+  if (o.chunk_iterations <= 0 || !(o.chunk_seconds > 0.0)) {
+    return absl::InvalidArgumentError("a mapping step needs positive chunk limits");
+  }
+  if (!(o.min_publish_interval_s >= 0.0) || o.publish_every_iterations <= 0) {
+    return absl::InvalidArgumentError("publish interval and cadence must be positive");
+  }
+  MapperOptions mapper = o.mapper;
+  mapper.max_iterations = o.iterations_per_keyframe;  // the session sets the budget
+  mapper.time_budget_s = 0.0;
+  return Mapper::ValidateOptions(mapper);
+}
+
+absl::StatusOr<std::unique_ptr<MappingSession>> MappingSession::Create(
+    const MappingSessionOptions& options, Backend* backend,
+    std::shared_ptr<const PlenoxelMap> base) {
+  PLX_RETURN_IF_ERROR(ValidateMappingSessionOptions(options));
+  MapperOptions mapper_options = options.mapper;
+  mapper_options.max_iterations = options.iterations_per_keyframe;
+  mapper_options.time_budget_s = 0.0;
+  // Keyframes stream in: coarse-to-fine would have to re-allocate from every keyframe.
+  mapper_options.coarse_to_fine = false;
+  return CatchAllocationFailure(
+      "starting a mapping session", [&]() -> absl::StatusOr<std::unique_ptr<MappingSession>> {
+        std::unique_ptr<Mapper> mapper;
+        if (base != nullptr) {
+          // Copy-on-write: the session's map shares every brick with `base` until it changes
+          // one, so continuing a large map costs its index, not its bricks.
+          mapper = std::make_unique<Mapper>(mapper_options, backend,
+                                            std::make_unique<PlenoxelMap>(base->ShareCopy()));
+        } else {
+          mapper = std::make_unique<Mapper>(mapper_options, backend);
+        }
+        std::unique_ptr<MappingSession> session(new MappingSession(options, std::move(mapper)));
+        session->latest_ = std::move(base);
+        return session;
+      });
+}
+
+MappingSession::MappingSession(const MappingSessionOptions& options,
+                               std::unique_ptr<Mapper> mapper)
+    : options_(options), mapper_(std::move(mapper)) {}
+
+absl::Status MappingSession::AddKeyframe(RgbdFrame frame, const SE3& world_T_camera,
+                                         const PinholeIntrinsics& k) {
+  if (frame.color.width != k.width || frame.color.height != k.height ||
+      frame.depth.width != k.width || frame.depth.height != k.height ||
+      frame.color.channels != 3 || frame.depth.channels != 1) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "keyframe images (colour ", frame.color.width, "x", frame.color.height, "x",
+        frame.color.channels, ", depth ", frame.depth.width, "x", frame.depth.height, "x",
+        frame.depth.channels, ") do not match the intrinsics (", k.width, "x", k.height, ")"));
+  }
+  if (!world_T_camera.matrix().allFinite()) {
+    return absl::InvalidArgumentError("keyframe pose is not finite");
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  pending_.push_back(PendingKeyframe{std::move(frame), world_T_camera, k});
+  ++added_;
+  return absl::OkStatus();
+}
+
+int MappingSession::pending_keyframes() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return static_cast<int>(pending_.size());
+}
+
+bool MappingSession::BudgetLeft() const {
+  return integrated_ > 0 && mapper_->training_set().num_rays() > 0 && !mapper_->budget_spent();
+}
+
+bool MappingSession::has_work() const { return pending_keyframes() > 0 || BudgetLeft(); }
+
+absl::StatusOr<MappingStepResult> MappingSession::Step(bool finish) {
+  return CatchAllocationFailure("mapping step", [&]() -> absl::StatusOr<MappingStepResult> {
+    MappingStepResult result;
+    std::optional<PendingKeyframe> next;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!pending_.empty()) {
+        next = std::move(pending_.front());
+        pending_.pop_front();
+      }
+    }
+    if (next) {
+      // One keyframe per step: allocation and fusion of a keyframe is the longest piece of
+      // work a step cannot split.
+      const double start = NowSeconds();
+      PLX_RETURN_IF_ERROR(
+          mapper_->AddKeyframe(std::move(next->frame), next->world_T_camera, next->intrinsics));
+      PLX_RETURN_IF_ERROR(mapper_->AllocateAndInitialize());
+      ++integrated_;
+      ++keyframes_since_publish_;
+      changed_since_publish_ = true;
+      mapper_->set_max_iterations(options_.iterations_per_keyframe * integrated_);
+      result.keyframes_integrated = 1;
+      result.integrate_s = NowSeconds() - start;
+    }
+    if (BudgetLeft()) {
+      const double start = NowSeconds();
+      const int before = mapper_->iterations_done();
+      PLX_ASSIGN_OR_RETURN(
+          MappingSummary summary,
+          mapper_->Optimize([](const MappingProgress&) { return true; },
+                            options_.chunk_iterations, options_.chunk_seconds));
+      last_ = summary.last;
+      result.iterations = mapper_->iterations_done() - before;
+      changed_since_publish_ = changed_since_publish_ || result.iterations > 0;
+      result.optimize_s = NowSeconds() - start;
+    }
+
+    const double now = NowSeconds();
+    const double gap = std::max(options_.min_publish_interval_s, 10.0 * last_publish_cost_s_);
+    const bool enough_new = keyframes_since_publish_ > 0 ||
+                            mapper_->iterations_done() - iterations_at_publish_ >=
+                                options_.publish_every_iterations;
+    const bool due = changed_since_publish_ && now - last_publish_time_s_ >= gap && enough_new;
+    const bool final_version = finish && changed_since_publish_ && !has_work();
+    if (due || final_version) PLX_RETURN_IF_ERROR(PublishInto(&result));
+    return result;
+  });
+}
+
+absl::Status MappingSession::PublishInto(MappingStepResult* result) {
+  const double start = NowSeconds();
+  PLX_ASSIGN_OR_RETURN(latest_, mapper_->Publish());
+  last_publish_cost_s_ = NowSeconds() - start;
+  last_publish_time_s_ = NowSeconds();
+  result->published = latest_;
+  result->keyframes_in_published = keyframes_since_publish_;
+  result->publish_s = last_publish_cost_s_;
+  ++published_versions_;
+  changed_since_publish_ = false;
+  keyframes_since_publish_ = 0;
+  iterations_at_publish_ = mapper_->iterations_done();
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::shared_ptr<const PlenoxelMap>> MappingSession::Publish() {
+  if (!changed_since_publish_ && latest_ != nullptr) return latest_;
+  MappingStepResult ignored;
+  PLX_RETURN_IF_ERROR(CatchAllocationFailure("publishing the map",
+                                             [&] { return PublishInto(&ignored); }));
+  return latest_;
+}
+
+MappingSessionProgress MappingSession::progress() const {
+  MappingSessionProgress p;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    p.keyframes_added = added_;
+  }
+  p.keyframes_integrated = integrated_;
+  p.iterations = mapper_->iterations_done();
+  p.iteration_budget = options_.iterations_per_keyframe * integrated_;
+  p.fraction = p.iteration_budget > 0
+                   ? std::min(1.0, static_cast<double>(p.iterations) / p.iteration_budget)
+                   : 0.0;
+  p.schedule = mapper_->schedule_fraction();
+  p.train_psnr = last_.psnr;
+  p.train_depth_l1_m = last_.depth_l1_m;
+  p.published_versions = published_versions_;
+  p.map_bytes = mapper_->map().grid.Memory().total_bytes();
+  p.cloned_bricks = mapper_->summary().cloned_bricks;
+  p.last_publish_s = last_publish_cost_s_;
+  return p;
+}
+
+}  // namespace plx

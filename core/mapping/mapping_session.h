@@ -1,0 +1,136 @@
+// Incremental mapping (DESIGN.md §7, §10): posed keyframes arrive one at a time while readers
+// use the map, so the work is cut into bounded steps and the map is published as immutable
+// copy-on-write versions. This is the policy every streaming caller shares (the daemon's
+// Integrate stream, SLAM): how much each keyframe earns of the iteration budget, how long one
+// step may run, when a new version is worth publishing, and how a job continues a map.
+//
+// Threads: AddKeyframe may be called from any thread; everything else from one thread at a
+// time (the step runner, e.g. the worker that owns the backend).
+#pragma once
+
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <mutex>
+
+#include "absl/status/statusor.h"
+#include "core/geometry/intrinsics.h"
+#include "core/geometry/rgbd_frame.h"
+#include "core/geometry/se3.h"
+#include "core/grid/plenoxel_map.h"
+#include "core/kernels/backend.h"
+#include "core/mapping/mapper.h"
+
+namespace plx {
+
+// The most iterations a keyframe may earn; beyond it a typo, not a wish.
+inline constexpr int kMaxIterationsPerKeyframe = 100000;
+
+struct MappingSessionOptions {
+  // Voxel size, batch, learning rates and the allocation/fusion bands. The budget fields are
+  // the session's: it grows max_iterations by iterations_per_keyframe per keyframe.
+  MapperOptions mapper;
+  int iterations_per_keyframe = 50;
+
+  // One Step runs at most this many iterations or this long (at least one iteration), so a
+  // tracking frame queued behind it on the same device waits about chunk_seconds plus one
+  // iteration; integrating one keyframe (allocation and fusion) comes on top.
+  int chunk_iterations = 10;
+  double chunk_seconds = 0.05;
+
+  // A version is published when keyframes were integrated since the last one, or
+  // publish_every_iterations iterations have run, and at least min_publish_interval_s has
+  // passed; the interval stretches to 10x the last publish's cost, so publishing never takes
+  // more than about a tenth of the session's time.
+  double min_publish_interval_s = 0.25;
+  int publish_every_iterations = 100;
+};
+
+// Checks the session's own fields and the mapper options it will use.
+absl::Status ValidateMappingSessionOptions(const MappingSessionOptions& options);
+
+struct MappingStepResult {
+  int keyframes_integrated = 0;  // by this step (0 or 1)
+  int iterations = 0;            // run by this step
+  // Set when this step published a new version of the map.
+  std::shared_ptr<const PlenoxelMap> published;
+  int keyframes_in_published = 0;  // keyframes integrated since the previous published version
+  // Where the step's time went (seconds).
+  double integrate_s = 0.0, optimize_s = 0.0, publish_s = 0.0;
+};
+
+struct MappingSessionProgress {
+  int keyframes_added = 0;       // AddKeyframe calls accepted
+  int keyframes_integrated = 0;  // allocated and initialised in the map
+  int iterations = 0;
+  int iteration_budget = 0;      // iterations_per_keyframe * keyframes integrated
+  double fraction = 0.0;         // iterations / budget, capped at 1
+  double schedule = 0.0;         // learning-rate schedule position (never decreases)
+  double train_psnr = 0.0;       // last batch (see MappingProgress)
+  double train_depth_l1_m = 0.0;
+  int published_versions = 0;
+  int64_t map_bytes = 0;
+  int64_t cloned_bricks = 0;     // copy-on-write clones so far
+  double last_publish_s = 0.0;   // how long the last publish took
+};
+
+class MappingSession {
+ public:
+  // A session that continues `base` (a published version, shared, never written: the session
+  // maps a copy-on-write copy of it) or, when `base` is null, starts a new map with
+  // options.mapper.voxel_size. `backend` must outlive the session.
+  static absl::StatusOr<std::unique_ptr<MappingSession>> Create(
+      const MappingSessionOptions& options, Backend* backend,
+      std::shared_ptr<const PlenoxelMap> base);
+
+  // Queues a keyframe (thread-safe; checked now, integrated by a later Step).
+  absl::Status AddKeyframe(RgbdFrame frame, const SE3& world_T_camera,
+                           const PinholeIntrinsics& intrinsics);
+  int pending_keyframes() const;
+
+  // True while a Step would do something: keyframes are queued or budget is left.
+  bool has_work() const;
+
+  // One bounded piece of work: integrates at most one queued keyframe, runs at most one chunk
+  // of iterations, and publishes a version when one is due. With `finish`, also publishes
+  // whatever is not published yet once no work is left (the end of a job).
+  absl::StatusOr<MappingStepResult> Step(bool finish = false);
+
+  // Publishes the current map now (e.g. before a save), unless nothing changed since the last
+  // version, when it returns that one.
+  absl::StatusOr<std::shared_ptr<const PlenoxelMap>> Publish();
+
+  MappingSessionProgress progress() const;
+  // The latest published version (null before the first publish).
+  const std::shared_ptr<const PlenoxelMap>& latest() const { return latest_; }
+
+ private:
+  struct PendingKeyframe {
+    RgbdFrame frame;
+    SE3 world_T_camera;
+    PinholeIntrinsics intrinsics;
+  };
+
+  MappingSession(const MappingSessionOptions& options, std::unique_ptr<Mapper> mapper);
+  bool BudgetLeft() const;
+  absl::Status PublishInto(MappingStepResult* result);
+
+  const MappingSessionOptions options_;
+  std::unique_ptr<Mapper> mapper_;
+
+  mutable std::mutex mutex_;
+  std::deque<PendingKeyframe> pending_;  // guarded by mutex_
+  int added_ = 0;                        // guarded by mutex_
+
+  int integrated_ = 0;
+  MappingProgress last_;
+  std::shared_ptr<const PlenoxelMap> latest_;
+  int published_versions_ = 0;
+  bool changed_since_publish_ = false;
+  int keyframes_since_publish_ = 0;
+  int iterations_at_publish_ = 0;
+  double last_publish_cost_s_ = 0.0;
+  double last_publish_time_s_ = -1e300;  // on the session's clock
+};
+
+}  // namespace plx
