@@ -10,6 +10,8 @@ import numpy as np
 
 from plenoxd.v1 import plenoxd_pb2 as pb
 
+from .timestamps import slerp
+
 __all__ = [
     "pb",
     "quat_to_matrix",
@@ -59,21 +61,6 @@ def matrix_to_quat(r):
     q = np.array(q)
     q /= np.linalg.norm(q)
     return -q if q[3] < 0 else q
-
-
-def slerp(q0, q1, alpha):
-    """Spherical interpolation between quaternions (x, y, z, w), the shorter way round."""
-    q0 = np.asarray(q0, dtype=np.float64) / np.linalg.norm(q0)
-    q1 = np.asarray(q1, dtype=np.float64) / np.linalg.norm(q1)
-    d = float(np.dot(q0, q1))
-    if d < 0.0:
-        q1, d = -q1, -d
-    if d > 1.0 - 1e-9:  # nearly identical: linear is exact enough and avoids 0/0
-        q = (1.0 - alpha) * q0 + alpha * q1
-        return q / np.linalg.norm(q)
-    theta = np.arccos(min(d, 1.0))
-    s = np.sin(theta)
-    return (np.sin((1.0 - alpha) * theta) / s) * q0 + (np.sin(alpha * theta) / s) * q1
 
 
 # --- poses -------------------------------------------------------------------------------------
