@@ -119,7 +119,9 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
           absl::StrCat("the daemon ended the Track stream at frame ", i, " of ", total)),
                   /*cancel=*/false);
     }
-    trajectory.push_back({frame->timestamp, PoseFromProto(estimate.pose())});
+    absl::StatusOr<SE3> pose = PoseFromProto(estimate.pose(), "estimate.pose");
+    if (!pose.ok()) return fail(pose.status(), /*cancel=*/true);
+    trajectory.push_back({frame->timestamp, *pose});
     if (i > 0) {
       roundtrip_ms.push_back(absl::ToDoubleMilliseconds(absl::Now() - sent));
       latency_ms.push_back(estimate.latency_ms());

@@ -104,10 +104,17 @@ def as_pose(pose):
 
 
 def pose_to_proto(pose, out=None):
-    """A plenoxd.v1.Pose from any pose form accepted by as_pose()."""
+    """A plenoxd.v1.Pose from any pose form accepted by as_pose(), with the wire's convention
+    (as the C++ proto/pose_codec.h): a unit quaternion with qw >= 0."""
     t, q = as_pose(pose)
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(q))):
         raise ValueError("pose is not finite")
+    norm = np.linalg.norm(q)
+    if norm < 1e-6:  # the daemon's threshold for "the quaternion is zero"
+        raise ValueError("the quaternion is zero")
+    q = q / norm
+    if q[3] < 0.0:  # q and -q are the same rotation; one sign makes equal poses equal messages
+        q = -q
     out = pb.Pose() if out is None else out
     out.tx, out.ty, out.tz = (float(v) for v in t)
     out.qx, out.qy, out.qz, out.qw = (float(v) for v in q)
