@@ -44,9 +44,8 @@ int RunRemoteExport(const RemoteOptions& remote, const std::vector<std::string>&
       .Add("min-density", "D",
            absl::StrCat("points where the density exceeds D (0 = the daemon's default, ",
                         kDefaultExportMinDensity, ")"),
-           "0")
-      .AddSwitch("json", "print a JSON summary on the last line of stdout")
-      .AddSwitch("quiet", "no progress on stderr");
+           "0");
+  AddJsonAndQuietSwitches(flags);
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
   absl::StatusOr<double> min_density = flags.GetDouble("min-density", 0.0, 1e9);
