@@ -1,7 +1,8 @@
 """Pieces shared by the benchmark scripts in bench/ (see bench/README.md).
 
 - TUM-layout dataset reading: intrinsics, frame association, ground-truth pose interpolation,
-  image loading, TUM trajectory writing. Used by the Open3D peers in bench/peers/.
+  image loading, TUM trajectory writing. Used by the Open3D peers in bench/peers/. Association
+  and slerp are the Python client's (clients/python/plenoxd_client/timestamps.py).
 - Orchestration: running a command with its stderr passed through live, reading the JSON
   object on the last line of its stdout, turning every failure into a CommandError, and
   printing a markdown table with notes. Used by map_bench.py and track_bench.py.
@@ -13,6 +14,8 @@ them. Run everything with Debian's interpreter, /usr/bin/python3.
 
 import bisect
 import collections
+import functools
+import importlib.util
 import json
 import math
 import os
@@ -74,27 +77,17 @@ def read_intrinsics(dataset):
     }
 
 
-def associate(rgb_rows, depth_rows, max_dt):
-    """Pair rgb and depth stamps one-to-one, closest pairs first (TUM associate.py logic)."""
-    rgb = sorted((float(r[0]), r[1]) for r in rgb_rows)
-    depth = sorted((float(r[0]), r[1]) for r in depth_rows)
-    dstamps = [d[0] for d in depth]
-    cands = []
-    for i, (t, _) in enumerate(rgb):
-        lo = bisect.bisect_left(dstamps, t - max_dt)
-        hi = bisect.bisect_right(dstamps, t + max_dt)
-        for j in range(lo, hi):
-            cands.append((abs(dstamps[j] - t), i, j))
-    cands.sort()
-    used_r, used_d, pairs = set(), set(), []
-    for _, i, j in cands:
-        if i in used_r or j in used_d:
-            continue
-        used_r.add(i)
-        used_d.add(j)
-        pairs.append((rgb[i][0], rgb[i][1], depth[j][0], depth[j][1]))
-    pairs.sort()
-    return pairs
+@functools.lru_cache(maxsize=None)
+def _timestamps():
+    """clients/python/plenoxd_client/timestamps.py: TUM association and slerp, written once for
+    the Python client and the bench. Loaded by its path, because importing the plenoxd_client
+    package needs grpc and the stubs a build generates, which the peers' interpreter need not
+    have. Needs numpy."""
+    path = os.path.join(REPO, "clients", "python", "plenoxd_client", "timestamps.py")
+    spec = importlib.util.spec_from_file_location("plenoxd_client_timestamps", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def read_frames(dataset):
@@ -103,24 +96,15 @@ def read_frames(dataset):
     if os.path.exists(assoc):
         frames = [(float(r[0]), r[1], float(r[2]), r[3]) for r in read_rows(assoc)]
     else:
-        frames = associate(read_rows(os.path.join(dataset, "rgb.txt")),
-                           read_rows(os.path.join(dataset, "depth.txt")), ASSOC_MAX_DT)
+        # Paired one-to-one, closest stamps first (the TUM associate.py rule).
+        rgb = read_rows(os.path.join(dataset, "rgb.txt"))
+        depth = read_rows(os.path.join(dataset, "depth.txt"))
+        pairs = _timestamps().associate([float(r[0]) for r in rgb], [float(r[0]) for r in depth],
+                                        ASSOC_MAX_DT)
+        frames = [(float(rgb[i][0]), rgb[i][1], float(depth[j][0]), depth[j][1])
+                  for i, j in pairs]
     return [(tr, os.path.join(dataset, pr), td, os.path.join(dataset, pd))
             for tr, pr, td, pd in frames]
-
-
-def quat_slerp(q0, q1, a):
-    q0 = q0 / np.linalg.norm(q0)
-    q1 = q1 / np.linalg.norm(q1)
-    d = float(np.dot(q0, q1))
-    if d < 0.0:  # take the short way round
-        q1, d = -q1, -d
-    if d > 0.9995:
-        q = q0 + a * (q1 - q0)
-    else:
-        th = math.acos(min(1.0, d))
-        q = (math.sin((1.0 - a) * th) * q0 + math.sin(a * th) * q1) / math.sin(th)
-    return q / np.linalg.norm(q)
 
 
 def quat_to_rot(q):
@@ -187,7 +171,7 @@ class GroundTruth:
             a = (t - t0) / (t1 - t0)
             p0, p1 = self.p[i - 1], self.p[i]
             tr = (1.0 - a) * p0[:3] + a * p1[:3]
-            q = quat_slerp(p0[3:], p1[3:], a)
+            q = _timestamps().slerp(p0[3:], p1[3:], a)
         T = np.eye(4)
         T[:3, :3] = quat_to_rot(np.asarray(q) / np.linalg.norm(q))
         T[:3, 3] = tr

@@ -6,6 +6,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/formats/ply_export.h"
+#include "core/mapping/mapper.h"
 #include "core/render/render_view.h"
 #include "server/grpc_status.h"
 #include "server/integrate_reactor.h"
@@ -65,7 +66,8 @@ class ExportReactor final : public grpc::ServerWriteReactor<pb::ExportChunk> {
       Done(map.status());
       return;
     }
-    const float min_density = request->min_density() > 0 ? request->min_density() : 5.0f;
+    const float min_density = request->min_density() > 0 ? request->min_density()
+                                                          : kDefaultExportMinDensity;
     state_->workers->Pick().Post(
         Priority::kBackground, [this, map = *map, min_density](Backend*, bool cancelled) {
           if (cancelled) {
@@ -230,7 +232,8 @@ grpc::ServerUnaryReactor* PlenoxdService::CreateMap(grpc::CallbackServerContext*
   absl::Status status = CheckCall(*state_, context);
   if (status.ok()) {
     // Only exactly 0 means the default; negative and NaN sizes reach the store's range check.
-    const float voxel = request->voxel_size() == 0.0f ? 0.02f : request->voxel_size();
+    const float voxel =
+        request->voxel_size() == 0.0f ? MapperOptions{}.voxel_size : request->voxel_size();
     status = StatusToProto(state_->maps->Create(request->name(), voxel), response);
   }
   Finish(reactor, "CreateMap", status);

@@ -77,29 +77,6 @@ absl::StatusOr<DepthImage> DecodeDepth(const pb::Frame& frame, const std::string
 
 }  // namespace
 
-absl::StatusOr<SE3> PoseFromProto(const pb::Pose& p, const std::string& field) {
-  const double values[7] = {p.tx(), p.ty(), p.tz(), p.qx(), p.qy(), p.qz(), p.qw()};
-  const char* names[7] = {"tx", "ty", "tz", "qx", "qy", "qz", "qw"};
-  for (int i = 0; i < 7; ++i) {
-    if (!std::isfinite(values[i])) return Invalid(absl::StrCat(field, ".", names[i]), "not finite");
-  }
-  const Eigen::Quaterniond q(p.qw(), p.qx(), p.qy(), p.qz());
-  if (q.norm() < 1e-6) return Invalid(field, "the quaternion is zero");
-  return SE3(q.normalized(), Eigen::Vector3d(p.tx(), p.ty(), p.tz()));
-}
-
-void PoseToProto(const SE3& pose, pb::Pose* out) {
-  Eigen::Quaterniond q = pose.rotation();
-  if (q.w() < 0) q.coeffs() = -q.coeffs();
-  out->set_tx(pose.translation().x());
-  out->set_ty(pose.translation().y());
-  out->set_tz(pose.translation().z());
-  out->set_qx(q.x());
-  out->set_qy(q.y());
-  out->set_qz(q.z());
-  out->set_qw(q.w());
-}
-
 absl::StatusOr<CameraCalibration> IntrinsicsFromProto(const pb::Intrinsics& k,
                                                       const std::string& field,
                                                       bool require_depth_scale) {

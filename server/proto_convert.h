@@ -11,13 +11,13 @@
 #include "core/geometry/se3.h"
 #include "core/render/render_view.h"
 #include "plenoxd/v1/plenoxd.pb.h"
+#include "proto/pose_codec.h"
 
 namespace plx::server {
 
 namespace pb = ::plenoxd::v1;
 
-absl::StatusOr<SE3> PoseFromProto(const pb::Pose& pose, const std::string& field);
-void PoseToProto(const SE3& pose, pb::Pose* out);
+// Poses: PoseFromProto / PoseToProto (proto/pose_codec.h, shared with the CLI).
 
 // With require_depth_scale, depth_scale must be positive (incoming depth images).
 absl::StatusOr<CameraCalibration> IntrinsicsFromProto(const pb::Intrinsics& intrinsics,

@@ -11,6 +11,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "app/make_backend.h"
+#include "clients/plenox/map_flags.h"
 #include "core/common/status_macros.h"
 
 namespace plx::cli {
@@ -103,6 +104,11 @@ JsonObject& JsonObject::AddBool(const std::string& key, bool value) {
   return *this;
 }
 
+JsonObject& JsonObject::Append(const JsonObject& other) {
+  fields_.insert(fields_.end(), other.fields_.begin(), other.fields_.end());
+  return *this;
+}
+
 std::string JsonObject::str() const {
   std::string out = "{";
   for (size_t i = 0; i < fields_.size(); ++i) {
@@ -168,6 +174,11 @@ std::string BackendText(const Backend& backend) {
 
 std::string Megabytes(int64_t bytes) { return absl::StrFormat("%.1f MB", bytes / 1e6); }
 
+void AddJsonAndQuietSwitches(FlagSet& flags) {
+  flags.AddSwitch("json", "print a JSON summary on the last line of stdout")
+      .AddSwitch("quiet", "no progress on stderr");
+}
+
 void AddDatasetFlags(FlagSet& flags) {
   flags.Add("dataset", "DIR", "RGB-D sequence folder", std::nullopt, true)
       .Add("format", "auto|tum|replica|scannet", "dataset layout", "auto")
@@ -190,9 +201,16 @@ absl::StatusOr<DatasetOptions> DatasetOptionsFromFlags(const FlagSet& flags) {
   return options;
 }
 
-absl::StatusOr<std::unique_ptr<RgbdDataset>> OpenDatasetFromFlags(const FlagSet& flags,
-                                                                   const DatasetOptions& options) {
-  return OpenDataset(flags.GetString("dataset"), options);
+std::unique_ptr<RgbdDataset> OpenDatasetOrReport(const std::string& command,
+                                                 const FlagSet& flags,
+                                                 const DatasetOptions& options, int* exit_code) {
+  absl::StatusOr<std::unique_ptr<RgbdDataset>> dataset =
+      OpenDataset(flags.GetString("dataset"), options);
+  if (!dataset.ok()) {
+    *exit_code = ReportError(command, dataset.status());
+    return nullptr;
+  }
+  return std::move(*dataset);
 }
 
 absl::Status CheckOutputDirectory(const std::string& path) {
@@ -226,15 +244,14 @@ absl::StatusOr<TrackerOptions> TrackerOptionsFromFlags(const FlagSet& flags) {
 }
 
 void AddMapperFlags(FlagSet& flags) {
-  flags.Add("voxel-size", "M", "voxel edge in metres", "0.02")
-      .Add("time-budget", "S", "optimisation time limit in seconds (0 = none)", "0")
+  AddVoxelSizeFlag(flags, "voxel edge in metres");
+  flags.Add("time-budget", "S", "optimisation time limit in seconds (0 = none)", "0")
       .Add("iterations", "N",
            absl::StrCat("optimisation iteration limit (0 = none) [default: ",
                         kIterationsPerKeyframe, " per keyframe]"),
-           "")
-      .Add("batch", "N", "rays per iteration", "8192")
-      .Add("max-depth", "M", "ignore depth measurements beyond this (metres)", "10")
-      .Add("seed", "N", "random seed for ray sampling", "20200823")
+           "");
+  AddBatchAndMaxDepthFlags(flags);
+  flags.Add("seed", "N", "random seed for ray sampling", "20200823")
       .AddSwitch("coarse-to-fine",
                  "optimise at twice the voxel size for the first half, then upsample");
 }
@@ -246,15 +263,15 @@ void SetIterationBudget(const FlagSet& flags, int keyframes, MapperOptions* opti
 }
 
 absl::StatusOr<MapperOptions> MapperOptionsFromFlags(const FlagSet& flags, int keyframes) {
-  PLX_ASSIGN_OR_RETURN(const double voxel, flags.GetDouble("voxel-size", 0.001, 1.0));
+  PLX_ASSIGN_OR_RETURN(const double voxel, VoxelSizeFromFlags(flags));
   MapperOptions o = MapperOptionsForVoxelSize(static_cast<float>(voxel));
   PLX_ASSIGN_OR_RETURN(o.time_budget_s, flags.GetDouble("time-budget", 0.0, 1e7));
   if (flags.IsSet("iterations")) {
     PLX_ASSIGN_OR_RETURN(o.max_iterations, flags.GetInt("iterations", 0, 100000000));
   }
   SetIterationBudget(flags, keyframes, &o);
-  PLX_ASSIGN_OR_RETURN(o.batch_size, flags.GetInt("batch", 1, 1 << 22));
-  PLX_ASSIGN_OR_RETURN(const double max_depth, flags.GetDouble("max-depth", 0.1, 1000.0));
+  PLX_ASSIGN_OR_RETURN(o.batch_size, BatchFromFlags(flags));
+  PLX_ASSIGN_OR_RETURN(const double max_depth, MaxDepthFromFlags(flags));
   o.allocation.max_depth = static_cast<float>(max_depth);
   o.fusion.max_depth = static_cast<float>(max_depth);
   PLX_ASSIGN_OR_RETURN(const int seed, flags.GetInt("seed", 0, 2147483647));

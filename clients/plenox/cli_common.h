@@ -55,6 +55,8 @@ class JsonObject {
   JsonObject& Add(const std::string& key, const std::string& value);
   // true / false. Not an Add overload: a string literal would convert to bool before string.
   JsonObject& AddBool(const std::string& key, bool value);
+  // Every field of `other`, in its order.
+  JsonObject& Append(const JsonObject& other);
   std::string str() const;
 
  private:
@@ -64,13 +66,17 @@ class JsonObject {
 // Peak resident set size of this process, MB.
 double PeakRssMb();
 
+// --json (a JSON summary on the last line of stdout) and --quiet (no progress on stderr).
+void AddJsonAndQuietSwitches(FlagSet& flags);
+
 // --dataset, --format, --intrinsics, --depth-scale.
 void AddDatasetFlags(FlagSet& flags);
 // Checks the dataset flags (errors here are usage errors) ...
 absl::StatusOr<DatasetOptions> DatasetOptionsFromFlags(const FlagSet& flags);
-// ... and opens the dataset with them (errors here are failures).
-absl::StatusOr<std::unique_ptr<RgbdDataset>> OpenDatasetFromFlags(const FlagSet& flags,
-                                                                   const DatasetOptions& options);
+// ... and opens the dataset with them. Errors here are failures: it prints the error
+// ("plenox <command>: ...") and returns nullptr with *exit_code set.
+std::unique_ptr<RgbdDataset> OpenDatasetOrReport(const std::string& command, const FlagSet& flags,
+                                                 const DatasetOptions& options, int* exit_code);
 
 // NotFound when the folder that would hold `path` does not exist (checked before long work).
 absl::Status CheckOutputDirectory(const std::string& path);

@@ -41,20 +41,20 @@ int RunEvalMap(const std::vector<std::string>& args) {
 
   absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(flags.GetString("map"));
   if (!map.ok()) return ReportError("eval-map", map.status());
-  absl::StatusOr<std::unique_ptr<RgbdDataset>> dataset =
-      OpenDatasetFromFlags(flags, *dataset_options);
-  if (!dataset.ok()) return ReportError("eval-map", dataset.status());
-  const std::vector<int> held_out = HeldOutFrames((*dataset)->size(), *every, *frames);
+  std::unique_ptr<RgbdDataset> dataset =
+      OpenDatasetOrReport("eval-map", flags, *dataset_options, &exit_code);
+  if (!dataset) return exit_code;
+  const std::vector<int> held_out = HeldOutFrames(dataset->size(), *every, *frames);
   if (held_out.empty()) {
     return ReportError("eval-map", absl::FailedPreconditionError(absl::StrFormat(
                                        "the dataset has no frame held out from mapping every %d-th "
                                        "frame (%d frames)",
-                                       *every, (*dataset)->size())));
+                                       *every, dataset->size())));
   }
   MapEvalOptions options;
   options.pixels_per_frame = *pixels;
   options.max_depth = *max_depth;
-  absl::StatusOr<MapEvalResult> r = EvaluateMap(*backend, **map, **dataset, held_out, options);
+  absl::StatusOr<MapEvalResult> r = EvaluateMap(*backend, **map, *dataset, held_out, options);
   if (!r.ok()) return ReportError("eval-map", r.status());
   if (flags.GetSwitch("json")) {
     JsonObject json;

@@ -4,6 +4,7 @@
 #include "absl/strings/str_format.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
+#include "clients/plenox/map_flags.h"
 #include "clients/plenox/mapping_progress.h"
 #include "core/eval/map_metrics.h"
 #include "core/formats/map_file.h"
@@ -16,16 +17,15 @@ int RunMap(const std::vector<std::string>& args) {
                 "Builds a Plenoxel map from every N-th frame of a dataset, using the dataset's\n"
                 "ground-truth poses, and saves it to a map file.");
   AddDatasetFlags(flags);
-  flags.Add("out", "MAP", "map file to write", std::nullopt, true)
-      .Add("every", "N", "map every N-th frame (0, N, 2N, ...)", "10");
+  flags.Add("out", "MAP", "map file to write", std::nullopt, true);
+  AddEveryFlag(flags, "N");
   AddMapperFlags(flags);
   AddBackendFlags(flags);
-  flags.AddSwitch("json", "print a JSON summary on the last line of stdout")
-      .AddSwitch("quiet", "no progress on stderr");
+  AddJsonAndQuietSwitches(flags);
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
 
-  absl::StatusOr<int> every = flags.GetInt("every", 1, 1000000);
+  absl::StatusOr<int> every = EveryFromFlags(flags);
   if (!every.ok()) return ReportError("map", every.status(), true);
   absl::StatusOr<MapperOptions> options = MapperOptionsFromFlags(flags, /*keyframes=*/1);
   if (!options.ok()) return ReportError("map", options.status(), true);
@@ -36,15 +36,15 @@ int RunMap(const std::vector<std::string>& args) {
   std::unique_ptr<Backend> backend = BackendFromFlagsOrReport("map", flags, &exit_code);
   if (!backend) return exit_code;
 
-  absl::StatusOr<std::unique_ptr<RgbdDataset>> dataset =
-      OpenDatasetFromFlags(flags, *dataset_options);
-  if (!dataset.ok()) return ReportError("map", dataset.status());
-  const std::vector<int> keyframes = KeyframeIndices((*dataset)->size(), *every);
+  std::unique_ptr<RgbdDataset> dataset =
+      OpenDatasetOrReport("map", flags, *dataset_options, &exit_code);
+  if (!dataset) return exit_code;
+  const std::vector<int> keyframes = KeyframeIndices(dataset->size(), *every);
   SetIterationBudget(flags, static_cast<int>(keyframes.size()), &*options);
 
   ProgressLine line(!flags.GetSwitch("quiet"));
   absl::StatusOr<MapDatasetResult> result =
-      MapDataset(**dataset, keyframes, *options, *backend, MappingProgressPrinter(&line));
+      MapDataset(*dataset, keyframes, *options, *backend, MappingProgressPrinter(&line));
   if (!result.ok()) return ReportError("map", result.status());
   line.Finish(MappingSummaryText(result->summary) + " [" + BackendText(*backend) + "]");
 

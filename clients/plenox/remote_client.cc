@@ -245,23 +245,6 @@ std::unique_ptr<RemoteClient> ConnectOrReport(const std::string& command,
   return std::move(*client);
 }
 
-void PoseToProto(const SE3& pose, pb::Pose* out) {
-  const Eigen::Vector3d& t = pose.translation();
-  const Eigen::Quaterniond& q = pose.rotation();
-  out->set_tx(t.x());
-  out->set_ty(t.y());
-  out->set_tz(t.z());
-  out->set_qx(q.x());
-  out->set_qy(q.y());
-  out->set_qz(q.z());
-  out->set_qw(q.w());
-}
-
-SE3 PoseFromProto(const pb::Pose& pose) {
-  return SE3(Eigen::Quaterniond(pose.qw(), pose.qx(), pose.qy(), pose.qz()),
-             Eigen::Vector3d(pose.tx(), pose.ty(), pose.tz()));
-}
-
 void IntrinsicsToProto(const PinholeIntrinsics& k, double depth_scale, pb::Intrinsics* out) {
   out->set_fx(k.fx);
   out->set_fy(k.fy);

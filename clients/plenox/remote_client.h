@@ -24,6 +24,7 @@
 #include "core/geometry/rgbd_frame.h"
 #include "core/geometry/se3.h"
 #include "plenoxd/v1/plenoxd.grpc.pb.h"
+#include "proto/pose_codec.h"
 
 namespace plx::cli {
 
@@ -89,9 +90,8 @@ class RemoteClient {
 std::unique_ptr<RemoteClient> ConnectOrReport(const std::string& command,
                                               const RemoteOptions& options, int* exit_code);
 
-// Wire conversions (the daemon normalises quaternions on receipt).
-void PoseToProto(const SE3& pose, pb::Pose* out);
-SE3 PoseFromProto(const pb::Pose& pose);
+// Wire conversions; poses: PoseToProto / PoseFromProto (proto/pose_codec.h, shared with the
+// daemon).
 void IntrinsicsToProto(const PinholeIntrinsics& k, double depth_scale, pb::Intrinsics* out);
 
 // How frames travel: PNG (colour 8-bit, depth 16-bit; small on the wire, costs an encode here

@@ -12,6 +12,7 @@
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "clients/plenox/remote_client.h"
+#include "core/formats/ply_export.h"
 
 namespace plx::cli {
 namespace {
@@ -40,10 +41,11 @@ int RunRemoteExport(const RemoteOptions& remote, const std::vector<std::string>&
                 "field). The file appears only once it is complete.");
   flags.Add("map", "N", "the map on the daemon", std::nullopt, true)
       .Add("out", "CLOUD.ply", "point cloud to write", std::nullopt, true)
-      .Add("min-density", "D", "points where the density exceeds D (0 = the daemon's default, 5)",
-           "0")
-      .AddSwitch("json", "print a JSON summary on the last line of stdout")
-      .AddSwitch("quiet", "no progress on stderr");
+      .Add("min-density", "D",
+           absl::StrCat("points where the density exceeds D (0 = the daemon's default, ",
+                        kDefaultExportMinDensity, ")"),
+           "0");
+  AddJsonAndQuietSwitches(flags);
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
   absl::StatusOr<double> min_density = flags.GetDouble("min-density", 0.0, 1e9);

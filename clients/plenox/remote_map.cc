@@ -10,6 +10,7 @@
 #include "absl/strings/str_format.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
+#include "clients/plenox/map_flags.h"
 #include "clients/plenox/remote_client.h"
 #include "core/eval/map_metrics.h"
 
@@ -58,27 +59,24 @@ int RunRemoteMap(const RemoteOptions& remote, const std::vector<std::string>& ar
                 "daemon has spent the optimisation budget and published the final version.");
   AddDatasetFlags(flags);
   flags.Add("name", "N", "the map on the daemon (1-64 characters of [A-Za-z0-9_.-])", std::nullopt,
-            true)
-      .Add("every", "K", "map every K-th frame (0, K, 2K, ...)", "10")
-      .Add("voxel-size", "M", "voxel edge in metres of a new map (an existing map keeps its own)",
-           "0.02")
-      .Add("iterations-per-keyframe", "N", "optimisation iterations per keyframe", "50")
-      .Add("batch", "N", "rays per iteration", "8192")
-      .Add("max-depth", "M", "ignore depth measurements beyond this (metres)", "10")
-      .AddSwitch("json", "print a JSON summary on the last line of stdout")
-      .AddSwitch("quiet", "no progress on stderr");
+            true);
+  AddEveryFlag(flags, "K");
+  AddVoxelSizeFlag(flags, "voxel edge in metres of a new map (an existing map keeps its own)");
+  flags.Add("iterations-per-keyframe", "N", "optimisation iterations per keyframe", "50");
+  AddBatchAndMaxDepthFlags(flags);
+  AddJsonAndQuietSwitches(flags);
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
 
-  absl::StatusOr<int> every = flags.GetInt("every", 1, 1000000);
+  absl::StatusOr<int> every = EveryFromFlags(flags);
   if (!every.ok()) return ReportError(kCommand, every.status(), true);
-  absl::StatusOr<double> voxel = flags.GetDouble("voxel-size", 0.001, 1.0);
+  absl::StatusOr<double> voxel = VoxelSizeFromFlags(flags);
   if (!voxel.ok()) return ReportError(kCommand, voxel.status(), true);
   absl::StatusOr<int> iterations = flags.GetInt("iterations-per-keyframe", 1, 100000);
   if (!iterations.ok()) return ReportError(kCommand, iterations.status(), true);
-  absl::StatusOr<int> batch = flags.GetInt("batch", 1, 1 << 22);
+  absl::StatusOr<int> batch = BatchFromFlags(flags);
   if (!batch.ok()) return ReportError(kCommand, batch.status(), true);
-  absl::StatusOr<double> max_depth = flags.GetDouble("max-depth", 0.1, 1000.0);
+  absl::StatusOr<double> max_depth = MaxDepthFromFlags(flags);
   if (!max_depth.ok()) return ReportError(kCommand, max_depth.status(), true);
   absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);
   if (!dataset_options.ok()) return ReportError(kCommand, dataset_options.status(), true);
@@ -88,21 +86,20 @@ int RunRemoteMap(const RemoteOptions& remote, const std::vector<std::string>& ar
   if (!client) return exit_code;
 
   // Everything local is checked before the daemon is asked to create anything.
-  absl::StatusOr<std::unique_ptr<RgbdDataset>> opened =
-      OpenDatasetFromFlags(flags, *dataset_options);
-  if (!opened.ok()) return ReportError(kCommand, opened.status());
-  const RgbdDataset& dataset = **opened;
-  const std::vector<int> keyframes = KeyframeIndices(dataset.size(), *every);
+  std::unique_ptr<RgbdDataset> dataset =
+      OpenDatasetOrReport(kCommand, flags, *dataset_options, &exit_code);
+  if (!dataset) return exit_code;
+  const std::vector<int> keyframes = KeyframeIndices(dataset->size(), *every);
   if (keyframes.empty()) {
     return ReportError(kCommand, absl::InvalidArgumentError(absl::StrCat(
-                                     dataset.name(), " has no frames to map")));
+                                     dataset->name(), " has no frames to map")));
   }
   for (int index : keyframes) {
-    if (!dataset.ground_truth(index)) {
+    if (!dataset->ground_truth(index)) {
       return ReportError(
           kCommand,
           absl::FailedPreconditionError(absl::StrCat(
-              "frame ", index, " (t=", dataset.timestamp(index),
+              "frame ", index, " (t=", dataset->timestamp(index),
               ") has no ground-truth pose; mapping with known poses needs one for every keyframe")));
     }
   }
@@ -153,9 +150,9 @@ int RunRemoteMap(const RemoteOptions& remote, const std::vector<std::string>& ar
   absl::Status local = absl::OkStatus();
   bool stream_open = true;
   for (size_t i = 0; i < keyframes.size() && stream_open; ++i) {
-    absl::StatusOr<RgbdFrame> frame = dataset.LoadFrame(keyframes[i]);
+    absl::StatusOr<RgbdFrame> frame = dataset->LoadFrame(keyframes[i]);
     absl::StatusOr<pb::Frame> encoded =
-        frame.ok() ? FrameToProto(*frame, dataset.calibration(), /*with_pose=*/true)
+        frame.ok() ? FrameToProto(*frame, dataset->calibration(), /*with_pose=*/true)
                    : absl::StatusOr<pb::Frame>(frame.status());
     if (!encoded.ok()) {
       local = encoded.status();

@@ -2,7 +2,6 @@
 // (one Track stream, in lock-step so that no frame is dropped).
 #include <algorithm>
 #include <cmath>
-#include <iostream>
 
 #include "absl/strings/str_cat.h"
 #include "core/common/percentile.h"
@@ -10,6 +9,7 @@
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "clients/plenox/remote_client.h"
+#include "clients/plenox/track_output.h"
 #include "core/io/atomic_write.h"
 #include "core/formats/trajectory_file.h"
 #include "core/tracking/tracker.h"
@@ -29,14 +29,10 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
                 "previous estimate came back), so none is dropped. Times reported: the daemon's\n"
                 "latency (frame received to estimate sent) and the round trip seen here (frame\n"
                 "sent to estimate read, encoding excluded).");
-  flags.Add("map", "N", "the map on the daemon", std::nullopt, true);
-  AddDatasetFlags(flags);
-  flags.Add("out", "TRAJ.txt", "trajectory to write", std::nullopt, true);
-  AddTrackerFlags(flags);
+  AddTrackFlags(flags, "N", "the map on the daemon");
   flags.Add("encoding", "png|raw", "how frames travel: PNG, or raw RGB8 + uint16 (no codec)", "png")
-      .Add("timings", "FILE", "also write per-frame times: frame timestamp roundtrip_ms daemon_ms", "")
-      .AddSwitch("json", "print a JSON summary on the last line of stdout")
-      .AddSwitch("quiet", "no progress on stderr");
+      .Add("timings", "FILE", "also write per-frame times: frame timestamp roundtrip_ms daemon_ms", "");
+  AddJsonAndQuietSwitches(flags);
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
 
@@ -45,7 +41,6 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
   absl::StatusOr<TrackerOptions> tracker_options = TrackerOptionsFromFlags(flags);
   if (!tracker_options.ok()) return ReportError(kCommand, tracker_options.status(), true);
   const TrackerOptions& options = *tracker_options;
-  const std::string mode = flags.GetString("mode");
   pb::TrackOptions wire;
   wire.set_mode(options.mode == TrackingMode::kAdam ? pb::TrackOptions::MODE_ADAM
                                                     : pb::TrackOptions::MODE_GAUSS_NEWTON);
@@ -56,24 +51,26 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
   absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);
   if (!dataset_options.ok()) return ReportError(kCommand, dataset_options.status(), true);
   const std::string map_name = flags.GetString("map");
-  const std::string out = flags.GetString("out");
-  if (absl::Status s = CheckOutputDirectory(out); !s.ok()) return ReportError(kCommand, s);
+  TrackReport report{.mode = flags.GetString("mode"),
+                     .rays = options.rays,
+                     .iterations = options.iterations,
+                     .trajectory = flags.GetString("out")};
   const std::string timings = flags.GetString("timings");
-  if (!timings.empty()) {
-    if (absl::Status s = CheckOutputDirectory(timings); !s.ok()) return ReportError(kCommand, s);
+  for (const std::string& path : {report.trajectory, timings}) {
+    if (path.empty()) continue;
+    if (absl::Status s = CheckOutputDirectory(path); !s.ok()) return ReportError(kCommand, s);
   }
 
   std::unique_ptr<RemoteClient> client = ConnectOrReport(kCommand, remote, &exit_code);
   if (!client) return exit_code;
-  absl::StatusOr<std::unique_ptr<RgbdDataset>> opened =
-      OpenDatasetFromFlags(flags, *dataset_options);
-  if (!opened.ok()) return ReportError(kCommand, opened.status());
-  const RgbdDataset& dataset = **opened;
-  const int total = dataset.size();
-  if (total == 0) {
+  std::unique_ptr<RgbdDataset> dataset =
+      OpenDatasetOrReport(kCommand, flags, *dataset_options, &exit_code);
+  if (!dataset) return exit_code;
+  report.frames = dataset->size();
+  if (report.frames == 0) {
     return ReportError(kCommand, absl::InvalidArgumentError("the dataset has no frames"));
   }
-  const std::optional<SE3> start_pose = dataset.ground_truth(0);
+  const std::optional<SE3> start_pose = dataset->ground_truth(0);
 
   std::unique_ptr<grpc::ClientContext> context =
       client->NewContext(absl::InfiniteDuration(), map_name);
@@ -95,11 +92,10 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
   std::vector<double> latency_ms;  // frames 1.., as in-process (frame 0 is the start pose)
   std::vector<double> roundtrip_ms;
   absl::Time first_tracked;  // frame 1 loading: frames per second count from here
-  int lost = 0, degraded = 0;
   int64_t dropped = 0;
-  for (int i = 0; i < total; ++i) {
+  for (int i = 0; i < report.frames; ++i) {
     if (i == 1) first_tracked = absl::Now();
-    absl::StatusOr<RgbdFrame> frame = dataset.LoadFrame(i);
+    absl::StatusOr<RgbdFrame> frame = dataset->LoadFrame(i);
     if (!frame.ok()) return fail(frame.status(), /*cancel=*/true);
     pb::TrackRequest request;
     if (i == 0) {
@@ -109,28 +105,34 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
     }
     // No per-frame prior: the daemon predicts with constant velocity, as in-process tracking.
     absl::StatusOr<pb::Frame> encoded =
-        FrameToProto(*frame, dataset.calibration(), /*with_pose=*/false, *encoding);
+        FrameToProto(*frame, dataset->calibration(), /*with_pose=*/false, *encoding);
     if (!encoded.ok()) return fail(encoded.status(), /*cancel=*/true);
     *request.mutable_frame() = std::move(*encoded);
     pb::PoseEstimate estimate;
     const absl::Time sent = absl::Now();
     if (!stream->Write(request) || !stream->Read(&estimate)) {
-      return fail(absl::InternalError(
-          absl::StrCat("the daemon ended the Track stream at frame ", i, " of ", total)),
+      return fail(absl::InternalError(absl::StrCat("the daemon ended the Track stream at frame ",
+                                                   i, " of ", report.frames)),
                   /*cancel=*/false);
     }
-    trajectory.push_back({frame->timestamp, PoseFromProto(estimate.pose())});
+    absl::StatusOr<SE3> pose = PoseFromProto(estimate.pose(), "estimate.pose");
+    if (!pose.ok()) return fail(pose.status(), /*cancel=*/true);
+    trajectory.push_back({frame->timestamp, *pose});
     if (i > 0) {
       roundtrip_ms.push_back(absl::ToDoubleMilliseconds(absl::Now() - sent));
       latency_ms.push_back(estimate.latency_ms());
-      lost += estimate.state() == pb::TRACKING_STATE_LOST;
-      degraded += estimate.state() == pb::TRACKING_STATE_DEGRADED;
+      report.lost += estimate.state() == pb::TRACKING_STATE_LOST;
+      report.degraded += estimate.state() == pb::TRACKING_STATE_DEGRADED;
     }
     dropped += estimate.dropped();
-    line.Update(absl::StrFormat("tracking %d/%d  %s  %.0f ms  rays %d/%d  lost %d%s%s", i + 1,
-                                total, TrackingStateText(estimate.state()), estimate.latency_ms(),
-                                estimate.valid_rays(), options.rays, lost,
-                                estimate.reason().empty() ? "" : "  ", estimate.reason()));
+    line.Update(TrackProgressText({.frame = i + 1,
+                                   .frames = report.frames,
+                                   .state = TrackingStateText(estimate.state()),
+                                   .milliseconds = estimate.latency_ms(),
+                                   .valid_rays = static_cast<int>(estimate.valid_rays()),
+                                   .rays = options.rays,
+                                   .lost = report.lost,
+                                   .reason = estimate.reason()}));
   }
   const absl::Time last_tracked = absl::Now();
   stream->WritesDone();
@@ -139,10 +141,8 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
   }
 
   // The trajectory first: it is the result; the timings are extra.
-  if (absl::Status s = WriteTumTrajectory(
-          out, trajectory,
-          absl::StrFormat("plenox track: %s on map %s at %s (mode %s)", dataset.name(), map_name,
-                          client->server(), mode));
+  if (absl::Status s = WriteTrackTrajectory(report, trajectory, dataset->name(),
+                                            absl::StrCat(map_name, " at ", client->server()));
       !s.ok()) {
     return ReportError(kCommand, s);
   }
@@ -156,37 +156,22 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
       return ReportError(kCommand, s);
     }
   }
-  const double median = Percentile(latency_ms, 0.5), p95 = Percentile(latency_ms, 0.95);
-  line.Finish(absl::StrFormat(
-      "tracked %d frames on %s: median %.1f ms, p95 %.1f ms per frame, %d lost, %d degraded%s",
-      total, client->server(), median, p95, lost, degraded,
-      start_pose ? "" : " (no ground truth: started at the identity)"));
-  if (flags.GetSwitch("json")) {
-    JsonObject json;
-    json.Add("frames", total)
-        .Add("ms_per_frame_median", median)
-        .Add("ms_per_frame_p95", p95)
-        .Add("ms_per_frame_p99", Percentile(latency_ms, 0.99))
-        .Add("roundtrip_ms_median", Percentile(roundtrip_ms, 0.5))
-        .Add("roundtrip_ms_p99", Percentile(roundtrip_ms, 0.99))
-        // Loading and encoding included: what this client achieves end to end.
-        .Add("fps", roundtrip_ms.empty() ? 0.0
-                                         : roundtrip_ms.size() /
-                                               absl::ToDoubleSeconds(last_tracked - first_tracked))
-        .Add("encoding", flags.GetString("encoding"))
-        .Add("lost", lost)
-        .Add("degraded", degraded)
-        .Add("dropped", dropped)
-        .Add("mode", mode)
-        .Add("rays", options.rays)
-        .Add("iterations", options.iterations)
-        .Add("trajectory", out)
-        .Add("map", map_name)
-        .Add("server", client->server());
-    std::cout << json.str() << "\n";
-  } else {
-    std::cout << absl::StrFormat("wrote %s (%d poses)\n", out, total);
-  }
+  report.ms_per_frame_median = Percentile(latency_ms, 0.5);
+  report.ms_per_frame_p95 = Percentile(latency_ms, 0.95);
+  report.dropped = dropped;
+  report.started_from_ground_truth = start_pose.has_value();
+  line.Finish(TrackSummaryText(report, absl::StrCat(" on ", client->server()), ""));
+  JsonObject more_times;
+  more_times.Add("ms_per_frame_p99", Percentile(latency_ms, 0.99))
+      .Add("roundtrip_ms_median", Percentile(roundtrip_ms, 0.5))
+      .Add("roundtrip_ms_p99", Percentile(roundtrip_ms, 0.99))
+      // Loading and encoding included: what this client achieves end to end.
+      .Add("fps", roundtrip_ms.empty() ? 0.0
+                                       : roundtrip_ms.size() /
+                                             absl::ToDoubleSeconds(last_tracked - first_tracked))
+      .Add("encoding", flags.GetString("encoding"));
+  PrintTrackResult(report, flags.GetSwitch("json"), more_times,
+                   JsonObject().Add("map", map_name).Add("server", client->server()));
   return kExitOk;
 }
 

@@ -15,6 +15,10 @@ struct PlyExport {
   int64_t points = 0;
 };
 
+// The density threshold when the caller names none: the daemon's Export with min_density 0,
+// and what `plenox export --help` promises for it.
+inline constexpr float kDefaultExportMinDensity = 5.0f;
+
 PlyExport ExportSurfacePointsPly(const PlenoxelMap& map, float min_density);
 
 }  // namespace plx

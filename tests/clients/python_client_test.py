@@ -167,6 +167,15 @@ def main():
         k = seq.intrinsics
         failures.check((k.width, k.height) == (WIDTH, HEIGHT), "intrinsics.txt size")
         groundtruth = seq.groundtruth()
+        # The wire's quaternion convention (as the C++ proto/pose_codec.h): unit, qw >= 0.
+        wire = convert.pose_to_proto(([1.0, 2.0, 3.0], [0.0, 0.0, -0.6, -0.8]))
+        failures.check(np.allclose([wire.qx, wire.qy, wire.qz, wire.qw], [0.0, 0.0, 0.6, 0.8])
+                       and (wire.tx, wire.ty, wire.tz) == (1.0, 2.0, 3.0),
+                       "pose_to_proto writes a unit quaternion with qw >= 0")
+        t_back, q_back = convert.pose_from_proto(convert.pose_to_proto(frames[0].pose))
+        failures.check(np.allclose(t_back, frames[0].pose[0], atol=1e-12)
+                       and abs(abs(np.dot(q_back, frames[0].pose[1])) - 1.0) < 1e-12,
+                       "pose_to_proto / pose_from_proto round trip")
 
         daemon = Daemon(args.plenoxd, work, "open")
         daemons.append(daemon)

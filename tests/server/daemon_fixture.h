@@ -38,6 +38,7 @@
 #include "core/synthetic/synthetic_sequence.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "plenoxd/v1/plenoxd.grpc.pb.h"
+#include "proto/pose_codec.h"
 #include "server/daemon.h"
 #include "tests/test_util.h"
 
@@ -93,22 +94,18 @@ inline const InMemoryDataset& Room() {
 
 inline SE3 GroundTruth(int index) { return *Room().frames()[index].world_T_camera; }
 
+// The daemon's own pose codec (proto/pose_codec.h), as the CLI uses it.
 inline pb::Pose ToProto(const SE3& pose) {
   pb::Pose p;
-  const Eigen::Quaterniond& q = pose.rotation();
-  p.set_tx(pose.translation().x());
-  p.set_ty(pose.translation().y());
-  p.set_tz(pose.translation().z());
-  p.set_qx(q.x());
-  p.set_qy(q.y());
-  p.set_qz(q.z());
-  p.set_qw(q.w());
+  PoseToProto(pose, &p);
   return p;
 }
 
+// A pose the daemon sent; a malformed one fails the test and reads as the identity.
 inline SE3 FromProto(const pb::Pose& p) {
-  return SE3(Eigen::Quaterniond(p.qw(), p.qx(), p.qy(), p.qz()),
-             Eigen::Vector3d(p.tx(), p.ty(), p.tz()));
+  absl::StatusOr<SE3> pose = PoseFromProto(p, "pose");
+  EXPECT_TRUE(pose.ok()) << pose.status();
+  return pose.ok() ? *pose : SE3();
 }
 
 inline pb::Intrinsics RoomIntrinsics() {

@@ -10,6 +10,8 @@ import numpy as np
 
 from plenoxd.v1 import plenoxd_pb2 as pb
 
+from .timestamps import slerp
+
 __all__ = [
     "pb",
     "quat_to_matrix",
@@ -61,21 +63,6 @@ def matrix_to_quat(r):
     return -q if q[3] < 0 else q
 
 
-def slerp(q0, q1, alpha):
-    """Spherical interpolation between quaternions (x, y, z, w), the shorter way round."""
-    q0 = np.asarray(q0, dtype=np.float64) / np.linalg.norm(q0)
-    q1 = np.asarray(q1, dtype=np.float64) / np.linalg.norm(q1)
-    d = float(np.dot(q0, q1))
-    if d < 0.0:
-        q1, d = -q1, -d
-    if d > 1.0 - 1e-9:  # nearly identical: linear is exact enough and avoids 0/0
-        q = (1.0 - alpha) * q0 + alpha * q1
-        return q / np.linalg.norm(q)
-    theta = np.arccos(min(d, 1.0))
-    s = np.sin(theta)
-    return (np.sin((1.0 - alpha) * theta) / s) * q0 + (np.sin(alpha * theta) / s) * q1
-
-
 # --- poses -------------------------------------------------------------------------------------
 
 def pose_to_matrix(t, q):
@@ -117,10 +104,17 @@ def as_pose(pose):
 
 
 def pose_to_proto(pose, out=None):
-    """A plenoxd.v1.Pose from any pose form accepted by as_pose()."""
+    """A plenoxd.v1.Pose from any pose form accepted by as_pose(), with the wire's convention
+    (as the C++ proto/pose_codec.h): a unit quaternion with qw >= 0."""
     t, q = as_pose(pose)
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(q))):
         raise ValueError("pose is not finite")
+    norm = np.linalg.norm(q)
+    if norm < 1e-6:  # the daemon's threshold for "the quaternion is zero"
+        raise ValueError("the quaternion is zero")
+    q = q / norm
+    if q[3] < 0.0:  # q and -q are the same rotation; one sign makes equal poses equal messages
+        q = -q
     out = pb.Pose() if out is None else out
     out.tx, out.ty, out.tz = (float(v) for v in t)
     out.qx, out.qy, out.qz, out.qw = (float(v) for v in q)

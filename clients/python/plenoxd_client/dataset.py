@@ -20,6 +20,7 @@ from typing import Optional, Tuple
 import numpy as np
 
 from . import convert
+from .timestamps import associate
 
 __all__ = ["Intrinsics", "Frame", "TumDataset", "read_intrinsics", "read_groundtruth",
            "pose_at_time", "associate"]
@@ -136,30 +137,6 @@ def pose_at_time(samples, time, max_difference=0.02):
     if has_after:
         return samples[i][1].copy(), samples[i][2].copy()
     return None
-
-
-def associate(first, second, max_difference=0.02):
-    """Pairs (i, j) of timestamps first[i], second[j] at most max_difference apart, closest
-    first, each index used once (TUM's associate.py); sorted by first[i]."""
-    order = sorted(range(len(second)), key=lambda j: second[j])
-    sorted_second = [second[j] for j in order]
-    candidates = []
-    for i, t in enumerate(first):
-        k = bisect.bisect_left(sorted_second, t - max_difference)
-        while k < len(sorted_second) and sorted_second[k] <= t + max_difference:
-            j = order[k]
-            candidates.append((abs(t - second[j]), i, j))
-            k += 1
-    candidates.sort()
-    used_first, used_second, pairs = set(), set(), []
-    for _, i, j in candidates:
-        if i in used_first or j in used_second:
-            continue
-        used_first.add(i)
-        used_second.add(j)
-        pairs.append((i, j))
-    pairs.sort(key=lambda p: (first[p[0]], p[0]))
-    return pairs
 
 
 class TumDataset:
