@@ -4,6 +4,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/common/status_macros.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
 
@@ -17,18 +18,10 @@ double SecondsSince(std::chrono::steady_clock::time_point t) {
 }  // namespace
 
 IntegrateReactor::IntegrateReactor(DaemonState* state, grpc::CallbackServerContext* context)
-    : state_(state), context_(context) {
-  const absl::Status admitted = AcquireStreamSlot(*state_, context_);
-  if (!admitted.ok()) {
-    state_->metrics->rpc_errors++;
-    final_status_ = ToGrpcStatus(admitted);
-    finished_ = true;
-    Finish(final_status_);
-    return;
-  }
-  holds_slot_ = true;
-  reading_ = true;
-  StartRead(&request_);
+    : StreamReactor(state, context, "Integrate") {}
+
+absl::Status IntegrateReactor::EmptyStreamError() const {
+  return absl::InvalidArgumentError("empty stream: the first IntegrateRequest must name the map");
 }
 
 absl::Status IntegrateReactor::HandleFirstMessage() {
@@ -65,57 +58,32 @@ absl::Status IntegrateReactor::HandleFirstMessage() {
   return absl::OkStatus();
 }
 
-void IntegrateReactor::OnReadDone(bool ok) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  reading_ = false;
-  if (!ok) {
-    if (first_ && !finished_) {
-      FailLocked(absl::InvalidArgumentError(
-          "empty stream: the first IntegrateRequest must name the map"));
-      return;
-    }
-    reading_done_ = true;
-    if (lease_ && !finished_) ScheduleLocked();  // spend the rest of the budget, then finish
-    MaybeFinishLocked();
-    return;
-  }
-  if (finished_ || !final_status_.ok()) return;
-  if (first_) {
-    first_ = false;
-    if (absl::Status s = HandleFirstMessage(); !s.ok()) {
-      FailLocked(s);
-      return;
-    }
+absl::Status IntegrateReactor::HandleRequestLocked(bool first) {
+  if (first) {
+    PLX_RETURN_IF_ERROR(HandleFirstMessage());
   } else if (!request_.map().empty() && request_.map() != map_name_) {
-    FailLocked(absl::InvalidArgumentError(
-        absl::StrCat("map: a stream maps one map (\"", map_name_, "\"), got \"", request_.map(), "\"")));
-    return;
+    return absl::InvalidArgumentError(absl::StrCat("map: a stream maps one map (\"", map_name_,
+                                                   "\"), got \"", request_.map(), "\""));
   }
   if (request_.has_frame()) {
-    absl::StatusOr<DecodedFrame> frame =
-        FrameFromProto(request_.frame(), absl::StrCat("frame[", received_, "]"), true);
-    if (!frame.ok()) {
-      FailLocked(frame.status());
-      return;
-    }
-    queue_.push_back(std::move(*frame));
+    PLX_ASSIGN_OR_RETURN(
+        DecodedFrame frame,
+        FrameFromProto(request_.frame(), absl::StrCat("frame[", received_, "]"), true));
+    queue_.push_back(std::move(frame));
     ++received_;
     ScheduleLocked();
   }
-  // Backpressure: stop reading while the mapping task is behind; it resumes the reads.
-  if (queue_.size() < kMaxQueuedKeyframes) {
-    reading_ = true;
-    StartRead(&request_);
-  }
+  return absl::OkStatus();
+}
+
+void IntegrateReactor::OnInputClosedLocked() {
+  if (lease_) ScheduleLocked();  // spend the rest of the budget, then finish
 }
 
 void IntegrateReactor::ScheduleLocked() {
-  if (busy_) return;
-  busy_ = true;
-  // The stream stays on one worker: its Mapper holds that worker's backend.
-  if (worker_ == nullptr) worker_ = &state_->workers->AttachStream();
-  worker_->Post(Priority::kBackground,
-                               [this](Backend* backend, bool cancelled) { RunTask(backend, cancelled); });
+  if (busy()) return;
+  PostLocked(Priority::kBackground,
+             [this](Backend* backend, bool cancelled) { RunTask(backend, cancelled); });
 }
 
 void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
@@ -123,8 +91,8 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
   bool input_closed = false;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    if (cancelled || finished_ || !final_status_.ok()) {
-      busy_ = false;
+    if (cancelled || finished() || failed()) {
+      TaskDoneLocked();
       if (cancelled) FailLocked(absl::UnavailableError("plenoxd is shutting down"));
       MaybeFinishLocked();
       return;
@@ -135,11 +103,8 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
       frames.push_back(std::move(queue_.front()));
       queue_.pop_front();
     }
-    input_closed = reading_done_ && queue_.empty();
-    if (!reading_ && !reading_done_) {
-      reading_ = true;
-      StartRead(&request_);
-    }
+    input_closed = !open() && queue_.empty();
+    ResumeReadingLocked();
   }
   // The mapping policy (budget, chunking, publishing) is the session's (core/mapping); this
   // task only moves keyframes in and versions out.
@@ -202,7 +167,7 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
   integrated_ = p.keyframes_integrated;
 
   std::lock_guard<std::mutex> lock(mutex_);
-  busy_ = false;
+  TaskDoneLocked();
   progress.set_keyframes_received(received_);
   if (!status.ok()) {
     LogEvent("error", "mapping_failed",
@@ -210,89 +175,43 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
     FailLocked(status);
     return;
   }
-  if (finished_) return;
+  if (finished()) return;
   if ((finishing && queue_.empty()) || (input_closed && session_ == nullptr)) {
     progress.set_done(true);
     done_sent_ = true;
-    WriteLocked(std::move(progress));
+    WriteLocked(std::move(progress));  // the final message is never replaced
     state_->jobs->Update(job_id_, JobState::kDone, 1.0,
                          absl::StrFormat("%d keyframes, map version %d", integrated_, version_));
     MaybeFinishLocked();
     return;
   }
   if (step.iterations > 0 || step.keyframes_integrated > 0) {
-    WriteLocked(std::move(progress));
+    WriteLocked(std::move(progress), /*replaceable=*/true);  // progress is advisory
     state_->jobs->Update(job_id_, JobState::kRunning, p.fraction,
                          absl::StrFormat("%d keyframes integrated", integrated_));
   }
-  if (!queue_.empty() || reading_done_ || (session_ && session_->has_work())) ScheduleLocked();
+  if (!queue_.empty() || !open() || (session_ && session_->has_work())) ScheduleLocked();
 }
 
-void IntegrateReactor::WriteLocked(pb::MappingProgress progress) {
-  // Progress is advisory: keep at most one waiting message behind the one being written,
-  // except the final one.
-  if (write_in_flight_ && outbox_.size() > 1 && !outbox_.back().done()) outbox_.pop_back();
-  outbox_.push_back(std::move(progress));
-  if (!write_in_flight_) {
-    write_in_flight_ = true;
-    StartWrite(&outbox_.front());
-  }
-}
-
-void IntegrateReactor::OnWriteDone(bool ok) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  outbox_.pop_front();
-  if (!ok) {
-    outbox_.clear();
-    write_in_flight_ = false;
-    FailLocked(absl::CancelledError("client gone"));
-    return;
-  }
-  if (!outbox_.empty()) {
-    StartWrite(&outbox_.front());
-  } else {
-    write_in_flight_ = false;
-    MaybeFinishLocked();
-  }
-}
-
-void IntegrateReactor::OnCancel() {
-  std::lock_guard<std::mutex> lock(mutex_);
-  FailLocked(absl::CancelledError("cancelled by the client"));
-}
-
-void IntegrateReactor::FailLocked(const absl::Status& status) {
-  if (final_status_.ok()) final_status_ = ToGrpcStatus(status);
+void IntegrateReactor::OnFailedLocked(const absl::Status& status) {
   queue_.clear();
-  reading_done_ = true;
   if (!job_id_.empty()) {
     state_->jobs->Update(job_id_,
                          status.code() == absl::StatusCode::kCancelled ? JobState::kCancelled
                                                                        : JobState::kFailed,
                          0.0, std::string(status.message()));
   }
-  MaybeFinishLocked();
 }
 
-void IntegrateReactor::MaybeFinishLocked() {
-  if (finished_ || busy_ || write_in_flight_ || !outbox_.empty()) return;
-  if (final_status_.ok() && (!reading_done_ || (lease_ && !done_sent_))) return;
-  finished_ = true;
+void IntegrateReactor::OnFinishingLocked() {
   if (lease_) {
     state_->maps->EndMapping(map_name_);
     lease_ = false;
   }
-  if (!final_status_.ok()) state_->metrics->rpc_errors++;
-  Finish(final_status_);
 }
 
-void IntegrateReactor::OnDone() {
-  if (holds_slot_) ReleaseStreamSlot(*state_);
-  if (worker_ != nullptr) state_->workers->DetachStream(*worker_);
-  LogEvent("info", "rpc", {{"method", "Integrate"}, {"map", map_name_}, {"job", job_id_},
-                           {"keyframes", std::to_string(integrated_)},
-                           {"status", std::to_string(final_status_.error_code())}});
-  delete this;
+std::vector<LogField> IntegrateReactor::LogFields() const {
+  return {{"map", map_name_}, {"job", job_id_}, {"keyframes", std::to_string(integrated_)}};
 }
 
 }  // namespace plx::server

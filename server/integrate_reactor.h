@@ -10,7 +10,9 @@
 #include <chrono>
 #include <deque>
 #include <memory>
-#include <mutex>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include <grpcpp/grpcpp.h>
 
@@ -18,18 +20,14 @@
 #include "plenoxd/v1/plenoxd.grpc.pb.h"
 #include "server/daemon_state.h"
 #include "server/proto_convert.h"
+#include "server/stream_reactor.h"
 
 namespace plx::server {
 
-class IntegrateReactor final : public grpc::ServerBidiReactor<plenoxd::v1::IntegrateRequest,
-                                                              plenoxd::v1::MappingProgress> {
+class IntegrateReactor final
+    : public StreamReactor<plenoxd::v1::IntegrateRequest, plenoxd::v1::MappingProgress> {
  public:
   IntegrateReactor(DaemonState* state, grpc::CallbackServerContext* context);
-
-  void OnReadDone(bool ok) override;
-  void OnWriteDone(bool ok) override;
-  void OnCancel() override;
-  void OnDone() override;
 
   // A task longer than this is logged (slow_mapping_task) with where its time went.
   static constexpr double kSlowTaskSeconds = 0.3;
@@ -37,31 +35,23 @@ class IntegrateReactor final : public grpc::ServerBidiReactor<plenoxd::v1::Integ
   static constexpr size_t kMaxQueuedKeyframes = 8;
 
  private:
+  absl::Status HandleRequestLocked(bool first) override;
+  absl::Status EmptyStreamError() const override;
+  void OnInputClosedLocked() override;
+  void OnFailedLocked(const absl::Status& status) override;
+  bool WantsInputLocked() const override { return queue_.size() < kMaxQueuedKeyframes; }
+  bool ReadyToFinishLocked() const override { return !lease_ || done_sent_; }
+  void OnFinishingLocked() override;
+  std::vector<LogField> LogFields() const override;
+
   absl::Status HandleFirstMessage();
   void ScheduleLocked();  // posts one mapping task if none is queued
   void RunTask(Backend* backend, bool cancelled);
-  void WriteLocked(plenoxd::v1::MappingProgress progress);
-  void FailLocked(const absl::Status& status);
-  void MaybeFinishLocked();
 
-  DaemonState* state_;
-  grpc::CallbackServerContext* context_;
-  plenoxd::v1::IntegrateRequest request_;
-  bool holds_slot_ = false;
-
-  std::mutex mutex_;
-  bool first_ = true;
+  // Guarded by mutex_.
   bool lease_ = false;
-  bool reading_ = false;        // a StartRead is outstanding
-  bool reading_done_ = false;   // the client half-closed (or failed)
-  bool busy_ = false;           // a mapping task is queued or running
-  DeviceWorker* worker_ = nullptr;  // where every mapping task runs (bound at the first one)
   bool done_sent_ = false;
-  bool write_in_flight_ = false;
-  bool finished_ = false;
-  grpc::Status final_status_;
   std::deque<DecodedFrame> queue_;
-  std::deque<plenoxd::v1::MappingProgress> outbox_;
   uint32_t received_ = 0;
 
   // Owned by the mapping task.

@@ -23,7 +23,7 @@ std::string Quote(const std::string& value) {
 }  // namespace
 
 void LogEvent(const char* level, const std::string& event,
-              std::initializer_list<std::pair<const char*, std::string>> fields) {
+              absl::Span<const LogField> fields) {
   std::string line = absl::StrCat(
       "ts=", absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", absl::Now(), absl::UTCTimeZone()),
       " level=", level, " event=", Quote(event));

@@ -1,6 +1,7 @@
 #include "server/track_reactor.h"
 
 #include "absl/strings/str_cat.h"
+#include "core/common/status_macros.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
 
@@ -19,17 +20,10 @@ pb::TrackingState ToProto(TrackingState state) {
 }  // namespace
 
 TrackReactor::TrackReactor(DaemonState* state, grpc::CallbackServerContext* context)
-    : state_(state), context_(context) {
-  const absl::Status admitted = AcquireStreamSlot(*state_, context_);
-  if (!admitted.ok()) {
-    state_->metrics->rpc_errors++;
-    final_status_ = ToGrpcStatus(admitted);
-    finished_ = true;
-    Finish(final_status_);
-    return;
-  }
-  holds_slot_ = true;
-  StartRead(&request_);
+    : StreamReactor(state, context, "Track") {}
+
+absl::Status TrackReactor::EmptyStreamError() const {
+  return absl::InvalidArgumentError("empty stream: the first TrackRequest must name the map");
 }
 
 absl::Status TrackReactor::HandleFirstMessage() {
@@ -50,40 +44,17 @@ absl::Status TrackReactor::HandleFirstMessage() {
   return absl::OkStatus();
 }
 
-void TrackReactor::OnReadDone(bool ok) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  if (!ok) {
-    if (first_ && !finished_ && final_status_.ok()) {
-      FailLocked(absl::InvalidArgumentError("empty stream: the first TrackRequest must name the map"));
-      return;
-    }
-    reading_done_ = true;
-    MaybeFinishLocked();
-    return;
-  }
-  if (finished_) return;
-  if (first_) {
-    first_ = false;
-    if (absl::Status s = HandleFirstMessage(); !s.ok()) {
-      FailLocked(s);
-      return;
-    }
+absl::Status TrackReactor::HandleRequestLocked(bool first) {
+  if (first) {
+    PLX_RETURN_IF_ERROR(HandleFirstMessage());
     if (request_.has_initial_pose()) {
-      absl::StatusOr<SE3> pose = PoseFromProto(request_.initial_pose(), "initial_pose");
-      if (!pose.ok()) {
-        FailLocked(pose.status());
-        return;
-      }
+      PLX_ASSIGN_OR_RETURN(const SE3 pose, PoseFromProto(request_.initial_pose(), "initial_pose"));
       // Held until a frame arrives: the first message may name the map and the start only.
-      initial_pose_ = *pose;
+      initial_pose_ = pose;
     }
   }
   if (request_.has_frame()) {
-    absl::StatusOr<DecodedFrame> frame = FrameFromProto(request_.frame(), "frame", false);
-    if (!frame.ok()) {
-      FailLocked(frame.status());
-      return;
-    }
+    PLX_ASSIGN_OR_RETURN(DecodedFrame frame, FrameFromProto(request_.frame(), "frame", false));
     // Latest wins: a frame still waiting is stale now, except the stream's starting frame,
     // which defines its origin (then the new frame is the one dropped).
     if (pending_) {
@@ -91,28 +62,25 @@ void TrackReactor::OnReadDone(bool ok) {
       state_->metrics->frames_dropped++;
     }
     if (!(pending_ && pending_->initial_pose)) {
-      pending_ = Pending{std::move(*frame), std::chrono::steady_clock::now(), initial_pose_};
+      pending_ = Pending{std::move(frame), std::chrono::steady_clock::now(), initial_pose_};
       initial_pose_.reset();
-      if (!busy_) Submit();
+      if (!busy()) Submit();
     }
   }
-  StartRead(&request_);
+  return absl::OkStatus();
 }
 
 void TrackReactor::Submit() {
-  busy_ = true;
-  // The stream stays on the worker of its first frame: its Tracker holds that worker's backend.
-  if (worker_ == nullptr) worker_ = &state_->workers->AttachStream();
-  worker_->Post(Priority::kInteractive,
-                               [this](Backend* backend, bool cancelled) { RunTask(backend, cancelled); });
+  PostLocked(Priority::kInteractive,
+             [this](Backend* backend, bool cancelled) { RunTask(backend, cancelled); });
 }
 
 void TrackReactor::RunTask(Backend* backend, bool cancelled) {
   std::optional<Pending> work;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    if (cancelled || finished_) {
-      busy_ = false;
+    if (cancelled || finished()) {
+      TaskDoneLocked();
       if (cancelled) FailLocked(absl::UnavailableError("plenoxd is shutting down"));
       MaybeFinishLocked();
       return;
@@ -165,81 +133,28 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
   }
   std::lock_guard<std::mutex> lock(mutex_);
   if (!failure.ok()) {
-    busy_ = false;
+    TaskDoneLocked();
     LogEvent("error", "track_failed", {{"map", map_name_}, {"error", failure.ToString()}});
     FailLocked(failure);
     return;
   }
-  if (work && !finished_) {
+  if (work && !finished()) {
     estimate.set_dropped(dropped_);
     dropped_ = 0;
-    Write(std::move(estimate));
+    WriteLocked(std::move(estimate));
   }
-  busy_ = false;
-  if (pending_ && !finished_) {
+  TaskDoneLocked();
+  if (pending_ && !finished()) {
     Submit();  // one task per frame keeps the worker fair between streams
   } else {
     MaybeFinishLocked();
   }
 }
 
-void TrackReactor::Write(pb::PoseEstimate estimate) {
-  outbox_.push_back(std::move(estimate));
-  if (!write_in_flight_) {
-    write_in_flight_ = true;
-    StartWrite(&outbox_.front());
-  }
-}
+void TrackReactor::OnFailedLocked(const absl::Status&) { pending_.reset(); }
 
-void TrackReactor::OnWriteDone(bool ok) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  outbox_.pop_front();
-  if (!ok) {
-    // The client went away; nothing more can be delivered.
-    outbox_.clear();
-    write_in_flight_ = false;
-    reading_done_ = true;
-    pending_.reset();
-    if (final_status_.ok()) final_status_ = grpc::Status(grpc::StatusCode::CANCELLED, "client gone");
-    MaybeFinishLocked();
-    return;
-  }
-  if (!outbox_.empty()) {
-    StartWrite(&outbox_.front());
-  } else {
-    write_in_flight_ = false;
-    MaybeFinishLocked();
-  }
-}
-
-void TrackReactor::OnCancel() {
-  std::lock_guard<std::mutex> lock(mutex_);
-  pending_.reset();
-  reading_done_ = true;
-  if (final_status_.ok()) final_status_ = grpc::Status(grpc::StatusCode::CANCELLED, "cancelled");
-  MaybeFinishLocked();
-}
-
-void TrackReactor::FailLocked(const absl::Status& status) {
-  if (final_status_.ok()) final_status_ = ToGrpcStatus(status);
-  pending_.reset();
-  reading_done_ = true;
-  MaybeFinishLocked();
-}
-
-void TrackReactor::MaybeFinishLocked() {
-  if (finished_ || !reading_done_ || busy_ || write_in_flight_ || !outbox_.empty()) return;
-  finished_ = true;
-  if (!final_status_.ok()) state_->metrics->rpc_errors++;
-  Finish(final_status_);
-}
-
-void TrackReactor::OnDone() {
-  if (holds_slot_) ReleaseStreamSlot(*state_);
-  if (worker_ != nullptr) state_->workers->DetachStream(*worker_);
-  LogEvent("info", "rpc", {{"method", "Track"}, {"map", map_name_},
-                           {"status", std::to_string(final_status_.error_code())}});
-  delete this;
+std::vector<LogField> TrackReactor::LogFields() const {
+  return {{"map", map_name_}};
 }
 
 }  // namespace plx::server

@@ -1,0 +1,202 @@
+// The state machine every bidirectional stream of plenoxd shares (Track, Integrate, and the
+// coming Slam): admission against the stream limit, reading with optional backpressure, work
+// posted to the stream's one device worker, a single-write outbox, and finishing exactly once
+// when the input is over, no task is queued or running and every reply has been written.
+//
+// Phases: kOpen (reading requests) -> kClosing (the client half-closed, or the stream failed or
+// was cancelled: no more requests are handled) -> kFinished (Finish called). A subclass handles
+// requests and runs its tasks; it calls the *Locked helpers with mutex_ held.
+#pragma once
+
+#include <deque>
+#include <mutex>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+
+#include "absl/status/status.h"
+#include "server/daemon_state.h"
+#include "server/grpc_status.h"
+#include "server/log.h"
+
+namespace plx::server {
+
+template <typename Request, typename Response>
+class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
+ public:
+  void OnReadDone(bool ok) final {
+    std::lock_guard<std::mutex> lock(mutex_);
+    reading_ = false;
+    if (phase_ != Phase::kOpen) return;
+    if (!ok) {
+      if (first_) {
+        FailLocked(EmptyStreamError());
+        return;
+      }
+      phase_ = Phase::kClosing;
+      OnInputClosedLocked();
+      MaybeFinishLocked();
+      return;
+    }
+    const bool first = first_;
+    first_ = false;
+    if (absl::Status s = HandleRequestLocked(first); !s.ok()) {
+      FailLocked(s);
+      return;
+    }
+    if (phase_ == Phase::kOpen && WantsInputLocked()) ReadLocked();
+  }
+
+  void OnWriteDone(bool ok) final {
+    std::lock_guard<std::mutex> lock(mutex_);
+    outbox_.pop_front();
+    if (!ok) {
+      // The client went away; nothing more can be delivered.
+      outbox_.clear();
+      write_in_flight_ = false;
+      FailLocked(absl::CancelledError("client gone"));
+      return;
+    }
+    if (!outbox_.empty()) {
+      this->StartWrite(&outbox_.front().message);
+    } else {
+      write_in_flight_ = false;
+      MaybeFinishLocked();
+    }
+  }
+
+  void OnCancel() final {
+    std::lock_guard<std::mutex> lock(mutex_);
+    FailLocked(absl::CancelledError("cancelled by the client"));
+  }
+
+  void OnDone() final {
+    if (holds_slot_) ReleaseStreamSlot(*state_);
+    if (worker_ != nullptr) state_->workers->DetachStream(*worker_);
+    std::vector<LogField> fields = {{"method", method_}};
+    for (LogField& field : LogFields()) fields.push_back(std::move(field));
+    fields.emplace_back("status", std::to_string(final_status_.error_code()));
+    LogEvent("info", "rpc", fields);
+    delete this;
+  }
+
+ protected:
+  enum class Phase { kOpen, kClosing, kFinished };
+
+  // Admits the stream (drain, auth, stream limit) and starts reading, or finishes it at once.
+  StreamReactor(DaemonState* state, grpc::CallbackServerContext* context, const char* method)
+      : state_(state), context_(context), method_(method) {
+    const absl::Status admitted = AcquireStreamSlot(*state_, context_);
+    if (!admitted.ok()) {
+      state_->metrics->rpc_errors++;
+      final_status_ = ToGrpcStatus(admitted);
+      phase_ = Phase::kFinished;
+      this->Finish(final_status_);
+      return;
+    }
+    holds_slot_ = true;
+    ReadLocked();  // no reaction runs before the constructor returns
+  }
+  virtual ~StreamReactor() = default;
+
+  // --- What a stream supplies (mutex_ held) ---
+  // Handles request_ (`first`: the stream's first message). An error fails the stream.
+  virtual absl::Status HandleRequestLocked(bool first) = 0;
+  // The error for a stream closed before its first message.
+  virtual absl::Status EmptyStreamError() const = 0;
+  // The client half-closed after at least one message.
+  virtual void OnInputClosedLocked() {}
+  // The stream failed or was cancelled: drop queued input, mark jobs.
+  virtual void OnFailedLocked(const absl::Status& status) { (void)status; }
+  // False holds the reads (backpressure); call ResumeReadingLocked when there is room again.
+  virtual bool WantsInputLocked() const { return true; }
+  // Besides the input being over and the outbox empty: may the stream end on success now?
+  virtual bool ReadyToFinishLocked() const { return true; }
+  // Called once, just before Finish (release leases).
+  virtual void OnFinishingLocked() {}
+  // Extra fields of the stream's "rpc" log line.
+  virtual std::vector<LogField> LogFields() const { return {}; }
+
+  // --- Helpers (mutex_ held) ---
+  // Queues a reply. `replaceable` replies (progress) keep at most one waiting behind the one
+  // being written: a newer one replaces it.
+  void WriteLocked(Response message, bool replaceable = false) {
+    if (write_in_flight_ && replaceable && outbox_.size() > 1 && outbox_.back().replaceable) {
+      outbox_.pop_back();
+    }
+    outbox_.push_back(Outgoing{std::move(message), replaceable});
+    if (!write_in_flight_) {
+      write_in_flight_ = true;
+      this->StartWrite(&outbox_.front().message);
+    }
+  }
+
+  // Ends the stream with `status` once its task and writes are done (the first failure wins).
+  void FailLocked(const absl::Status& status) {
+    if (phase_ == Phase::kFinished) return;
+    if (final_status_.ok()) final_status_ = ToGrpcStatus(status);
+    phase_ = Phase::kClosing;
+    OnFailedLocked(status);
+    MaybeFinishLocked();
+  }
+
+  void MaybeFinishLocked() {
+    if (phase_ != Phase::kClosing || busy_ || write_in_flight_ || !outbox_.empty()) return;
+    if (final_status_.ok() && !ReadyToFinishLocked()) return;
+    phase_ = Phase::kFinished;
+    OnFinishingLocked();
+    if (!final_status_.ok()) state_->metrics->rpc_errors++;
+    this->Finish(final_status_);
+  }
+
+  // Restarts reads held by backpressure.
+  void ResumeReadingLocked() {
+    if (phase_ == Phase::kOpen && !reading_ && WantsInputLocked()) ReadLocked();
+  }
+
+  // Posts one task to the stream's worker (bound at the first post: the stream's tracker or
+  // mapper holds that worker's backend) and marks the stream busy until TaskDoneLocked.
+  template <typename Task>
+  void PostLocked(Priority priority, Task task) {
+    busy_ = true;
+    if (worker_ == nullptr) worker_ = &state_->workers->AttachStream();
+    worker_->Post(priority, std::move(task));
+  }
+  void TaskDoneLocked() { busy_ = false; }
+
+  bool open() const { return phase_ == Phase::kOpen; }
+  bool finished() const { return phase_ == Phase::kFinished; }
+  bool failed() const { return !final_status_.ok(); }
+  bool busy() const { return busy_; }
+
+  DaemonState* const state_;
+  grpc::CallbackServerContext* const context_;
+  Request request_;
+  std::mutex mutex_;
+
+ private:
+  struct Outgoing {
+    Response message;
+    bool replaceable = false;
+  };
+
+  void ReadLocked() {
+    reading_ = true;
+    this->StartRead(&request_);
+  }
+
+  const char* const method_;
+  bool holds_slot_ = false;
+  Phase phase_ = Phase::kOpen;
+  bool first_ = true;
+  bool reading_ = false;          // a StartRead is outstanding
+  bool busy_ = false;             // a task is queued or running
+  bool write_in_flight_ = false;
+  grpc::Status final_status_;
+  std::deque<Outgoing> outbox_;
+  DeviceWorker* worker_ = nullptr;
+};
+
+}  // namespace plx::server
