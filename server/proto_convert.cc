@@ -4,6 +4,7 @@
 #include <cstring>
 
 #include "absl/strings/str_cat.h"
+#include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
 #include "core/io/image_io.h"
 
@@ -92,8 +93,10 @@ absl::StatusOr<CameraCalibration> IntrinsicsFromProto(const pb::Intrinsics& k,
   return c;
 }
 
-absl::StatusOr<DecodedFrame> FrameFromProto(const pb::Frame& frame, const std::string& field,
-                                            bool require_pose) {
+namespace {
+
+absl::StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const std::string& field,
+                                         bool require_pose) {
   if (!frame.has_intrinsics()) return Invalid(field + ".intrinsics", "missing");
   DecodedFrame out;
   PLX_ASSIGN_OR_RETURN(out.calibration,
@@ -111,6 +114,16 @@ absl::StatusOr<DecodedFrame> FrameFromProto(const pb::Frame& frame, const std::s
   }
   out.camera_id = frame.camera_id();
   return out;
+}
+
+}  // namespace
+
+absl::StatusOr<DecodedFrame> FrameFromProto(const pb::Frame& frame, const std::string& field,
+                                            bool require_pose) {
+  // Decoded images are UnifiedVectors: out of memory throws std::bad_alloc, which must fail this
+  // request, not unwind through gRPC's callback thread.
+  return CatchAllocationFailure(absl::StrCat("decoding ", field),
+                                [&] { return DecodeFrame(frame, field, require_pose); });
 }
 
 absl::Status RenderedViewToProto(const RenderedView& view, pb::ColorEncoding color_encoding,
