@@ -47,13 +47,17 @@ float* SparseGrid::mutable_brick_sh(int64_t slot) {
   return sh_table_[slot];
 }
 
-int64_t SparseGrid::MakePrivate(const uint8_t* brick_flags) {
+int64_t SparseGrid::MakePrivate(const uint8_t* brick_flags, int64_t max_clones,
+                                std::vector<int64_t>* still_shared) {
   int64_t cloned = 0;
   for (int64_t slot = 0; slot < num_bricks(); ++slot) {
-    if (brick_flags[slot] != 0 && brick_shared_[slot]) {
-      ClonePrivate(slot);
-      ++cloned;
+    if (brick_flags[slot] == 0 || !brick_shared_[slot]) continue;
+    if (max_clones >= 0 && cloned >= max_clones) {
+      if (still_shared != nullptr) still_shared->push_back(slot);
+      continue;
     }
+    ClonePrivate(slot);
+    ++cloned;
   }
   return cloned;
 }

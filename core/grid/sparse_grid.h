@@ -133,8 +133,10 @@ class SparseGrid {
   SparseGrid Publish();
   SparseGrid ShareCopy() const;
   // Clones every shared brick whose flag in `brick_flags` [num_bricks] is non-zero, so kernels
-  // may write it; returns how many were cloned.
-  int64_t MakePrivate(const uint8_t* brick_flags);
+  // may write it; returns how many were cloned. With `max_clones` >= 0 at most that many are
+  // cloned and the slots of the flagged bricks still shared are appended to `still_shared`.
+  int64_t MakePrivate(const uint8_t* brick_flags, int64_t max_clones = -1,
+                      std::vector<int64_t>* still_shared = nullptr);
   int64_t num_shared_bricks() const;
 
   GridMemory Memory() const;

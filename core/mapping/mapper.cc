@@ -222,9 +222,17 @@ absl::StatusOr<MappingSummary> Mapper::Optimize(const MappingProgressCallback& p
         LogLinearLearningRate(options_.lr_sh_start, options_.lr_sh_end, schedule_));
     // The step writes the bricks that received gradient: clone those a published version
     // still shares (copy-on-write), then take the views again (the tables changed).
-    summary_.cloned_bricks += map_->grid.MakePrivate(brick_touched_.data());
+    deferred_.clear();
+    summary_.cloned_bricks += map_->grid.MakePrivate(
+        brick_touched_.data(),
+        options_.max_clones_per_iteration > 0 ? options_.max_clones_per_iteration : -1,
+        &deferred_);
+    // Bricks still shared sit this step out: their vertices keep gradient and touched flags,
+    // and their brick flags are raised again for the next step.
+    for (int64_t slot : deferred_) brick_touched_[slot] = 0;
     PLX_RETURN_IF_ERROR(backend_->RmsPropStep(map_->grid.view(), map_->grid.write_view(), grad,
                                               state_view(), rms));
+    for (int64_t slot : deferred_) brick_touched_[slot] = 1;
     ++iteration_;
     ++done;
     if (done % kOccupancyRefreshInterval == 0) {

@@ -52,6 +52,12 @@ struct MapperOptions {
   bool coarse_to_fine = false;
   float upsample_at = 0.5f;
 
+  // Copy-on-write clones per iteration (0 = no limit). After a version is published, the
+  // bricks an iteration changes must be cloned first; above this many, the rest wait: their
+  // gradients keep accumulating and they are updated by a later iteration once cloned, so no
+  // single step pays for cloning most of the map (a mapping session sets this).
+  int max_clones_per_iteration = 0;
+
   uint32_t seed = 20200823;
   RenderOptions render;
   int progress_every = 25;  // iterations between progress reports
@@ -153,6 +159,7 @@ class Mapper {
   UnifiedVector<uint8_t> touched_, brick_touched_;
   UnifiedVector<float> rms_density_, rms_sh_;
   UnifiedVector<MappingRayLoss> losses_;
+  std::vector<int64_t> deferred_;  // touched bricks still shared with a published version
 };
 
 }  // namespace plx

@@ -28,6 +28,9 @@ absl::Status ValidateMappingSessionOptions(const MappingSessionOptions& o) {
   if (o.chunk_iterations <= 0 || !(o.chunk_seconds > 0.0)) {
     return absl::InvalidArgumentError("a mapping step needs positive chunk limits");
   }
+  if (o.max_clones_per_iteration < 0) {
+    return absl::InvalidArgumentError("max_clones_per_iteration must not be negative");
+  }
   if (!(o.min_publish_interval_s >= 0.0) || o.publish_every_iterations <= 0) {
     return absl::InvalidArgumentError("publish interval and cadence must be positive");
   }
@@ -44,6 +47,7 @@ absl::StatusOr<std::unique_ptr<MappingSession>> MappingSession::Create(
   MapperOptions mapper_options = options.mapper;
   mapper_options.max_iterations = options.iterations_per_keyframe;
   mapper_options.time_budget_s = 0.0;
+  mapper_options.max_clones_per_iteration = options.max_clones_per_iteration;
   // Keyframes stream in: coarse-to-fine would have to re-allocate from every keyframe.
   mapper_options.coarse_to_fine = false;
   return CatchAllocationFailure(

@@ -37,6 +37,10 @@ struct MappingSessionOptions {
   // iteration; integrating one keyframe (allocation and fusion) comes on top.
   int chunk_iterations = 10;
   double chunk_seconds = 0.05;
+  // Copy-on-write clones per iteration (MapperOptions::max_clones_per_iteration): 1024 bricks
+  // are 56 MB, so the first iterations after a publish stay about as long as the others
+  // instead of one of them cloning a third of the map.
+  int max_clones_per_iteration = 1024;
 
   // A version is published when keyframes were integrated since the last one, or
   // publish_every_iterations iterations have run, and at least min_publish_interval_s has
