@@ -2,7 +2,7 @@
 # Installs dependencies, builds everything and runs the whole test suite (what CI runs).
 #   scripts/test.sh          the suite (Release build in ./build)
 #   scripts/test.sh --tsan   ThreadSanitizer build of the core and server tests in ./build-tsan
-#                            (CPU only, no benches), then those tests; about 20 minutes on 2 cores
+#                            (CPU only, no benches), then those tests
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [[ "${1:-}" == "--tsan" ]]; then

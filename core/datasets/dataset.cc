@@ -2,7 +2,6 @@
 
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <system_error>
 
@@ -16,6 +15,7 @@
 #include "core/datasets/tum_dataset.h"
 #include "core/formats/calibration_file.h"
 #include "core/formats/text_table.h"
+#include "core/io/atomic_write.h"
 #include "core/io/image_io.h"
 
 namespace plx {
@@ -44,15 +44,6 @@ absl::StatusOr<DatasetFormat> DetectFormat(const std::string& directory) {
       ": cannot tell the dataset layout; looked for rgb.txt or associations.txt "
       "(TUM), results/ with traj.txt (Replica), color/ depth/ pose/ (ScanNet). Pass the "
       "format explicitly if the layout is one of these"));
-}
-
-absl::Status WriteTextFile(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::trunc);
-  if (!out) return absl::PermissionDeniedError(absl::StrCat(path, ": cannot open for writing"));
-  out << text;
-  out.close();
-  if (!out) return absl::DataLossError(absl::StrCat(path, ": write failed"));
-  return absl::OkStatus();
 }
 
 absl::Status CheckFrameShape(const RgbdFrame& frame, int index, const PinholeIntrinsics& k) {
@@ -177,10 +168,12 @@ absl::Status WriteTumDataset(const RgbdDataset& dataset, const std::string& dire
       absl::StrAppend(&ground_truth, GroundTruthLine(stamp, *pose));
     }
   }
-  PLX_RETURN_IF_ERROR(WriteTextFile((root / "rgb.txt").string(), rgb_list));
-  PLX_RETURN_IF_ERROR(WriteTextFile((root / "depth.txt").string(), depth_list));
-  PLX_RETURN_IF_ERROR(WriteTextFile((root / "associations.txt").string(), associations));
-  PLX_RETURN_IF_ERROR(WriteTextFile((root / "groundtruth.txt").string(), ground_truth));
+  PLX_RETURN_IF_ERROR(WriteFilesAtomically(
+      {{(root / "rgb.txt").string(), rgb_list},
+       {(root / "depth.txt").string(), depth_list},
+       {(root / "associations.txt").string(), associations},
+       {(root / "groundtruth.txt").string(), ground_truth}},
+      absl::StrCat("cannot write the dataset's lists to ", directory)));
   return WriteCalibrationFile((root / kCalibrationFileName).string(), calibration);
 }
 

@@ -305,9 +305,7 @@ absl::Status CheckNoDuplicateBricks(const std::vector<BrickCoord>& bricks,
 // error sticks and later calls do nothing, so the caller checks once, in Finish().
 class MapWriter {
  public:
-  MapWriter(int fd, std::string error_prefix) : fd_(fd), error_prefix_(std::move(error_prefix)) {
-    buffer_.reserve(kIoChunkBytes);
-  }
+  explicit MapWriter(AtomicFileWriter* file) : file_(file) { buffer_.reserve(kIoChunkBytes); }
 
   void U32(uint32_t v) { Le(v, 4); }
   void I32(int32_t v) { Le(static_cast<uint32_t>(v), 4); }
@@ -361,21 +359,12 @@ class MapWriter {
   }
 
   void WriteAll(const uint8_t* data, size_t size) {
-    while (status_.ok() && size > 0) {
-      const ssize_t n = ::write(fd_, data, std::min(size, kIoChunkBytes));
-      if (n < 0) {
-        const int err = errno;
-        if (err == EINTR) continue;
-        status_ = ErrnoError(err, error_prefix_);
-        return;
-      }
-      data += n;
-      size -= static_cast<size_t>(n);
+    if (status_.ok()) {
+      status_ = file_->Write(absl::string_view(reinterpret_cast<const char*>(data), size));
     }
   }
 
-  int fd_;
-  std::string error_prefix_;
+  AtomicFileWriter* file_;
   std::vector<uint8_t> buffer_;
   Crc64 crc_;
   int64_t bytes_written_ = 0;
@@ -416,24 +405,6 @@ void WriteMap(const PlenoxelMap& map, MapWriter& w) {
   }
 }
 
-// The temp file, removed again unless the save reached its rename.
-class TempFile {
- public:
-  TempFile(ScopedFd fd, std::string path) : fd_(std::move(fd)), path_(std::move(path)) {}
-  ~TempFile() {
-    if (fd_.get() >= 0) fd_.Close();
-    if (!committed_) ::unlink(path_.c_str());
-  }
-  int fd() const { return fd_.get(); }
-  int Close() { return fd_.Close(); }
-  void Commit() { committed_ = true; }
-
- private:
-  ScopedFd fd_;
-  std::string path_;
-  bool committed_ = false;
-};
-
 }  // namespace
 
 absl::Status SaveMap(const PlenoxelMap& map, const std::string& path) {
@@ -450,17 +421,11 @@ absl::Status SaveMap(const PlenoxelMap& map, const std::string& path) {
   }
   const int64_t bricks = grid.num_bricks();
 
-  PLX_RETURN_IF_ERROR(CheckParentDirectory(path, what));
-
-  const std::string temp_path = absl::StrCat(path, ".tmp.", ::getpid());
-  ScopedFd fd(::open(temp_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644));
-  if (fd.get() < 0) {
-    const int err = errno;
-    return ErrnoError(err, absl::StrCat(what, ": cannot create temp file ", temp_path));
-  }
-  TempFile temp(std::move(fd), temp_path);
-
-  MapWriter writer(temp.fd(), absl::StrCat(what, ": writing ", temp_path, " failed"));
+  // Not "<name>.plx.tmp.<pid>.plx": a leftover temporary must not look like a map to the
+  // daemon, which loads every *.plx of its data dir.
+  PLX_ASSIGN_OR_RETURN(AtomicFileWriter file,
+                       AtomicFileWriter::Open(path, what, /*keep_extension=*/false));
+  MapWriter writer(&file);
   WriteMap(map, writer);
   PLX_RETURN_IF_ERROR(writer.Finish());
   const int64_t expected = kHeaderBytesWithoutSource + static_cast<int64_t>(map.source.size()) +
@@ -469,23 +434,8 @@ absl::Status SaveMap(const PlenoxelMap& map, const std::string& path) {
     return absl::InternalError(absl::StrCat(what, ": wrote ", writer.bytes_written(),
                                             " bytes, the layout needs ", expected));
   }
-  // Data must be on disk before the rename publishes it, or a crash could leave a complete
-  // name pointing at incomplete contents.
-  if (::fsync(temp.fd()) != 0) {
-    const int err = errno;
-    return ErrnoError(err, absl::StrCat(what, ": fsync of ", temp_path, " failed"));
-  }
-  if (temp.Close() != 0) {
-    const int err = errno;
-    return ErrnoError(err, absl::StrCat(what, ": closing ", temp_path, " failed"));
-  }
-  if (::rename(temp_path.c_str(), path.c_str()) != 0) {
-    const int err = errno;
-    return ErrnoError(err, absl::StrCat(what, ": renaming ", temp_path, " failed"));
-  }
-  temp.Commit();
-  SyncParentDirectory(path);
-  return absl::OkStatus();
+  PLX_RETURN_IF_ERROR(file.Finish());
+  return file.Commit();
 }
 
 absl::StatusOr<MapFileInfo> ReadMapInfo(const std::string& path) {

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <filesystem>
 #include <system_error>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/string_view.h"
@@ -16,44 +17,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
-absl::Status ErrnoStatus(int err, const std::string& message) {
-  const std::string text = absl::StrCat(message, ": ", std::strerror(err));
-  if (err == ENOENT) return absl::NotFoundError(text);
-  if (err == EACCES || err == EPERM || err == EROFS) return absl::PermissionDeniedError(text);
-  return absl::UnavailableError(text);
-}
-
-// Writes all of `data` to `fd`, retrying short writes and EINTR.
-absl::Status WriteAll(int fd, absl::string_view data, const std::string& what) {
-  while (!data.empty()) {
-    const ssize_t n = ::write(fd, data.data(), data.size());
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      return ErrnoStatus(errno, what);
-    }
-    data.remove_prefix(static_cast<size_t>(n));
-  }
-  return absl::OkStatus();
-}
-
-// The temporary keeps the target's extension, so tools that look at it (image viewers, editors)
-// see the right type while it is being written.
-std::string TempPath(const std::string& path) {
-  return absl::StrCat(path, ".tmp.", ::getpid(), fs::path(path).extension().string());
-}
-
-absl::Status WriteTemp(const std::string& temp, const std::string& bytes, const std::string& what) {
-  const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) return ErrnoStatus(errno, absl::StrCat(what, ": cannot create temp file ", temp));
-  absl::Status status = WriteAll(fd, bytes, absl::StrCat(what, ": writing ", temp));
-  // Contents must be on disk before the rename publishes them.
-  if (status.ok() && ::fsync(fd) != 0) {
-    status = ErrnoStatus(errno, absl::StrCat(what, ": fsync of ", temp));
-  }
-  if (::close(fd) != 0 && status.ok()) {
-    status = ErrnoStatus(errno, absl::StrCat(what, ": closing ", temp));
-  }
-  return status;
+// The temporary keeps the target's extension unless asked not to (see AtomicFileWriter).
+std::string TempPath(const std::string& path, bool keep_extension) {
+  return absl::StrCat(path, ".tmp.", ::getpid(),
+                      keep_extension ? fs::path(path).extension().string() : std::string());
 }
 
 }  // namespace
@@ -77,31 +44,94 @@ void SyncParentDirectory(const std::string& path) {
   ::close(fd);
 }
 
+absl::Status FileWriteError(int err, const std::string& message) {
+  const std::string text = absl::StrCat(message, ": ", std::strerror(err));
+  if (err == ENOENT) return absl::NotFoundError(text);
+  if (err == EACCES || err == EPERM || err == EROFS) return absl::PermissionDeniedError(text);
+  if (err == ENOSPC || err == EDQUOT || err == EFBIG) return absl::ResourceExhaustedError(text);
+  return absl::UnavailableError(text);
+}
+
+absl::StatusOr<AtomicFileWriter> AtomicFileWriter::Open(const std::string& path,
+                                                        const std::string& what,
+                                                        bool keep_extension) {
+  if (absl::Status s = CheckParentDirectory(path, what); !s.ok()) return s;
+  std::string temp = TempPath(path, keep_extension);
+  const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) return FileWriteError(errno, absl::StrCat(what, ": cannot create temp file ", temp));
+  return AtomicFileWriter(path, std::move(temp), what, fd);
+}
+
+AtomicFileWriter::AtomicFileWriter(std::string path, std::string temp_path, std::string what,
+                                   int fd)
+    : path_(std::move(path)), temp_path_(std::move(temp_path)), what_(std::move(what)), fd_(fd) {}
+
+AtomicFileWriter::AtomicFileWriter(AtomicFileWriter&& other) noexcept
+    : path_(std::move(other.path_)),
+      temp_path_(std::move(other.temp_path_)),
+      what_(std::move(other.what_)),
+      fd_(std::exchange(other.fd_, -1)),
+      committed_(std::exchange(other.committed_, true)) {}
+
+AtomicFileWriter::~AtomicFileWriter() {
+  if (fd_ >= 0) ::close(fd_);
+  if (!committed_) ::unlink(temp_path_.c_str());
+}
+
+absl::Status AtomicFileWriter::Write(absl::string_view data) {
+  while (!data.empty()) {
+    const ssize_t n = ::write(fd_, data.data(), data.size());
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      return FileWriteError(errno, absl::StrCat(what_, ": writing ", temp_path_));
+    }
+    data.remove_prefix(static_cast<size_t>(n));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status AtomicFileWriter::Finish() {
+  // Contents must be on disk before the rename publishes them, or a crash could leave a
+  // complete name pointing at incomplete contents.
+  absl::Status status;
+  if (::fsync(fd_) != 0) status = FileWriteError(errno, absl::StrCat(what_, ": fsync of ", temp_path_));
+  const int closed = ::close(fd_);
+  fd_ = -1;
+  if (closed != 0 && status.ok()) {
+    status = FileWriteError(errno, absl::StrCat(what_, ": closing ", temp_path_));
+  }
+  return status;
+}
+
+absl::Status AtomicFileWriter::Commit() {
+  if (::rename(temp_path_.c_str(), path_.c_str()) != 0) {
+    return FileWriteError(errno,
+                          absl::StrCat(what_, ": renaming ", temp_path_, " to ", path_));
+  }
+  committed_ = true;
+  SyncParentDirectory(path_);
+  return absl::OkStatus();
+}
+
 absl::Status WriteFilesAtomically(const std::vector<std::pair<std::string, std::string>>& files,
                                   const std::string& what) {
   for (const auto& file : files) {
     if (absl::Status s = CheckParentDirectory(file.first, what); !s.ok()) return s;
   }
-  std::vector<std::string> temps;
-  const auto remove_temps = [&] {
-    for (const std::string& temp : temps) ::unlink(temp.c_str());
-  };
+  // Every file is written and made durable before the first rename; a failure before then
+  // leaves no target touched (the writers remove their temporaries).
+  std::vector<AtomicFileWriter> writers;
+  writers.reserve(files.size());
   for (const auto& [path, bytes] : files) {
-    temps.push_back(TempPath(path));
-    if (absl::Status s = WriteTemp(temps.back(), bytes, what); !s.ok()) {
-      remove_temps();
-      return s;
-    }
+    absl::StatusOr<AtomicFileWriter> writer = AtomicFileWriter::Open(path, what);
+    if (!writer.ok()) return writer.status();
+    writers.push_back(*std::move(writer));
+    if (absl::Status s = writers.back().Write(bytes); !s.ok()) return s;
+    if (absl::Status s = writers.back().Finish(); !s.ok()) return s;
   }
-  for (size_t i = 0; i < files.size(); ++i) {
-    if (::rename(temps[i].c_str(), files[i].first.c_str()) != 0) {
-      const absl::Status s =
-          ErrnoStatus(errno, absl::StrCat(what, ": renaming ", temps[i], " to ", files[i].first));
-      remove_temps();
-      return s;
-    }
+  for (AtomicFileWriter& writer : writers) {
+    if (absl::Status s = writer.Commit(); !s.ok()) return s;
   }
-  for (const auto& file : files) SyncParentDirectory(file.first);
   return absl::OkStatus();
 }
 

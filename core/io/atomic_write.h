@@ -9,6 +9,8 @@
 #include <vector>
 
 #include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
 
 namespace plx {
 
@@ -19,6 +21,41 @@ absl::Status CheckParentDirectory(const std::string& path, const std::string& wh
 // Makes a rename into the folder of `path` durable (fsync of the folder). Best effort: some file
 // systems refuse fsync on directories, and the file is complete and in place by then.
 void SyncParentDirectory(const std::string& path);
+
+// The one errno -> Status mapping of file writes: NotFound (ENOENT), PermissionDenied (EACCES,
+// EPERM, EROFS), ResourceExhausted (ENOSPC, EDQUOT, EFBIG), Unavailable (other I/O errors).
+absl::Status FileWriteError(int err, const std::string& message);
+
+// One file written under a temporary name next to its target, made durable (fsync) and renamed
+// into place by Commit; a writer destroyed before Commit removes its temporary, so a failed
+// write never leaves a partial target. Streaming writers (map files) write through fd().
+class AtomicFileWriter {
+ public:
+  // `what` prefixes every error. `keep_extension`: the temporary ends with the target's
+  // extension (viewers and editors see the right type); false keeps it out of globs for that
+  // extension (the daemon loads every *.plx of its data dir).
+  static absl::StatusOr<AtomicFileWriter> Open(const std::string& path, const std::string& what,
+                                               bool keep_extension = true);
+  AtomicFileWriter(AtomicFileWriter&& other) noexcept;
+  AtomicFileWriter& operator=(AtomicFileWriter&&) = delete;
+  ~AtomicFileWriter();
+
+  int fd() const { return fd_; }
+  const std::string& temp_path() const { return temp_path_; }
+  // Writes all of `bytes`, retrying short writes and EINTR.
+  absl::Status Write(absl::string_view bytes);
+  // Flushes the contents to disk and closes the temporary (still under its temporary name).
+  absl::Status Finish();
+  // Renames the finished temporary onto the target (atomic), then syncs the folder.
+  absl::Status Commit();
+
+ private:
+  AtomicFileWriter(std::string path, std::string temp_path, std::string what, int fd);
+
+  std::string path_, temp_path_, what_;
+  int fd_ = -1;
+  bool committed_ = false;
+};
 
 // `files`: (path, bytes). Errors name `what` and the file: NotFound when a target's directory
 // does not exist, PermissionDenied for access errors, Unavailable for other I/O errors.
