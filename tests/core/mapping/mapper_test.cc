@@ -5,7 +5,7 @@
 #include "core/cpu/cpu_backend.h"
 #include "core/eval/map_metrics.h"
 #include "core/mapping/map_dataset.h"
-#include "core/synthetic/synthetic_sequence.h"
+#include "tests/synthetic_room.h"
 
 namespace plx {
 namespace {
@@ -14,15 +14,8 @@ namespace {
 class MapperTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    SyntheticOptions o;
-    o.width = 128;
-    o.height = 96;
-    o.num_frames = 30;
-    o.depth_noise = 0.0015;
-    o.hole_fraction = 0.05;
-    auto dataset = GenerateSyntheticSequence(o);
-    ASSERT_TRUE(dataset.ok()) << dataset.status();
-    dataset_ = new InMemoryDataset(std::move(*dataset));
+    dataset_ = testing::MakeSyntheticRoom(128, 96, 30, 0.0015, 0.05).release();
+    ASSERT_NE(dataset_, nullptr);
   }
   static void TearDownTestSuite() {
     delete dataset_;

@@ -7,7 +7,7 @@
 
 #include "core/cpu/cpu_backend.h"
 #include "core/eval/map_metrics.h"
-#include "core/synthetic/synthetic_sequence.h"
+#include "tests/synthetic_room.h"
 
 namespace plx {
 namespace {
@@ -16,13 +16,8 @@ namespace {
 class MappingSessionTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    SyntheticOptions o;
-    o.width = 96;
-    o.height = 72;
-    o.num_frames = 30;
-    auto dataset = GenerateSyntheticSequence(o);
-    ASSERT_TRUE(dataset.ok()) << dataset.status();
-    dataset_ = new InMemoryDataset(std::move(*dataset));
+    dataset_ = testing::MakeSyntheticRoom(96, 72, 30).release();
+    ASSERT_NE(dataset_, nullptr);
   }
   static void TearDownTestSuite() {
     delete dataset_;

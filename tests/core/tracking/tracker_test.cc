@@ -7,6 +7,7 @@
 #include "core/mapping/map_dataset.h"
 #include "core/synthetic/synthetic_sequence.h"
 #include "core/tracking/track_dataset.h"
+#include "tests/synthetic_room.h"
 
 namespace plx {
 namespace {
@@ -16,13 +17,8 @@ namespace {
 class TrackerTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    SyntheticOptions o;
-    o.width = 160;
-    o.height = 120;
-    o.num_frames = 30;
-    auto dataset = GenerateSyntheticSequence(o);
-    ASSERT_TRUE(dataset.ok()) << dataset.status();
-    dataset_ = new InMemoryDataset(std::move(*dataset));
+    dataset_ = testing::MakeSyntheticRoom(160, 120, 30).release();
+    ASSERT_NE(dataset_, nullptr);
     backend_ = MakeCpuBackend(2).release();
     MapperOptions m = MapperOptionsForVoxelSize(0.02f);
     m.max_iterations = 200;
