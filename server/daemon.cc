@@ -106,6 +106,8 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   for (const std::string& problem : d->maps_->LoadAllFromDataDir()) {
     LogEvent("warning", "map_not_loaded", {{"reason", problem}});
   }
+  // The file-I/O worker (SaveMap, LoadMap): a DeviceWorker with no backend, outside the
+  // WorkerPool, so a long write never queues ahead of tracking or mapping on a device.
   d->io_ = std::make_unique<DeviceWorker>(nullptr, DeviceDescription{"io", "io", "io"});
   d->jobs_ = std::make_unique<JobRegistry>();
   d->metrics_registry_ = std::make_unique<Metrics>();

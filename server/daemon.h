@@ -62,7 +62,7 @@ class Daemon {
   DaemonOptions options_;
   std::unique_ptr<MapStore> maps_;
   std::unique_ptr<WorkerPool> workers_;
-  std::unique_ptr<DeviceWorker> io_;
+  std::unique_ptr<DeviceWorker> io_;  // file I/O: a DeviceWorker without a backend
   std::unique_ptr<JobRegistry> jobs_;
   std::unique_ptr<Metrics> metrics_registry_;
   DaemonState state_;

@@ -8,6 +8,11 @@
 // Streams (Track, Integrate) keep state made with one worker's backend (a Tracker, a Mapper),
 // so a stream is bound to one worker for its whole life (WorkerPool::AttachStream); one-off
 // calls (Render, Export) go to whichever worker is least busy (WorkerPool::Pick).
+//
+// Despite the name, a DeviceWorker is a prioritised task thread that owns a backend only when
+// it has one: the daemon also runs map saves and loads on a DeviceWorker with a null backend
+// (kind "io", server/daemon.cc), kept out of the WorkerPool so disk waits never hold up a
+// device.
 #pragma once
 
 #include <atomic>
@@ -42,6 +47,7 @@ struct DeviceDescription {
 
 class DeviceWorker {
  public:
+  // `backend` may be null (the file-I/O worker): its tasks then get a null Backend*.
   DeviceWorker(std::unique_ptr<Backend> backend, DeviceDescription device);
   ~DeviceWorker();  // Stop()s
 

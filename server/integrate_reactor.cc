@@ -123,7 +123,7 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
   }
   for (DecodedFrame& f : frames) {
     if (!status.ok()) break;
-    const SE3 pose = *f.frame.world_T_camera;
+    const SE3 pose = *f.client_pose;
     status = session_->AddKeyframe(std::move(f.frame), pose, f.calibration.pinhole);
   }
   MappingStepResult step;

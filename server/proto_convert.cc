@@ -108,7 +108,7 @@ absl::StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const std::stri
   PLX_ASSIGN_OR_RETURN(out.frame.depth,
                        DecodeDepth(frame, field, w, h, out.calibration.depth_scale));
   if (frame.has_pose()) {
-    PLX_ASSIGN_OR_RETURN(out.frame.world_T_camera, PoseFromProto(frame.pose(), field + ".pose"));
+    PLX_ASSIGN_OR_RETURN(out.client_pose, PoseFromProto(frame.pose(), field + ".pose"));
   } else if (require_pose) {
     return Invalid(field + ".pose", "required (mapping needs every keyframe's pose)");
   }

@@ -25,9 +25,12 @@ absl::StatusOr<CameraCalibration> IntrinsicsFromProto(const pb::Intrinsics& intr
                                                       bool require_depth_scale);
 
 struct DecodedFrame {
-  RgbdFrame frame;  // colour in [0,1], depth in metres; world_T_camera = the frame's pose
+  RgbdFrame frame;  // colour in [0,1], depth in metres; no ground truth (a client sends none)
   CameraCalibration calibration;
   std::string camera_id;
+  // The pose the client sent with the frame (world_T_camera), if any: the pose prior for
+  // Track, the keyframe's pose for Integrate (where FrameFromProto requires it).
+  std::optional<SE3> client_pose;
 };
 
 // Decodes and checks a frame: intrinsics, encodings, image sizes against the intrinsics, pose

@@ -103,7 +103,7 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
     if (work->initial_pose || !tracker_started_) {
       // The stream's first frame: start from the given pose (or the frame's prior, or the
       // identity) and report it, as the in-process tracker does for frame 0.
-      const SE3 start = work->initial_pose.value_or(frame.world_T_camera.value_or(SE3()));
+      const SE3 start = work->initial_pose.value_or(work->frame.client_pose.value_or(SE3()));
       tracker_->Reset(start, frame.timestamp);
       tracker_started_ = true;
       result.pose = start;
@@ -111,7 +111,7 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
       result.reason = work->initial_pose ? "initial pose" : "initial pose (frame prior or identity)";
     } else {
       absl::StatusOr<TrackingResult> tracked =
-          tracker_->Track(frame, work->frame.calibration.pinhole, frame.world_T_camera);
+          tracker_->Track(frame, work->frame.calibration.pinhole, work->frame.client_pose);
       if (tracked.ok()) {
         result = *std::move(tracked);
       } else {

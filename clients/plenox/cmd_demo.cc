@@ -91,7 +91,7 @@ int RunDemo(const std::vector<std::string>& args) {
   const int shown = held_out[held_out.size() / 2];
   const RgbdFrame& truth = dataset->frames()[shown];
   absl::StatusOr<RenderedView> rendered = RenderView(*backend, *mapped->map,
-                                                     *truth.world_T_camera,
+                                                     *truth.ground_truth,
                                                      dataset->calibration().pinhole);
   if (!rendered.ok()) return ReportError("demo", rendered.status());
   const RenderedView& view = *rendered;
@@ -126,7 +126,7 @@ int RunDemo(const std::vector<std::string>& args) {
   }
   std::vector<StampedPose> ground_truth;
   for (const RgbdFrame& f : dataset->frames()) {
-    ground_truth.push_back({f.timestamp, *f.world_T_camera});
+    ground_truth.push_back({f.timestamp, *f.ground_truth});
   }
   absl::StatusOr<TrajectoryEvalResult> ate = EvaluateTrajectory(tracked->trajectory, ground_truth);
   if (!ate.ok()) return ReportError("demo", ate.status());

@@ -284,11 +284,11 @@ absl::StatusOr<pb::Frame> FrameToProto(const RgbdFrame& frame, const CameraCalib
     out.set_depth_encoding(pb::DEPTH_ENCODING_PNG16);
   }
   if (with_pose) {
-    if (!frame.world_T_camera) {
+    if (!frame.ground_truth) {
       return absl::InvalidArgumentError(
           absl::StrFormat("frame at t=%.6f has no ground-truth pose", frame.timestamp));
     }
-    PoseToProto(*frame.world_T_camera, out.mutable_pose());
+    PoseToProto(*frame.ground_truth, out.mutable_pose());
   }
   return out;
 }

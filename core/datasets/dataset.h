@@ -60,7 +60,7 @@ class InMemoryDataset final : public RgbdDataset {
   int size() const override { return static_cast<int>(frames_.size()); }
   double timestamp(int index) const override { return frames_[index].timestamp; }
   std::optional<SE3> ground_truth(int index) const override {
-    return frames_[index].world_T_camera;
+    return frames_[index].ground_truth;
   }
   absl::StatusOr<RgbdFrame> LoadFrame(int index) const override { return frames_[index]; }
   const std::vector<RgbdFrame>& frames() const { return frames_; }

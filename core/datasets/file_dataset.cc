@@ -57,7 +57,7 @@ double FileDataset::timestamp(int index) const {
 
 std::optional<SE3> FileDataset::ground_truth(int index) const {
   if (index < 0 || index >= size()) return std::nullopt;
-  return frames_[index].world_T_camera;
+  return frames_[index].ground_truth;
 }
 
 absl::StatusOr<RgbdFrame> FileDataset::LoadFrame(int index) const {
@@ -103,7 +103,7 @@ absl::StatusOr<RgbdFrame> FileDataset::LoadFrame(int index) const {
   frame.timestamp = files.timestamp;
   frame.color = ColorImageFromMat(color);
   frame.depth = DepthImageFromMat(depth, depth_scale_);
-  frame.world_T_camera = files.world_T_camera;
+  frame.ground_truth = files.ground_truth;
   return frame;
 }
 

@@ -26,7 +26,7 @@ struct FrameFiles {
   double timestamp = 0.0;
   std::string color_path;
   std::string depth_path;
-  std::optional<SE3> world_T_camera;
+  std::optional<SE3> ground_truth;  // world_T_camera from the dataset's pose files
 };
 
 class FileDataset final : public RgbdDataset {

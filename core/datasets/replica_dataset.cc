@@ -81,7 +81,7 @@ absl::StatusOr<std::unique_ptr<RgbdDataset>> OpenReplicaDataset(const std::strin
     frame.timestamp = static_cast<double>(number) / kFrameRate;
     frame.color_path = color_path;
     frame.depth_path = depths.find(number)->second;
-    frame.world_T_camera = poses[frames.size()];
+    frame.ground_truth = poses[frames.size()];
     frames.push_back(std::move(frame));
   }
   PLX_ASSIGN_OR_RETURN(

@@ -125,7 +125,7 @@ absl::StatusOr<std::unique_ptr<RgbdDataset>> OpenScanNetDataset(const std::strin
         return absl::NotFoundError(absl::StrCat(JoinPath(pose_dir, absl::StrCat(number, ".txt")),
                                                 ": pose file not found for ", color_path));
       }
-      PLX_ASSIGN_OR_RETURN(frame.world_T_camera, ReadPoseFile(pose->second));
+      PLX_ASSIGN_OR_RETURN(frame.ground_truth, ReadPoseFile(pose->second));
     }
     frames.push_back(std::move(frame));
   }

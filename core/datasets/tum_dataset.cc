@@ -214,7 +214,7 @@ absl::StatusOr<std::unique_ptr<RgbdDataset>> OpenTumDataset(const std::string& d
     PLX_ASSIGN_OR_RETURN(const std::vector<StampedPose> samples,
                          ReadGroundTruth(ground_truth_path));
     for (FrameFiles& frame : frames) {
-      frame.world_T_camera = PoseAtTime(samples, frame.timestamp, options.max_time_difference);
+      frame.ground_truth = PoseAtTime(samples, frame.timestamp, options.max_time_difference);
     }
   }
   PLX_ASSIGN_OR_RETURN(

@@ -3,6 +3,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "core/common/unified_allocator.h"
@@ -30,7 +31,20 @@ struct Image {
   }
 };
 
-using ColorImage = Image<float>;  // 3 channels, linear RGB in [0, 1]
-using DepthImage = Image<float>;  // 1 channel, z-depth in metres, 0 = invalid
+// Colour and depth share Image<float>'s layout and API but are distinct types, so passing a
+// depth image where a colour one is expected (or the reverse) does not compile. Code generic
+// over images takes an Image<T> and accepts both; turning a plain Image<float> into one of
+// them must be spelled out.
+struct ColorImage : Image<float> {  // 3 channels, linear RGB in [0, 1]
+  using Image<float>::Image;
+  ColorImage() = default;
+  explicit ColorImage(Image<float> image) : Image<float>(std::move(image)) {}
+};
+
+struct DepthImage : Image<float> {  // 1 channel, z-depth in metres, 0 = invalid
+  using Image<float>::Image;
+  DepthImage() = default;
+  explicit DepthImage(Image<float> image) : Image<float>(std::move(image)) {}
+};
 
 }  // namespace plx

@@ -487,7 +487,7 @@ void RenderSyntheticRows(const SE3& world_T_camera, const PinholeIntrinsics& k, 
 RgbdFrame RenderSyntheticView(const SE3& world_T_camera, const PinholeIntrinsics& intrinsics,
                               int supersampling) {
   RgbdFrame frame;
-  frame.world_T_camera = world_T_camera;
+  frame.ground_truth = world_T_camera;
   if (intrinsics.width <= 0 || intrinsics.height <= 0) return frame;
   frame.color = ColorImage(intrinsics.width, intrinsics.height, 3);
   frame.depth = DepthImage(intrinsics.width, intrinsics.height, 1);

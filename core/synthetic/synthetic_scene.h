@@ -63,8 +63,8 @@ Eigen::Vector3f SyntheticSurfaceColor(const SyntheticHit& hit);
 
 // Noise-free view of the scene at any pose and pinhole camera. Depth is the exact z-depth of
 // the ray through each pixel centre; colour averages supersampling x supersampling rays per
-// pixel (anti-aliasing; clamped to 1..4). world_T_camera is set, timestamp is 0. Rows are split
-// over threads. Non-positive sizes give empty images.
+// pixel (anti-aliasing; clamped to 1..4). The pose becomes the frame's ground_truth, the
+// timestamp is 0. Rows are split over threads. Non-positive sizes give empty images.
 RgbdFrame RenderSyntheticView(const SE3& world_T_camera, const PinholeIntrinsics& intrinsics,
                               int supersampling = 2);
 

@@ -204,7 +204,7 @@ absl::StatusOr<InMemoryDataset> GenerateSyntheticSequence(const SyntheticOptions
     if (split_rows) {
       frame = RenderSyntheticView(pose, k, /*supersampling=*/2);
     } else {
-      frame.world_T_camera = pose;
+      frame.ground_truth = pose;
       frame.color = ColorImage(k.width, k.height, 3);
       frame.depth = DepthImage(k.width, k.height, 1);
       internal::RenderSyntheticRows(pose, k, /*supersampling=*/2, 0, k.height, &frame);

@@ -120,7 +120,7 @@ class CudaParityTest : public ::testing::Test {
   }
 
   static const PinholeIntrinsics& intrinsics() { return dataset_->calibration().pinhole; }
-  static SE3 pose(int frame) { return *dataset_->frames()[frame].world_T_camera; }
+  static SE3 pose(int frame) { return *dataset_->frames()[frame].ground_truth; }
 
   static TrainingSet MakeTrainingSet() {
     TrainingSet set;

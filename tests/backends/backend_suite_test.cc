@@ -71,7 +71,7 @@ TEST_P(PipelineTest, MapsRendersAndTracksTheSyntheticRoom) {
   const PinholeIntrinsics& k = dataset->calibration().pinhole;
 
   const RgbdFrame& held_out = dataset->frames()[5];
-  absl::StatusOr<RenderedView> rendered = RenderView(backend(), map, *held_out.world_T_camera, k);
+  absl::StatusOr<RenderedView> rendered = RenderView(backend(), map, *held_out.ground_truth, k);
   ASSERT_TRUE(rendered.ok()) << rendered.status();
   const RenderedView& view = *rendered;
   double se = 0.0;
@@ -85,14 +85,14 @@ TEST_P(PipelineTest, MapsRendersAndTracksTheSyntheticRoom) {
   const RgbdFrame& frame = dataset->frames()[10];
   Vector6d offset;
   offset << 0.01, -0.01, 0.008, 0.01, -0.006, 0.008;
-  const SE3 start = *frame.world_T_camera * SE3::Exp(offset);
+  const SE3 start = *frame.ground_truth * SE3::Exp(offset);
   Tracker tracker(&map, &backend(), TrackerOptions());
   tracker.Reset(start, frame.timestamp - 1.0 / 30);
   absl::StatusOr<TrackingResult> tracked = tracker.Track(frame, k, start);
   ASSERT_TRUE(tracked.ok()) << tracked.status();
   const TrackingResult& r = *tracked;
   EXPECT_EQ(r.state, TrackingState::kOk) << r.reason;
-  EXPECT_LT((frame.world_T_camera->Inverse() * r.pose).translation().norm(), 5e-3);
+  EXPECT_LT((frame.ground_truth->Inverse() * r.pose).translation().norm(), 5e-3);
 }
 
 PLX_INSTANTIATE_BACKEND_SUITE(ReduceTest);

@@ -92,7 +92,7 @@ inline const InMemoryDataset& Room() {
   return *dataset;
 }
 
-inline SE3 GroundTruth(int index) { return *Room().frames()[index].world_T_camera; }
+inline SE3 GroundTruth(int index) { return *Room().frames()[index].ground_truth; }
 
 // The daemon's own pose codec (proto/pose_codec.h), as the CLI uses it.
 inline pb::Pose ToProto(const SE3& pose) {

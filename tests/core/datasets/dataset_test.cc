@@ -52,7 +52,7 @@ InMemoryDataset MakeSyntheticDataset(int frames, int width, int height, double d
     for (float& z : frame.depth.data) z = unit(rng) < 0.2f ? 0.0f : metres(rng);
     if (i != 1) {
       const Eigen::Quaterniond q(-0.5, 0.5 + 0.1 * i, -0.5, 0.5);  // w < 0
-      frame.world_T_camera = SE3(q, Eigen::Vector3d(i, -2.0 * i, 0.25));
+      frame.ground_truth = SE3(q, Eigen::Vector3d(i, -2.0 * i, 0.25));
     }
     list.push_back(std::move(frame));
   }
@@ -87,11 +87,11 @@ TEST(WriteTumDatasetTest, RoundTripReproducesFrames) {
         ASSERT_NEAR(frame->depth.data[j], want.depth.data[j], 0.5 / 5000 + 1e-6);
       }
     }
-    EXPECT_EQ(d.ground_truth(i).has_value(), want.world_T_camera.has_value());
-    if (want.world_T_camera.has_value() && d.ground_truth(i).has_value()) {
-      EXPECT_NEAR((d.ground_truth(i)->translation() - want.world_T_camera->translation()).norm(), 0,
+    EXPECT_EQ(d.ground_truth(i).has_value(), want.ground_truth.has_value());
+    if (want.ground_truth.has_value() && d.ground_truth(i).has_value()) {
+      EXPECT_NEAR((d.ground_truth(i)->translation() - want.ground_truth->translation()).norm(), 0,
                   1e-12);
-      EXPECT_NEAR(RotationAngleBetween(*d.ground_truth(i), *want.world_T_camera), 0, 1e-6);
+      EXPECT_NEAR(RotationAngleBetween(*d.ground_truth(i), *want.ground_truth), 0, 1e-6);
     }
   }
 
@@ -205,7 +205,7 @@ TEST(WriteTumDatasetTest, RealTeddyFramesRoundTripExactly) {
     EXPECT_EQ(frame->timestamp, frames[i].timestamp);
     ASSERT_TRUE((*read)->ground_truth(i).has_value());
     EXPECT_NEAR(
-        (frame->world_T_camera->translation() - frames[i].world_T_camera->translation()).norm(), 0,
+        (frame->ground_truth->translation() - frames[i].ground_truth->translation()).norm(), 0,
         1e-12);
   }
 }

@@ -79,7 +79,7 @@ TEST(ReplicaDatasetTest, ReadsFramesInNumericOrder) {
   ASSERT_TRUE(frame.ok()) << frame.status();
   EXPECT_FLOAT_EQ(frame->color.pixel(0, 0)[0], 190 / 255.0f);  // R = 200 - 10
   EXPECT_FLOAT_EQ(frame->depth.pixel(2, 2)[0], static_cast<float>(11000 / 6553.5));
-  ASSERT_TRUE(frame->world_T_camera.has_value());
+  ASSERT_TRUE(frame->ground_truth.has_value());
 }
 
 TEST(ReplicaDatasetTest, JpegFramesAndAutoDetection) {

@@ -81,7 +81,7 @@ TEST(ScanNetDatasetTest, InvalidPosesMeanNoGroundTruth) {
   EXPECT_FALSE((*dataset)->ground_truth(1).has_value());
   auto frame = (*dataset)->LoadFrame(1);
   ASSERT_TRUE(frame.ok());
-  EXPECT_FALSE(frame->world_T_camera.has_value());
+  EXPECT_FALSE(frame->ground_truth.has_value());
 }
 
 TEST(ScanNetDatasetTest, BadPoseFileNamesFileAndLine) {

@@ -206,8 +206,8 @@ TEST(TumDatasetTest, GroundTruthIsInterpolatedPerFrame) {
   EXPECT_FALSE((*dataset)->ground_truth(2).has_value());
   auto frame = (*dataset)->LoadFrame(0);
   ASSERT_TRUE(frame.ok());
-  ASSERT_TRUE(frame->world_T_camera.has_value());
-  EXPECT_NEAR((frame->world_T_camera->translation() - Eigen::Vector3d(1, 0, 0)).norm(), 0, 1e-9);
+  ASSERT_TRUE(frame->ground_truth.has_value());
+  EXPECT_NEAR((frame->ground_truth->translation() - Eigen::Vector3d(1, 0, 0)).norm(), 0, 1e-9);
 }
 
 TEST(TumDatasetTest, BadGroundTruthLineNamesFileAndLine) {

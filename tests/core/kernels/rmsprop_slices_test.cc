@@ -37,7 +37,7 @@ TEST(RmsPropSlicesTest, SlicedBricksGiveTheSameUpdateAsWholeBricks) {
   for (int f : {0, 10}) {
     const RgbdFrame& frame = dataset->frames()[f];
     ASSERT_TRUE(
-        set.AddFrame(frame, *frame.world_T_camera, dataset->calibration().pinhole, 10.0).ok());
+        set.AddFrame(frame, *frame.ground_truth, dataset->calibration().pinhole, 10.0).ok());
   }
   MappingBatchParams batch;
   batch.seed = 7;

@@ -39,7 +39,7 @@ TEST(ConcurrentReadersTest, TrackAndRenderPublishedVersionsWhileMappingPublishes
   auto session = MappingSession::Create(options, mapping_backend.get(), nullptr);
   ASSERT_TRUE(session.ok()) << session.status();
   const RgbdFrame& first = dataset->frames()[0];
-  ASSERT_TRUE((*session)->AddKeyframe(first, *first.world_T_camera, k).ok());
+  ASSERT_TRUE((*session)->AddKeyframe(first, *first.ground_truth, k).ok());
   absl::StatusOr<MappingStepResult> step = (*session)->Step();
   ASSERT_TRUE(step.ok() && step->published != nullptr);
 
@@ -66,9 +66,9 @@ TEST(ConcurrentReadersTest, TrackAndRenderPublishedVersionsWhileMappingPublishes
       while (!done.load()) {
         map = take();  // keeps the version alive while this thread reads it
         tracker.set_map(map.get());
-        tracker.Reset(*f.world_T_camera, f.timestamp - 1.0 / 30);
+        tracker.Reset(*f.ground_truth, f.timestamp - 1.0 / 30);
         absl::StatusOr<TrackingResult> t = tracker.Track(f, k);
-        absl::StatusOr<RenderedView> v = RenderView(*backend, *map, *f.world_T_camera, k);
+        absl::StatusOr<RenderedView> v = RenderView(*backend, *map, *f.ground_truth, k);
         if (!t.ok() || !v.ok()) failures++;
         tracked++;
         rendered++;
@@ -77,7 +77,7 @@ TEST(ConcurrentReadersTest, TrackAndRenderPublishedVersionsWhileMappingPublishes
   }
   for (int f : {10, 20}) {
     const RgbdFrame& frame = dataset->frames()[f];
-    ASSERT_TRUE((*session)->AddKeyframe(frame, *frame.world_T_camera, k).ok());
+    ASSERT_TRUE((*session)->AddKeyframe(frame, *frame.ground_truth, k).ok());
   }
   int published = 1;
   while ((*session)->has_work()) {

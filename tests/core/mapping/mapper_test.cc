@@ -107,7 +107,7 @@ TEST_F(MapperTest, ProgressCallbackCanCancel) {
 
 TEST_F(MapperTest, KeyframeWithoutGroundTruthIsAnError) {
   std::vector<RgbdFrame> frames = {dataset_->frames()[0]};
-  frames[0].world_T_camera.reset();
+  frames[0].ground_truth.reset();
   InMemoryDataset no_poses("no_poses", dataset_->calibration(), frames);
   std::unique_ptr<Backend> backend = MakeCpuBackend(1);
   auto result = MapDataset(no_poses, {0}, Options(5), *backend);

@@ -39,7 +39,7 @@ class MappingSessionTest : public ::testing::Test {
 
   static absl::Status AddKeyframe(MappingSession& session, int index) {
     const RgbdFrame& f = dataset_->frames()[index];
-    return session.AddKeyframe(f, *f.world_T_camera, dataset_->calibration().pinhole);
+    return session.AddKeyframe(f, *f.ground_truth, dataset_->calibration().pinhole);
   }
 
   // Steps until the session has no work, checking that every step stays bounded.
@@ -199,7 +199,7 @@ TEST_F(MappingSessionTest, RejectsBadKeyframesAndOptions) {
   PinholeIntrinsics wrong = dataset_->calibration().pinhole;
   wrong.width += 1;
   const RgbdFrame& f = dataset_->frames()[0];
-  EXPECT_EQ((*session)->AddKeyframe(f, *f.world_T_camera, wrong).code(),
+  EXPECT_EQ((*session)->AddKeyframe(f, *f.ground_truth, wrong).code(),
             absl::StatusCode::kInvalidArgument);
   EXPECT_EQ((*session)->pending_keyframes(), 0);
   EXPECT_FALSE((*session)->has_work());

@@ -182,7 +182,7 @@ TEST(SyntheticSceneTest, DepthFacingEachBoxIsDistanceToItsFace) {
 // with b's depth, interpolating b's inverse depth bilinearly (exact on planes).
 std::vector<double> ReprojectionErrors(const RgbdFrame& a, const RgbdFrame& b,
                                        const PinholeIntrinsics& k) {
-  const SE3 b_T_a = b.world_T_camera->Inverse() * *a.world_T_camera;
+  const SE3 b_T_a = b.ground_truth->Inverse() * *a.ground_truth;
   std::vector<double> errors;
   for (int v = 0; v < k.height; ++v) {
     for (int u = 0; u < k.width; ++u) {

@@ -50,7 +50,7 @@ PlenoxelMap* TrackerTest::map_ = nullptr;
 // 5.4 cm and 3.1 degrees off: recovered to well under a millimetre and 0.1 degree (measured
 // 0.52 mm / 0.007 deg on the keyframe).
 TEST_F(TrackerTest, RecoversAPerturbedPose) {
-  const SE3 truth = *dataset_->frames()[10].world_T_camera;
+  const SE3 truth = *dataset_->frames()[10].ground_truth;
   Vector6d offset;
   offset << 0.03, -0.04, 0.02, 0.03, -0.02, 0.04;
   TrackerOptions options;
@@ -65,7 +65,7 @@ TEST_F(TrackerTest, RecoversAPerturbedPose) {
 
 // A frame between keyframes, from a smaller offset: within 2 mm (measured 0.9 mm).
 TEST_F(TrackerTest, TracksAHeldOutFrame) {
-  const SE3 truth = *dataset_->frames()[15].world_T_camera;
+  const SE3 truth = *dataset_->frames()[15].ground_truth;
   Vector6d offset;
   offset << 0.01, 0.008, -0.012, -0.01, 0.006, 0.008;
   const TrackingResult r = TrackFrom(truth * SE3::Exp(offset), 15, TrackerOptions());
@@ -98,7 +98,7 @@ TEST_F(TrackerTest, AWrongFrameSizeIsLost) {
 
 // The paper's Adam tracker moves towards the truth but needs its 90 small steps.
 TEST_F(TrackerTest, AdamModeImprovesTheInitialGuess) {
-  const SE3 truth = *dataset_->frames()[10].world_T_camera;
+  const SE3 truth = *dataset_->frames()[10].ground_truth;
   Vector6d offset;
   offset << 0.01, -0.01, 0.005, 0.0, 0.0, 0.0;
   TrackerOptions options;
@@ -121,7 +121,7 @@ TEST_F(TrackerTest, TracksTheWholeSequenceWithConstantVelocity) {
   EXPECT_EQ(result->lost, 0);
   double worst = 0.0;
   for (int i = 0; i < 30; ++i) {
-    const SE3& truth = *dataset_->frames()[i].world_T_camera;
+    const SE3& truth = *dataset_->frames()[i].ground_truth;
     worst = std::max(worst, (truth.Inverse() * result->trajectory[i].pose).translation().norm());
   }
   EXPECT_LT(worst, 5e-3);
