@@ -149,8 +149,7 @@ absl::StatusOr<MapStatus> MapStore::Load(const std::string& name) {
   }
   PLX_ASSIGN_OR_RETURN(std::unique_ptr<PlenoxelMap> loaded, LoadMap(path));
   // Published maps are shared by concurrent readers, so they must not need a lazy refresh.
-  PLX_RETURN_IF_ERROR(
-      RefreshOccupancyIfStale(*MakeCpuBackend(), loaded->grid, loaded->render.sigma_threshold));
+  PLX_RETURN_IF_ERROR(RefreshOccupancyIfStale(*MakeCpuBackend(), *loaded));
   std::shared_ptr<const PlenoxelMap> map(std::move(loaded));
   std::lock_guard<std::mutex> lock(mutex_);
   auto it = maps_.find(name);

@@ -13,6 +13,8 @@
 #include "app/make_backend.h"
 #include "clients/plenox/map_flags.h"
 #include "core/common/status_macros.h"
+#include "core/formats/map_file.h"
+#include "core/kernels/refresh_occupancy.h"
 
 namespace plx::cli {
 
@@ -130,6 +132,18 @@ void AddBackendFlags(FlagSet& flags) {
             "auto")
       .Add("device", "N", "CUDA device for --backend cuda or auto", "0")
       .Add("threads", "N", "CPU threads of the CPU backend (0 = all cores)", "0");
+}
+
+std::unique_ptr<PlenoxelMap> LoadMapOrReport(const std::string& command, const FlagSet& flags,
+                                             Backend& backend, int* exit_code) {
+  absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(flags.GetString("map"));
+  absl::Status status = map.status();
+  if (status.ok()) status = RefreshOccupancyIfStale(backend, **map);
+  if (!status.ok()) {
+    *exit_code = ReportError(command, status);
+    return nullptr;
+  }
+  return *std::move(map);
 }
 
 std::unique_ptr<Backend> BackendFromFlagsOrReport(const std::string& command,

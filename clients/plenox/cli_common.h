@@ -102,6 +102,11 @@ void AddBackendFlags(FlagSet& flags);
 // value (--backend bogus, --device -1, --device with --backend cpu), failure (1) when the
 // backend cannot be made (--backend cuda in a build without CUDA or on a machine without the
 // device). Call it before any long work so such errors come at once.
+// The map file of --map, with exact occupancy for `backend` (readers need it; see
+// core/kernels/refresh_occupancy.h); null after reporting the error (exit code 1).
+std::unique_ptr<PlenoxelMap> LoadMapOrReport(const std::string& command, const FlagSet& flags,
+                                             Backend& backend, int* exit_code);
+
 std::unique_ptr<Backend> BackendFromFlagsOrReport(const std::string& command,
                                                   const FlagSet& flags, int* exit_code);
 // The backend for progress and summary lines: "cpu, 4 threads", or the GPU's name.

@@ -5,7 +5,6 @@
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "core/eval/map_metrics.h"
-#include "core/formats/map_file.h"
 
 namespace plx::cli {
 
@@ -39,8 +38,8 @@ int RunEvalMap(const std::vector<std::string>& args) {
   std::unique_ptr<Backend> backend = BackendFromFlagsOrReport("eval-map", flags, &exit_code);
   if (!backend) return exit_code;
 
-  absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(flags.GetString("map"));
-  if (!map.ok()) return ReportError("eval-map", map.status());
+  std::unique_ptr<PlenoxelMap> map = LoadMapOrReport("eval-map", flags, *backend, &exit_code);
+  if (!map) return exit_code;
   std::unique_ptr<RgbdDataset> dataset =
       OpenDatasetOrReport("eval-map", flags, *dataset_options, &exit_code);
   if (!dataset) return exit_code;
@@ -54,7 +53,7 @@ int RunEvalMap(const std::vector<std::string>& args) {
   MapEvalOptions options;
   options.pixels_per_frame = *pixels;
   options.max_depth = *max_depth;
-  absl::StatusOr<MapEvalResult> r = EvaluateMap(*backend, **map, *dataset, held_out, options);
+  absl::StatusOr<MapEvalResult> r = EvaluateMap(*backend, *map, *dataset, held_out, options);
   if (!r.ok()) return ReportError("eval-map", r.status());
   if (flags.GetSwitch("json")) {
     JsonObject json;

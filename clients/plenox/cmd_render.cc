@@ -6,7 +6,6 @@
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "clients/plenox/render_flags.h"
-#include "core/formats/map_file.h"
 #include "core/formats/pose_text.h"
 #include "core/io/atomic_write.h"
 #include "core/io/image_io.h"
@@ -30,10 +29,10 @@ int RunRender(const std::vector<std::string>& args) {
   std::unique_ptr<Backend> backend = BackendFromFlagsOrReport("render", flags, &exit_code);
   if (!backend) return exit_code;
 
-  absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(flags.GetString("map"));
-  if (!map.ok()) return ReportError("render", map.status());
+  std::unique_ptr<PlenoxelMap> map = LoadMapOrReport("render", flags, *backend, &exit_code);
+  if (!map) return exit_code;
   absl::StatusOr<RenderedView> rendered_view =
-      RenderView(*backend, **map, target->pose, target->intrinsics);
+      RenderView(*backend, *map, target->pose, target->intrinsics);
   if (!rendered_view.ok()) return ReportError("render", rendered_view.status());
   const RenderedView& view = *rendered_view;
   std::string color_png, depth_png;  // only the images asked for are encoded

@@ -3,7 +3,6 @@
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "clients/plenox/track_output.h"
-#include "core/formats/map_file.h"
 #include "core/formats/trajectory_file.h"
 #include "core/tracking/track_dataset.h"
 
@@ -36,8 +35,8 @@ int RunTrack(const std::vector<std::string>& args) {
   std::unique_ptr<Backend> backend = BackendFromFlagsOrReport("track", flags, &exit_code);
   if (!backend) return exit_code;
 
-  absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(flags.GetString("map"));
-  if (!map.ok()) return ReportError("track", map.status());
+  std::unique_ptr<PlenoxelMap> map = LoadMapOrReport("track", flags, *backend, &exit_code);
+  if (!map) return exit_code;
   std::unique_ptr<RgbdDataset> dataset =
       OpenDatasetOrReport("track", flags, *dataset_options, &exit_code);
   if (!dataset) return exit_code;
@@ -46,7 +45,7 @@ int RunTrack(const std::vector<std::string>& args) {
   report.frames = dataset->size();
   int lost = 0;
   absl::StatusOr<TrackDatasetResult> result = TrackDataset(
-      *dataset, **map, *backend, options, [&](int i, const TrackingResult& r) {
+      *dataset, *map, *backend, options, [&](int i, const TrackingResult& r) {
         lost += r.state == TrackingState::kLost;
         line.Update(TrackProgressText({.frame = i + 1,
                                        .frames = report.frames,
