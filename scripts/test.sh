@@ -7,6 +7,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 if [[ "${1:-}" == "--tsan" ]]; then
   bash scripts/install_deps.sh
+  export CCACHE_BASEDIR="${CCACHE_BASEDIR:-$PWD}"  # see scripts/build.sh
   if [[ ! -f build-tsan/build.ninja ]]; then
     cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPLX_WITH_CUDA=OFF \
       -DPLX_BUILD_BENCH=OFF -DCMAKE_CXX_FLAGS="-fsanitize=thread" \

@@ -18,15 +18,9 @@ double SecondsSince(std::chrono::steady_clock::time_point t) {
 }  // namespace
 
 IntegrateReactor::IntegrateReactor(DaemonState* state, grpc::CallbackServerContext* context)
-    : StreamReactor(state, context, "Integrate") {}
-
-absl::Status IntegrateReactor::EmptyStreamError() const {
-  return absl::InvalidArgumentError("empty stream: the first IntegrateRequest must name the map");
-}
+    : StreamReactor(state, context, "Integrate", "IntegrateRequest") {}
 
 absl::Status IntegrateReactor::HandleFirstMessage() {
-  map_name_ = request_.map();
-  if (absl::Status s = CheckMapName(map_name_, "map"); !s.ok()) return s;
   absl::StatusOr<MapStatus> info = state_->maps->Info(map_name_);
   if (!info.ok()) return info.status();
   const pb::IntegrateOptions& o = request_.options();
@@ -59,12 +53,7 @@ absl::Status IntegrateReactor::HandleFirstMessage() {
 }
 
 absl::Status IntegrateReactor::HandleRequestLocked(bool first) {
-  if (first) {
-    PLX_RETURN_IF_ERROR(HandleFirstMessage());
-  } else if (!request_.map().empty() && request_.map() != map_name_) {
-    return absl::InvalidArgumentError(absl::StrCat("map: a stream maps one map (\"", map_name_,
-                                                   "\"), got \"", request_.map(), "\""));
-  }
+  if (first) PLX_RETURN_IF_ERROR(HandleFirstMessage());
   if (request_.has_frame()) {
     PLX_ASSIGN_OR_RETURN(
         DecodedFrame frame,

@@ -36,7 +36,6 @@ class IntegrateReactor final
 
  private:
   absl::Status HandleRequestLocked(bool first) override;
-  absl::Status EmptyStreamError() const override;
   void OnInputClosedLocked() override;
   void OnFailedLocked(const absl::Status& status) override;
   bool WantsInputLocked() const override { return queue_.size() < kMaxQueuedKeyframes; }
@@ -55,7 +54,6 @@ class IntegrateReactor final
   uint32_t received_ = 0;
 
   // Owned by the mapping task.
-  std::string map_name_;
   std::string job_id_;
   MappingSessionOptions options_;
   std::unique_ptr<MappingSession> session_;

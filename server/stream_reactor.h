@@ -17,9 +17,11 @@
 #include <grpcpp/grpcpp.h>
 
 #include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
 #include "server/daemon_state.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
+#include "server/proto_convert.h"
 
 namespace plx::server {
 
@@ -32,7 +34,8 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
     if (phase_ != Phase::kOpen) return;
     if (!ok) {
       if (first_) {
-        FailLocked(EmptyStreamError());
+        FailLocked(absl::InvalidArgumentError(
+            absl::StrCat("empty stream: the first ", request_name_, " must name the map")));
         return;
       }
       phase_ = Phase::kClosing;
@@ -42,6 +45,18 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
     }
     const bool first = first_;
     first_ = false;
+    // Every stream works on one map, named by its first message.
+    if (first) {
+      map_name_ = request_.map();
+      if (absl::Status s = CheckMapName(map_name_, "map"); !s.ok()) {
+        FailLocked(s);
+        return;
+      }
+    } else if (!request_.map().empty() && request_.map() != map_name_) {
+      FailLocked(absl::InvalidArgumentError(absl::StrCat(
+          "map: a stream works on one map (\"", map_name_, "\"), got \"", request_.map(), "\"")));
+      return;
+    }
     if (absl::Status s = HandleRequestLocked(first); !s.ok()) {
       FailLocked(s);
       return;
@@ -86,8 +101,10 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
   enum class Phase { kOpen, kClosing, kFinished };
 
   // Admits the stream (drain, auth, stream limit) and starts reading, or finishes it at once.
-  StreamReactor(DaemonState* state, grpc::CallbackServerContext* context, const char* method)
-      : state_(state), context_(context), method_(method) {
+  // `method` names the RPC in logs, `request_name` the request message in errors.
+  StreamReactor(DaemonState* state, grpc::CallbackServerContext* context, const char* method,
+                const char* request_name)
+      : state_(state), context_(context), method_(method), request_name_(request_name) {
     const absl::Status admitted = AcquireStreamSlot(*state_, context_);
     if (!admitted.ok()) {
       state_->metrics->rpc_errors++;
@@ -102,10 +119,9 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
   virtual ~StreamReactor() = default;
 
   // --- What a stream supplies (mutex_ held) ---
-  // Handles request_ (`first`: the stream's first message). An error fails the stream.
+  // Handles request_ (`first`: the stream's first message, whose map name is checked and in
+  // map_name_ by then). An error fails the stream.
   virtual absl::Status HandleRequestLocked(bool first) = 0;
-  // The error for a stream closed before its first message.
-  virtual absl::Status EmptyStreamError() const = 0;
   // The client half-closed after at least one message.
   virtual void OnInputClosedLocked() {}
   // The stream failed or was cancelled: drop queued input, mark jobs.
@@ -174,6 +190,7 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
   DaemonState* const state_;
   grpc::CallbackServerContext* const context_;
   Request request_;
+  std::string map_name_;  // set from the first message, before HandleRequestLocked
   std::mutex mutex_;
 
  private:
@@ -188,6 +205,7 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
   }
 
   const char* const method_;
+  const char* const request_name_;
   bool holds_slot_ = false;
   Phase phase_ = Phase::kOpen;
   bool first_ = true;

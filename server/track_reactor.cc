@@ -20,15 +20,9 @@ pb::TrackingState ToProto(TrackingState state) {
 }  // namespace
 
 TrackReactor::TrackReactor(DaemonState* state, grpc::CallbackServerContext* context)
-    : StreamReactor(state, context, "Track") {}
-
-absl::Status TrackReactor::EmptyStreamError() const {
-  return absl::InvalidArgumentError("empty stream: the first TrackRequest must name the map");
-}
+    : StreamReactor(state, context, "Track", "TrackRequest") {}
 
 absl::Status TrackReactor::HandleFirstMessage() {
-  map_name_ = request_.map();
-  if (absl::Status s = CheckMapName(map_name_, "map"); !s.ok()) return s;
   absl::StatusOr<MapVersion> map = state_->maps->Latest(map_name_);
   if (!map.ok()) return map.status();
   map_ = *map;

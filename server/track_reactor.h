@@ -34,7 +34,6 @@ class TrackReactor final
   };
 
   absl::Status HandleRequestLocked(bool first) override;
-  absl::Status EmptyStreamError() const override;
   void OnFailedLocked(const absl::Status& status) override;
   std::vector<LogField> LogFields() const override;
 
@@ -48,7 +47,6 @@ class TrackReactor final
   uint32_t dropped_ = 0;
 
   // Owned by the task (one at a time).
-  std::string map_name_;
   TrackerOptions options_;
   MapVersion map_;
   std::unique_ptr<Tracker> tracker_;

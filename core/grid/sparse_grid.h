@@ -172,6 +172,7 @@ class SparseGrid {
   std::vector<BrickCoord> brick_coords_;  // per slot
   std::vector<BrickStorage> bricks_;      // per slot
   std::vector<uint8_t> brick_shared_;     // per slot: 1 = another version may read it
+  int64_t clone_cursor_ = 0;              // where a capped MakePrivate starts next
   UnifiedVector<float*> density_table_;   // per slot: bricks_[slot].get()
   UnifiedVector<float*> sh_table_;        // per slot: bricks_[slot].get() + 512
   std::array<int32_t, 3> index_min_ = {0, 0, 0};

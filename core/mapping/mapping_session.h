@@ -46,7 +46,7 @@ struct MappingSessionOptions {
   // publish_every_iterations iterations have run, and at least min_publish_interval_s has
   // passed; the interval stretches to 10x the last publish's cost, so publishing never takes
   // more than about a tenth of the session's time.
-  double min_publish_interval_s = 0.25;
+  double min_publish_interval_s = 1.0;
   int publish_every_iterations = 100;
 };
 

@@ -28,13 +28,20 @@ void DefaultDeallocate(void* block, size_t bytes, void* context) {
   DefaultUnifiedMemoryHooks().deallocate(block, bytes, context);
 }
 
-const UnifiedMemoryHooks kFailingHooks{&FailingAllocate, &DefaultDeallocate, nullptr,
-                                       "failing-test"};
+// One hooks object per test: freed brick blocks are pooled for reuse by the hooks that made
+// them (core/grid/sparse_grid.cc), and a block pooled by an earlier test must not satisfy this
+// test's allocations without going through the failing allocator.
+const UnifiedMemoryHooks kFailingHooks[2] = {
+    {&FailingAllocate, &DefaultDeallocate, nullptr, "failing-test-0"},
+    {&FailingAllocate, &DefaultDeallocate, nullptr, "failing-test-1"}};
+int g_next_hooks = 0;
 
-// Installs the failing hooks for the test's lifetime.
+// Installs failing hooks for the test's lifetime.
 class AllocationFailureTest : public ::testing::Test {
  protected:
-  void SetUp() override { previous_ = InstallUnifiedMemoryHooks(&kFailingHooks); }
+  void SetUp() override {
+    previous_ = InstallUnifiedMemoryHooks(&kFailingHooks[g_next_hooks++ % 2]);
+  }
   void TearDown() override {
     g_fail_above = std::numeric_limits<size_t>::max();
     g_fail_size = 0;
