@@ -53,6 +53,16 @@ class BrickPool {
     return static_cast<float*>(UnifiedAllocate(kBrickBytes));
   }
 
+  void Clear() {
+    std::vector<float*> blocks;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      blocks.swap(free_);
+      free_.reserve(kMaxPooledBricks);
+    }
+    for (float* block : blocks) UnifiedDeallocate(block, kBrickBytes);
+  }
+
   void Give(float* block) noexcept {
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -71,6 +81,8 @@ class BrickPool {
 };
 
 }  // namespace
+
+void SparseGrid::ReleasePooledBricks() { BrickPool::Get().Clear(); }
 
 SparseGrid::BrickStorage SparseGrid::NewBrickStorage() {
   float* data = BrickPool::Get().Take();  // throws std::bad_alloc

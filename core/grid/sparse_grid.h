@@ -139,6 +139,10 @@ class SparseGrid {
                       std::vector<int64_t>* still_shared = nullptr);
   int64_t num_shared_bricks() const;
 
+  // Brick blocks freed by dropped versions are pooled (up to 4096) for the next allocations;
+  // this returns them to their allocator (memory pressure, tests that count allocations).
+  static void ReleasePooledBricks();
+
   GridMemory Memory() const;
 
   // Cell occupancy (GridViewT::cell_bits) starts conservative (every cell of an active block

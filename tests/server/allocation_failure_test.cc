@@ -28,19 +28,14 @@ void DefaultDeallocate(void* block, size_t bytes, void* context) {
   DefaultUnifiedMemoryHooks().deallocate(block, bytes, context);
 }
 
-// One hooks object per test: freed brick blocks are pooled for reuse by the hooks that made
-// them (core/grid/sparse_grid.cc), and a block pooled by an earlier test must not satisfy this
-// test's allocations without going through the failing allocator.
-const UnifiedMemoryHooks kFailingHooks[2] = {
-    {&FailingAllocate, &DefaultDeallocate, nullptr, "failing-test-0"},
-    {&FailingAllocate, &DefaultDeallocate, nullptr, "failing-test-1"}};
-int g_next_hooks = 0;
+const UnifiedMemoryHooks kFailingHooks{&FailingAllocate, &DefaultDeallocate, nullptr,
+                                       "failing-test"};
 
 // Installs failing hooks for the test's lifetime.
 class AllocationFailureTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    previous_ = InstallUnifiedMemoryHooks(&kFailingHooks[g_next_hooks++ % 2]);
+    previous_ = InstallUnifiedMemoryHooks(&kFailingHooks);
   }
   void TearDown() override {
     g_fail_above = std::numeric_limits<size_t>::max();
@@ -108,6 +103,7 @@ TEST_F(AllocationFailureTest, BricksThatCannotBeAllocatedFailTheMappingJobOnly) 
   // Only a brick's parameter block (56 KB, plus the block header) fails: decoding succeeds and
   // the brick allocation is what runs out.
   g_fail_size = static_cast<size_t>(kBrickFloats) * sizeof(float) + kUnifiedAlignment;
+  SparseGrid::ReleasePooledBricks();  // pooled blocks would not reach the allocator
   const grpc::Status failed = IntegrateOneKeyframe(d, "fresh");
   EXPECT_EQ(failed.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << Describe(failed);
   EXPECT_NE(failed.error_message().find("allocating bricks"), std::string::npos)
