@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
 # Installs dependencies, builds everything and runs the whole test suite (what CI runs).
 #   scripts/test.sh          the suite (Release build in ./build)
-#   scripts/test.sh --tsan   ThreadSanitizer build of the core and server tests in ./build-tsan
-#                            (CPU only, no benches), then those tests
+#   scripts/test.sh --tsan   ThreadSanitizer build of the core tests in ./build-tsan (CPU only),
+#                            then those tests: the shared map versions, mapping sessions and
+#                            readers, the thread pool. The daemon's tests are not part of it:
+#                            Debian's gRPC is not built with TSan, and its inlined reactor code
+#                            racing with its uninstrumented library reports false positives.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [[ "${1:-}" == "--tsan" ]]; then
@@ -14,10 +17,10 @@ if [[ "${1:-}" == "--tsan" ]]; then
       -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=thread" \
       $(command -v ccache > /dev/null && echo -DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
   fi
-  cmake --build build-tsan --target plx_core_tests plx_server_tests
+  cmake --build build-tsan --target plx_core_tests
   # halt_on_error: a report fails the test; second_deadlock_stack: readable lock reports.
-  export TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 ${TSAN_OPTIONS:-}"
-  ctest --test-dir build-tsan --output-on-failure -j2 -R "plx_core_tests|plx_server_tests"
+  export TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$PWD/tests/tsan.supp ${TSAN_OPTIONS:-}"
+  ctest --test-dir build-tsan --output-on-failure -j2 -R "plx_core_tests"
   exit 0
 fi
 bash scripts/install_deps.sh
