@@ -133,10 +133,6 @@ int64_t SparseGrid::MakePrivate(const uint8_t* brick_flags, int64_t max_clones,
   return cloned;
 }
 
-int64_t SparseGrid::num_shared_bricks() const {
-  return std::count(brick_shared_.begin(), brick_shared_.end(), uint8_t{1});
-}
-
 namespace {
 // Room for `n` elements, growing geometrically like push_back would.
 template <typename Vector>

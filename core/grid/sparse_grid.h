@@ -137,7 +137,6 @@ class SparseGrid {
   // cloned and the slots of the flagged bricks still shared are appended to `still_shared`.
   int64_t MakePrivate(const uint8_t* brick_flags, int64_t max_clones = -1,
                       std::vector<int64_t>* still_shared = nullptr);
-  int64_t num_shared_bricks() const;
 
   // Brick blocks freed by dropped versions are pooled (up to 4096) for the next allocations;
   // this returns them to their allocator (memory pressure, tests that count allocations).

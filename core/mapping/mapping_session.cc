@@ -154,8 +154,8 @@ absl::StatusOr<MappingStepResult> MappingSession::Step(bool finish) {
 absl::Status MappingSession::PublishInto(MappingStepResult* result) {
   const double start = NowSeconds();
   PLX_ASSIGN_OR_RETURN(latest_, mapper_->Publish());
-  last_publish_cost_s_ = NowSeconds() - start;
   last_publish_time_s_ = NowSeconds();
+  last_publish_cost_s_ = last_publish_time_s_ - start;
   result->published = latest_;
   result->keyframes_in_published = keyframes_since_publish_;
   result->publish_s = last_publish_cost_s_;

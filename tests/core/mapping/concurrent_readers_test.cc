@@ -13,19 +13,15 @@
 #include "core/cpu/cpu_backend.h"
 #include "core/mapping/mapping_session.h"
 #include "core/render/render_view.h"
-#include "core/synthetic/synthetic_sequence.h"
 #include "core/tracking/tracker.h"
+#include "tests/synthetic_room.h"
 
 namespace plx {
 namespace {
 
 TEST(ConcurrentReadersTest, TrackAndRenderPublishedVersionsWhileMappingPublishes) {
-  SyntheticOptions o;
-  o.width = 64;
-  o.height = 48;
-  o.num_frames = 30;
-  absl::StatusOr<InMemoryDataset> dataset = GenerateSyntheticSequence(o);
-  ASSERT_TRUE(dataset.ok()) << dataset.status();
+  std::unique_ptr<InMemoryDataset> dataset = testing::MakeSyntheticRoom(64, 48, 30);
+  ASSERT_NE(dataset, nullptr);
   const PinholeIntrinsics& k = dataset->calibration().pinhole;
 
   MappingSessionOptions options;
