@@ -30,6 +30,9 @@ struct DaemonOptions {
   int64_t max_map_bytes = int64_t{4} << 30;
   int max_streams = 32;
   int max_message_bytes = 64 << 20;
+  // Pixels (width x height) of one Track/Integrate frame; larger frames are RESOURCE_EXHAUSTED
+  // before their images are decoded. 4K UHD: a decoded frame (float colour + depth) is 133 MB.
+  int64_t max_frame_pixels = 3840 * 2160;
   int threads = 0;                         // CPU backend threads (0 = all cores)
   // Compute devices, one worker each: kCpu one CPU worker; kCuda one worker per GPU in `gpus`
   // (Start fails when there is none); kAuto like kCuda when a GPU is visible, else kCpu.
