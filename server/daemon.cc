@@ -151,11 +151,15 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   }
   d->server_->GetHealthCheckService()->SetServingStatus(true);
   if (options.metrics_port >= 0) {
-    std::string error;
+    HttpServerOptions http;
+    http.host = options.metrics_host;
+    http.port = options.metrics_port;
+    d->http_ = std::make_unique<HttpServer>(http);
     Daemon* raw = d.get();
-    d->metrics_ = MetricsHttpServer::Start(options.metrics_host, options.metrics_port,
-                                           [raw] { return raw->RenderMetrics(); }, &error);
-    if (!d->metrics_) return absl::UnavailableError(error);
+    AddMetricsRoute(*d->http_, [raw] { return raw->RenderMetrics(); });
+    if (absl::Status s = d->http_->Start(); !s.ok()) {
+      return absl::UnavailableError(absl::StrCat("metrics: ", s.message()));
+    }
   }
   LogEvent("info", "serving",
            {{"listen", options.listen}, {"port", std::to_string(d->port_)},
@@ -197,7 +201,7 @@ absl::Status Daemon::Drain(absl::Duration grace) {
   io_->Stop();
   const absl::Status saved = maps_->SaveDirty();
   if (!saved.ok()) LogEvent("error", "save_failed", {{"reason", std::string(saved.message())}});
-  metrics_.reset();
+  http_.reset();
   LogEvent("info", "stopped", {});
   return saved;
 }

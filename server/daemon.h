@@ -14,6 +14,7 @@
 #include "absl/time/time.h"
 #include "app/make_backend.h"
 #include "server/daemon_state.h"
+#include "server/http_server.h"
 #include "server/metrics.h"
 #include "server/plenoxd_service.h"
 
@@ -49,7 +50,7 @@ class Daemon {
   ~Daemon();
 
   int port() const { return port_; }
-  int metrics_port() const { return metrics_ ? metrics_->port() : -1; }
+  int metrics_port() const { return http_ ? http_->port() : -1; }
 
   // Stops taking calls (health NOT_SERVING, new calls UNAVAILABLE), lets running calls finish
   // for up to `grace` and cancels the rest, stops the workers and saves every dirty map.
@@ -71,7 +72,7 @@ class Daemon {
   DaemonState state_;
   std::unique_ptr<PlenoxdService> service_;
   std::unique_ptr<grpc::Server> server_;
-  std::unique_ptr<MetricsHttpServer> metrics_;
+  std::unique_ptr<HttpServer> http_;  // --metrics-port: /metrics
   int port_ = 0;
   bool drained_ = false;
 };

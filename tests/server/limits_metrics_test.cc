@@ -244,7 +244,7 @@ TEST(MetricsTest, FramesTrackedAndDroppedMatchTheStreams) {
   ASSERT_GT(port, 0);
 
   const std::string idle = HttpGet(port, "/metrics");
-  ASSERT_EQ(idle.rfind("HTTP/1.0 200", 0), 0u) << idle.substr(0, 200);
+  ASSERT_EQ(idle.rfind("HTTP/1.1 200", 0), 0u) << idle.substr(0, 200);
   EXPECT_EQ(Sample(idle, "plenoxd_frames_tracked_total"), 0);
   EXPECT_EQ(Sample(idle, "plenoxd_serving"), 1);
   EXPECT_EQ(Sample(idle, "plenoxd_maps"), 1);
@@ -282,7 +282,7 @@ TEST(MetricsTest, FramesTrackedAndDroppedMatchTheStreams) {
 
   ASSERT_TRUE(WaitFor([&] { return d.daemon->state().metrics->active_streams.load() == 0; }));
   const std::string body = HttpGet(port, "/metrics");
-  ASSERT_EQ(body.rfind("HTTP/1.0 200", 0), 0u) << body.substr(0, 200);
+  ASSERT_EQ(body.rfind("HTTP/1.1 200", 0), 0u) << body.substr(0, 200);
   EXPECT_NE(body.find("# TYPE plenoxd_frames_tracked_total counter"), std::string::npos);
   EXPECT_EQ(Sample(body, "plenoxd_frames_tracked_total"), 7 + burst_estimates) << body;
   EXPECT_EQ(Sample(body, "plenoxd_frames_dropped_total"), burst_dropped);
@@ -291,7 +291,7 @@ TEST(MetricsTest, FramesTrackedAndDroppedMatchTheStreams) {
   EXPECT_EQ(Sample(body, "plenoxd_track_latency_seconds_count"), 7 + burst_estimates);
 
   const std::string other = HttpGet(port, "/other");
-  EXPECT_EQ(other.rfind("HTTP/1.0 404", 0), 0u) << other.substr(0, 200);
+  EXPECT_EQ(other.rfind("HTTP/1.1 404", 0), 0u) << other.substr(0, 200);
 }
 
 }  // namespace
