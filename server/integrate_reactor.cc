@@ -1,6 +1,7 @@
 #include "server/integrate_reactor.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -31,6 +32,11 @@ absl::Status IntegrateReactor::HandleFirstMessage() {
   }
   if (o.iterations_per_keyframe() > 0) {
     options_.iterations_per_keyframe = static_cast<int>(o.iterations_per_keyframe());
+  }
+  // Exactly 0 means the default; anything else must be a usable depth.
+  if (!(std::isfinite(o.max_depth()) && o.max_depth() >= 0)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "options.max_depth: must be finite and > 0 metres (0 = the default), got ", o.max_depth()));
   }
   if (o.max_depth() > 0) {
     options_.mapper.allocation.max_depth = o.max_depth();

@@ -27,6 +27,11 @@ absl::Status TrackReactor::HandleFirstMessage() {
   if (!map.ok()) return map.status();
   map_ = *map;
   const pb::TrackOptions& o = request_.options();
+  // proto3 enums are open: an unknown number arrives as itself and must not become the default.
+  if (!pb::TrackOptions::Mode_IsValid(o.mode())) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "options.mode: unknown mode ", o.mode(), " (UNSPECIFIED, GAUSS_NEWTON or ADAM)"));
+  }
   options_ = TrackerOptionsForMode(o.mode() == pb::TrackOptions::MODE_ADAM
                                       ? TrackingMode::kAdam
                                       : TrackingMode::kGaussNewton);

@@ -304,6 +304,40 @@ TEST_F(BadInputTest, TrackBadOptionsNameOptions) {
   pb::TrackRequest r = TrackStart("a", EncodeFrame(0, false));
   r.mutable_options()->set_rays(3);
   EXPECT_CODE_AND_FIELD(TrackStatus(stub(), {r}), INVALID_ARGUMENT, "options");
+  // An enum number the daemon does not know is refused, not taken as the default mode.
+  pb::TrackRequest mode = TrackStart("a", EncodeFrame(0, false));
+  mode.mutable_options()->set_mode(static_cast<pb::TrackOptions::Mode>(99));
+  EXPECT_CODE_AND_FIELD(TrackStatus(stub(), {mode}), INVALID_ARGUMENT,
+                        "options.mode: unknown mode 99");
+}
+
+// Negative and non-finite options are refused, not replaced by the default (0 is the default).
+TEST_F(BadInputTest, IntegrateMaxDepthMustBeFiniteAndNotNegative) {
+  const pb::Frame f = EncodeFrame(5, true);
+  for (float bad : {-1.0f, std::nanf(""), INFINITY}) {
+    pb::IntegrateRequest r = IntegrateStart("a", &f);
+    r.mutable_options()->set_max_depth(bad);
+    SCOPED_TRACE(bad);
+    EXPECT_CODE_AND_FIELD(IntegrateStatus(stub(), {r}), INVALID_ARGUMENT, "options.max_depth");
+  }
+  pb::MapInfo a;
+  ASSERT_TRUE(GetMap(stub(), "a", &a).ok());
+  EXPECT_EQ(a.version(), a_before_.version());
+}
+
+TEST_F(BadInputTest, ExportMinDensityMustBeFiniteAndNotNegative) {
+  for (float bad : {-1.0f, std::nanf(""), INFINITY}) {
+    grpc::ClientContext context;
+    Prepare(&context, "", kBadCallTimeout);
+    pb::ExportRequest request;
+    request.set_map("a");
+    request.set_min_density(bad);
+    auto reader = stub().Export(&context, request);
+    pb::ExportChunk chunk;
+    EXPECT_FALSE(reader->Read(&chunk)) << bad;
+    SCOPED_TRACE(bad);
+    EXPECT_CODE_AND_FIELD(reader->Finish(), INVALID_ARGUMENT, "min_density");
+  }
 }
 
 TEST_F(BadInputTest, IntegrateUndecodableColourNamesTheKeyframe) {
