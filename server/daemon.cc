@@ -12,6 +12,7 @@
 #include "absl/strings/str_join.h"
 #include "core/cpu/cpu_backend.h"
 #include "server/log.h"
+#include "server/secret_files.h"
 
 #ifndef PLX_VERSION
 #define PLX_VERSION "unknown"
@@ -83,6 +84,15 @@ absl::StatusOr<std::vector<std::unique_ptr<DeviceWorker>>> MakeWorkers(const Dae
 std::string PlenoxdVersion() { return PLX_VERSION; }
 
 absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& options) {
+  // A bad certificate or key would otherwise only show as BuildAndStart failing, which reads
+  // as "address in use".
+  if (!options.tls_cert_pem.empty() || !options.tls_key_pem.empty()) {
+    if (absl::Status s = CheckTlsPem({options.tls_cert_pem, options.tls_key_pem},
+                                     "TLS certificate", "TLS private key");
+        !s.ok()) {
+      return s;
+    }
+  }
   std::unique_ptr<Daemon> d(new Daemon());
   d->options_ = options;
   // The devices first: a daemon that cannot compute where it was told to stops before it

@@ -1,10 +1,10 @@
 // The Integrate stream (bidirectional): posed keyframes in, MappingProgress out. The first
 // message names a map created with CreateMap; the stream takes that map's writer lease (one
 // mapping job per map). Keyframes are checked on arrival (CheckFrame) and queued still encoded;
-// a mapping task on a device worker at background priority decodes them, adds them, allocates and initialises their bricks, optimises in
-// short chunks and publishes new versions of the map to readers. After the client half-closes
-// the job spends the rest of its iteration budget, publishes the final version and ends the
-// stream with a message that has done = true.
+// a mapping task on a device worker at background priority decodes them, adds them, allocates
+// and initialises their bricks, optimises in short chunks and publishes new versions of the map
+// to readers. After the client half-closes the job spends the rest of its iteration budget,
+// publishes the final version and ends the stream with a message that has done = true.
 #pragma once
 
 #include <chrono>

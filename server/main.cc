@@ -3,24 +3,18 @@
 #include <signal.h>
 
 #include <cstdio>
-#include <fstream>
 #include <iostream>
-#include <sstream>
 
-#include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "app/flags.h"
 #include "app/make_backend.h"
 #include "server/daemon.h"
+#include "server/secret_files.h"
 
 namespace {
 
-absl::StatusOr<std::string> ReadFile(const std::string& path, const std::string& flag) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return absl::NotFoundError(absl::StrCat(flag, ": cannot read ", path));
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
+absl::Status FlagError(const char* flag, const absl::Status& status) {
+  return absl::Status(status.code(), absl::StrCat(flag, ": ", status.message()));
 }
 
 int Usage(const absl::Status& status) {
@@ -103,24 +97,20 @@ int main(int argc, char** argv) {
     if (!gpus.ok()) return Usage(gpus.status());
     options.gpus = *gpus;
   }
+  // Secrets are checked here, each error naming its flag and file, before anything listens.
   if (flags.IsSet("auth-token-file")) {
-    auto token = ReadFile(flags.GetString("auth-token-file"), "--auth-token-file");
-    if (!token.ok()) return Usage(token.status());
-    options.auth_token = std::string(absl::StripAsciiWhitespace(*token));
-    if (options.auth_token.empty()) {
-      return Usage(absl::InvalidArgumentError("--auth-token-file: the file is empty"));
-    }
+    auto token = plx::server::ReadAuthTokenFile(flags.GetString("auth-token-file"));
+    if (!token.ok()) return Usage(FlagError("--auth-token-file", token.status()));
+    options.auth_token = *token;
   }
   if (flags.IsSet("tls-cert") != flags.IsSet("tls-key")) {
     return Usage(absl::InvalidArgumentError("--tls-cert and --tls-key go together"));
   }
   if (flags.IsSet("tls-cert")) {
-    auto cert = ReadFile(flags.GetString("tls-cert"), "--tls-cert");
-    auto key = ReadFile(flags.GetString("tls-key"), "--tls-key");
-    if (!cert.ok()) return Usage(cert.status());
-    if (!key.ok()) return Usage(key.status());
-    options.tls_cert_pem = *cert;
-    options.tls_key_pem = *key;
+    auto tls = plx::server::ReadTlsFiles(flags.GetString("tls-cert"), flags.GetString("tls-key"));
+    if (!tls.ok()) return Usage(FlagError("--tls-cert/--tls-key", tls.status()));
+    options.tls_cert_pem = tls->cert_pem;
+    options.tls_key_pem = tls->key_pem;
   }
 
   // Signals are taken by sigwait below, not by handlers, so they must be blocked before any
