@@ -32,10 +32,15 @@ int main(int argc, char** argv) {
   flags.Add("listen", "HOST:PORT", "address to serve on (0.0.0.0:PORT for all interfaces)",
             "127.0.0.1:50051")
       .Add("data-dir", "DIR", "maps are loaded from and saved to DIR/<name>.plx")
-      .Add("auth-token-file", "F", "require 'authorization: Bearer <token>' with the token in F")
-      .Add("tls-cert", "PEM", "serve TLS with this certificate chain (with --tls-key)")
-      .Add("tls-key", "PEM", "private key for --tls-cert")
-      .Add("metrics-port", "PORT", "serve Prometheus metrics at http://HOST:PORT/metrics (-1 = off)",
+      .Add("auth-token-file", "F",
+           "require 'authorization: Bearer <token>' with the token in F (printable ASCII, no "
+           "spaces; ends trimmed; keep F private, a readable F is logged)")
+      .Add("tls-cert", "PEM",
+           "serve TLS with this certificate chain (with --tls-key; both checked at start)")
+      .Add("tls-key", "PEM", "unencrypted private key for --tls-cert")
+      .Add("metrics-port", "PORT",
+           "serve Prometheus metrics at http://HOST:PORT/metrics (-1 = off; 16 threads, 5 s "
+           "read/write and 2 s idle timeouts)",
            "-1")
       .Add("metrics-host", "IP", "address for the metrics endpoint", "127.0.0.1")
       .Add("max-maps", "N", "maps held at once", "16")
