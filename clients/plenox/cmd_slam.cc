@@ -1,6 +1,8 @@
 // plenox slam: online SLAM over a dataset's frames (core/slam): each frame's pose while the map
 // grows, no ground truth used except frame 0's pose as the start when the dataset has one.
+#include <algorithm>
 #include <cmath>
+#include <thread>
 
 #include "absl/strings/str_cat.h"
 #include "app/make_backend.h"
@@ -48,6 +50,8 @@ void AddSlamFlags(FlagSet& flags) {
       .Add("refine-window", "N",
            "re-align the last N keyframes' poses to the map after each keyframe (0 = off)",
            absl::StrCat(d.refinement.window))
+      .Add("mapping-nice", "N", "priority of the mapping thread below tracking (0-19)",
+           absl::StrCat(d.mapping_nice))
       .Add("rpe-delta", "M", "RPE pair distance in metres of path (as eval-traj --delta)", "1");
 }
 
@@ -74,6 +78,7 @@ absl::StatusOr<SlamDatasetOptions> OptionsFromFlags(const FlagSet& flags) {
   s.refinement.tracker = s.tracker;
   s.refinement.tracker.iterations = std::max(refine_iterations, s.tracker.iterations);
   s.deterministic = flags.GetSwitch("deterministic");
+  PLX_ASSIGN_OR_RETURN(s.mapping_nice, flags.GetInt("mapping-nice", 0, 19));
   o.realtime = flags.GetSwitch("realtime");
   PLX_ASSIGN_OR_RETURN(o.speed, flags.GetDouble("speed", 0.01, 100));
   PLX_ASSIGN_OR_RETURN(o.max_frames, flags.GetInt("max-frames", 0, 1 << 30));
@@ -146,7 +151,12 @@ int RunSlam(const std::vector<std::string>& args) {
   // CPU one thread in deterministic mode (a fixed order of gradient adds).
   const BackendKind kind = *ParseBackendKind(flags.GetString("backend"));
   const int device = *flags.GetInt("device", 0, 1023);
-  const int threads = options->slam.deterministic ? 1 : *flags.GetInt("threads", 0, 4096);
+  // A CPU backend with 0 threads is the process-wide pool, which runs one loop at a time: the
+  // mapping backend gets a pool of its own (as many threads as tracking's) so the two never
+  // queue behind each other; its threads run at a lower priority (SlamOptions::mapping_nice).
+  int threads = *flags.GetInt("threads", 0, 4096);
+  if (threads == 0) threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  if (options->slam.deterministic) threads = 1;
   const SlamSession::BackendFactory mapping_backend = [kind, device, threads] {
     return MakeBackend(kind, device, threads);
   };

@@ -53,8 +53,9 @@ const char* SlamStateName(SlamState state) {
 
 SlamOptions DefaultSlamOptions() {
   SlamOptions o;
-  // Tracking wants a new keyframe's geometry soon; a publish costs the index, not the bricks.
-  o.mapping.min_publish_interval_s = 0.25;
+  // Tracking wants a new keyframe's geometry at once; a publish costs the index, not the
+  // bricks, and its cost still spaces publishes out (MappingSessionOptions).
+  o.mapping.min_publish_interval_s = 0.0;
   o.mapping.mapper.window_keyframes = 5;
   o.mapping.mapper.window_fraction = 0.5f;
   o.refinement.tracker = o.tracker;
@@ -77,6 +78,9 @@ absl::Status ValidateSlamOptions(const SlamOptions& o) {
   if (!(o.relocalisation_radius_m > 0.0) || !std::isfinite(o.relocalisation_radius_m)) {
     return absl::InvalidArgumentError(absl::StrCat(
         "relocalisation_radius_m must be positive, got ", o.relocalisation_radius_m));
+  }
+  if (o.max_pending_keyframes < 0) {
+    return absl::InvalidArgumentError("max_pending_keyframes must not be negative");
   }
   if (o.mapping_nice < 0 || o.mapping_nice > 19) {
     return absl::InvalidArgumentError(
@@ -287,8 +291,13 @@ absl::Status SlamSession::AddKeyframe(const RgbdFrame& frame, const SE3& pose,
     ++progress_.pending_keyframes;
   }
   changed_.notify_all();
-  if (options_.deterministic) PLX_RETURN_IF_ERROR(RunMappingToEnd(false));
-  return absl::OkStatus();
+  if (options_.deterministic) return RunMappingToEnd(false);
+  std::unique_lock<std::mutex> lock(mutex_);
+  changed_.wait(lock, [&] {
+    return keyframes_ - progress_.keyframes_integrated <= options_.max_pending_keyframes ||
+           mapping_done_ || !mapping_error_.ok();
+  });
+  return mapping_error_;
 }
 
 absl::Status SlamSession::WaitForFirstVersion() {
@@ -431,8 +440,14 @@ absl::StatusOr<SlamFrameResult> SlamSession::ProcessFrame(RgbdFrame frame,
         last_good_pose_ = out.pose;
       }
       if (out.state == SlamState::kOk) {
+        // While keyframes wait for mapping, the part of the view the map does not render yet
+        // is mostly what they will fill in: counting it again would take a keyframe per frame
+        // exactly when mapping is behind, and feed the lag it comes from.
+        const bool mapping_behind = mapping_->pending_keyframes() > 0;
         const double unmapped =
-            result->rays > 0 ? 1.0 - static_cast<double>(result->valid_rays) / result->rays : 1.0;
+            mapping_behind || result->rays == 0
+                ? 0.0
+                : 1.0 - static_cast<double>(result->valid_rays) / result->rays;
         const KeyframeDecision decision = DecideKeyframe(
             options_.keyframes, accepted_keyframes_, out.pose, frame.timestamp, unmapped);
         if (decision.keyframe) {
