@@ -66,7 +66,7 @@ TEST(PlenoxUsageTest, NoArgumentsPrintsUsageAndExits2) {
   EXPECT_EQ(r.exit_code, kExitUsage) << r.Describe();
   const std::string all = r.out + r.err;
   EXPECT_THAT(all, HasSubstr("usage: plenox <command>")) << r.Describe();
-  for (const char* command : {"demo", "map", "eval-map", "render", "synth"}) {
+  for (const char* command : {"demo", "map", "slam", "eval-map", "render", "synth"}) {
     EXPECT_THAT(all, HasSubstr(std::string("  ") + command + " ")) << command;
   }
 }
@@ -101,6 +101,12 @@ TEST(PlenoxUsageTest, EveryCommandHelpListsItsFlags) {
       {"track",
        {"--map", "--dataset", "--out", "--mode", "--rays", "--iterations", "--backend", "--device",
         "--threads", "--json", "--quiet", "--help"}},
+      {"slam",
+       {"--dataset", "--out", "--map-out", "--keyframes-out", "--realtime", "--speed",
+        "--deterministic", "--max-frames", "--iterations-per-keyframe", "--kf-translation",
+        "--kf-rotation", "--kf-unmapped", "--kf-interval", "--window", "--refine-window",
+        "--mapping-nice", "--mode", "--rays", "--iterations", "--voxel-size", "--backend",
+        "--device", "--threads", "--json", "--quiet", "--help"}},
       {"synth",
        {"--out", "--frames", "--width", "--height", "--noise", "--noise-seed", "--help"}},
       {"demo",
@@ -423,6 +429,40 @@ TEST_F(PlenoxBadInputTest, MalformedDatasetFlagsAreUsageErrors) {
   }
 }
 
+// SLAM refuses what it cannot run before any work, and writes nothing then.
+TEST_F(PlenoxBadInputTest, SlamBadInputFailsBeforeWork) {
+  ScopedTempDir work("plenox_cli_slam_bad");
+  ExpectFailsCleanly({"slam", "--dataset", *dataset_, "--out", "t.txt", "--realtime",
+                      "--deterministic"},
+                     kExitUsage, {"--realtime", "--deterministic"}, work);
+  ExpectFailsCleanly({"slam", "--dataset", *dataset_, "--out", "t.txt", "--kf-unmapped", "2"},
+                     kExitUsage, {"--kf-unmapped"}, work);
+  ExpectFailsCleanly({"slam", "--dataset", *dataset_, "--out", "missing/t.txt"}, kExitFailure,
+                     {"missing"}, work);
+  // Intrinsics for another image size than the frames'.
+  ExpectFailsCleanly({"slam", "--dataset", *dataset_, "--out", "t.txt", "--intrinsics",
+                      "27.2 27.2 20 15 40 30", "--quiet"},
+                     kExitFailure, {"40x30"}, work);
+}
+
+TEST_F(PlenoxBadInputTest, SlamOnADatasetWithoutDepthSaysSo) {
+  ScopedTempDir work("plenox_cli_slam_nodepth");
+  const std::string copy = work.path() + "/nodepth";
+  fs::copy(*dataset_, copy, fs::copy_options::recursive);
+  for (const fs::directory_entry& e : fs::recursive_directory_iterator(copy)) {
+    if (e.path().parent_path().filename() == "depth") {
+      cv::Mat zero = cv::imread(e.path().string(), cv::IMREAD_UNCHANGED);
+      zero.setTo(0);
+      ASSERT_TRUE(cv::imwrite(e.path().string(), zero));
+    }
+  }
+  const CommandResult r =
+      RunPlenox({"slam", "--dataset", copy, "--out", work.path() + "/t.txt"}, work.path());
+  EXPECT_EQ(r.exit_code, kExitFailure) << r.Describe();
+  EXPECT_THAT(r.err, HasSubstr("no valid depth")) << r.Describe();
+  EXPECT_FALSE(fs::exists(work.path() + "/t.txt"));
+}
+
 // render writes both images to temporary names and renames them only when both succeeded, so a
 // failed render leaves nothing behind, and the message names the unwritable path.
 TEST_F(PlenoxBadInputTest, RenderWritesNothingWhenTheDepthPathIsUnwritable) {
@@ -639,6 +679,47 @@ TEST_F(PlenoxEndToEndTest, TrackWritesATrajectoryThatEvalTrajScores) {
   ASSERT_TRUE(ate.has_value()) << scored.Describe();
   EXPECT_EQ(JsonNumber(*ate, "matched").value_or(-1), kFrames);
   EXPECT_LT(JsonNumber(*ate, "ate_rmse_m").value_or(-1), 0.01);
+}
+
+TEST_F(PlenoxEndToEndTest, SlamWritesTrajectoryKeyframesAndMapAndScoresThem) {
+  ScopedTempDir work("plenox_cli_slam");
+  const std::string trajectory = work.path() + "/slam.txt";
+  const std::string keyframes = work.path() + "/keyframes.txt";
+  const std::string map = work.path() + "/slam.plx";
+  const CommandResult r = RunPlenox(
+      {"slam", "--dataset", *dataset_, "--out", trajectory, "--keyframes-out", keyframes,
+       "--map-out", map, "--deterministic", "--voxel-size", "0.03", "--rays", "1024",
+       "--iterations-per-keyframe", "20", "--json"},
+      "", /*timeout_s=*/300.0);
+  ASSERT_EQ(r.exit_code, kExitOk) << r.Describe();
+  EXPECT_THAT(r.err, HasSubstr("started at frame 0's ground-truth pose")) << r.Describe();
+  const FlatJson json = LastLineJson(r);
+  EXPECT_EQ(JsonNumber(json, "frames"), kFrames);
+  EXPECT_EQ(JsonNumber(json, "processed"), kFrames);
+  EXPECT_EQ(JsonNumber(json, "lost").value_or(-1), 0);
+  EXPECT_EQ(JsonNumber(json, "dropped").value_or(-1), 0);
+  const double keyframe_count = JsonNumber(json, "keyframes").value_or(0);
+  EXPECT_GE(keyframe_count, 2);
+  EXPECT_LT(keyframe_count, kFrames);
+  for (const char* key : {"ms_per_frame_median", "fps", "map_mb", "keyframe_mb", "peak_rss_mb",
+                          "mapping_iterations"}) {
+    EXPECT_GT(JsonNumber(json, key).value_or(0), 0.0) << key;
+  }
+  // Measured 1.3 cm SE(3) at this size (96x72, 3 cm voxels); the tracker in a map built from
+  // ground-truth poses does about as well here.
+  EXPECT_LT(JsonNumber(json, "ate_se3_m").value_or(1), 0.03) << r.Describe();
+  EXPECT_EQ(ReadRows(trajectory).size(), static_cast<size_t>(kFrames));
+  EXPECT_EQ(ReadRows(keyframes).size(), static_cast<size_t>(keyframe_count));
+  // The same ATE as eval-traj computes from the written file.
+  const CommandResult scored =
+      RunPlenox({"eval-traj", "--est", trajectory, "--gt", *dataset_ + "/groundtruth.txt",
+                 "--align", "se3", "--json"});
+  ASSERT_EQ(scored.exit_code, kExitOk) << scored.Describe();
+  EXPECT_NEAR(JsonNumber(LastLineJson(scored), "ate_rmse_m").value_or(-1),
+              JsonNumber(json, "ate_se3_m").value_or(-2), 1e-6);
+  // The map is a map: eval-map reads it and it renders the held-out frames.
+  const FlatJson eval = EvalMap(map);
+  EXPECT_GT(JsonNumber(eval, "coverage").value_or(0), 0.8);
 }
 
 TEST_F(PlenoxEndToEndTest, TrackRejectsBadFlagsBeforeWork) {
