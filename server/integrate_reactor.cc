@@ -5,6 +5,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "core/common/status_macros.h"
+#include "core/geometry/world_pose.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
 
@@ -55,9 +56,10 @@ absl::Status IntegrateReactor::HandleFirstMessage() {
 absl::Status IntegrateReactor::HandleRequestLocked(bool first) {
   if (first) PLX_RETURN_IF_ERROR(HandleFirstMessage());
   if (request_.has_frame()) {
-    PLX_ASSIGN_OR_RETURN(
-        DecodedFrame frame,
-        FrameFromProto(request_.frame(), absl::StrCat("frame[", received_, "]"), true));
+    const std::string field = absl::StrCat("frame[", received_, "]");
+    PLX_ASSIGN_OR_RETURN(DecodedFrame frame, FrameFromProto(request_.frame(), field, true));
+    // Core refuses such a keyframe too; checked here to name the field.
+    PLX_RETURN_IF_ERROR(CheckPoseInsideWorld(*frame.client_pose, field + ".pose"));
     queue_.push_back(std::move(frame));
     ++received_;
     ScheduleLocked();

@@ -6,6 +6,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/formats/ply_export.h"
+#include "core/geometry/world_pose.h"
 #include "core/mapping/mapper.h"
 #include "core/render/render_view.h"
 #include "server/grpc_status.h"
@@ -346,6 +347,7 @@ grpc::ServerUnaryReactor* PlenoxdService::Render(grpc::CallbackServerContext* co
     pose = request->has_pose() ? PoseFromProto(request->pose(), "pose")
                                : absl::InvalidArgumentError("pose: missing");
     status = pose.status();
+    if (status.ok()) status = CheckPoseInsideWorld(*pose, "pose");
   }
   if (status.ok()) {
     calibration = request->has_intrinsics()

@@ -2,6 +2,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
+#include "core/geometry/world_pose.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
 
@@ -43,12 +44,16 @@ absl::Status TrackReactor::HandleRequestLocked(bool first) {
     PLX_RETURN_IF_ERROR(HandleFirstMessage());
     if (request_.has_initial_pose()) {
       PLX_ASSIGN_OR_RETURN(const SE3 pose, PoseFromProto(request_.initial_pose(), "initial_pose"));
+      PLX_RETURN_IF_ERROR(CheckPoseInsideWorld(pose, "initial_pose"));
       // Held until a frame arrives: the first message may name the map and the start only.
       initial_pose_ = pose;
     }
   }
   if (request_.has_frame()) {
     PLX_ASSIGN_OR_RETURN(DecodedFrame frame, FrameFromProto(request_.frame(), "frame", false));
+    if (frame.client_pose) {
+      PLX_RETURN_IF_ERROR(CheckPoseInsideWorld(*frame.client_pose, "frame.pose"));
+    }
     // Latest wins: a frame still waiting is stale now, except the stream's starting frame,
     // which defines its origin (then the new frame is the one dropped).
     if (pending_) {

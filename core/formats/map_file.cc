@@ -282,20 +282,47 @@ absl::Status VerifyChecksum(const OpenedFile& file, const std::string& path) {
 
 // AllocateBricks would silently merge duplicates and shift every later slot, so the payload
 // would land in the wrong bricks; refuse instead.
-absl::Status CheckNoDuplicateBricks(const std::vector<BrickCoord>& bricks,
-                                    const std::string& path) {
+absl::Status CheckNoDuplicateBricks(const std::vector<BrickCoord>& bricks) {
   absl::flat_hash_map<BrickCoord, int64_t> first_entry;
   first_entry.reserve(bricks.size());
   for (int64_t i = 0; i < static_cast<int64_t>(bricks.size()); ++i) {
     const auto [it, inserted] = first_entry.emplace(bricks[i], i);
     if (!inserted) {
       const BrickCoord& b = bricks[i];
-      return absl::DataLossError(absl::StrCat(path, ": brick (", b.x, ", ", b.y, ", ", b.z,
-                                              ") appears twice in the brick table (entries ",
-                                              it->second, " and ", i, "); the file is corrupt"));
+      return absl::InvalidArgumentError(absl::StrCat("brick (", b.x, ", ", b.y, ", ", b.z,
+                                                     ") appears twice in the brick table "
+                                                     "(entries ", it->second, " and ", i, ")"));
     }
   }
   return absl::OkStatus();
+}
+
+// What a map must satisfy to be stored, checked by both sides: LoadMap refuses to build, and
+// SaveMap to write, a map that breaks any of it, so a file SaveMap wrote is a file LoadMap reads.
+// The message names no file; callers prefix the path.
+absl::Status CheckStorableMap(float voxel_size, size_t source_bytes,
+                              const std::array<int32_t, 3>& index_min,
+                              const std::array<int32_t, 3>& index_dims,
+                              const std::vector<BrickCoord>& bricks) {
+  if (!std::isfinite(voxel_size) || voxel_size <= 0.0f) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("voxel size ", voxel_size, " is not a positive finite number"));
+  }
+  if (source_bytes > kMaxMapSourceBytes) {
+    return absl::InvalidArgumentError(absl::StrCat("source text is ", source_bytes,
+                                                   " bytes, the limit is ", kMaxMapSourceBytes));
+  }
+  if (static_cast<int64_t>(bricks.size()) > kMaxBricks) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(bricks.size(), " bricks exceed the limit of ", kMaxBricks));
+  }
+  // Inside the world (core/common/world_extent.h): the grid's coordinates cannot wrap.
+  PLX_RETURN_IF_ERROR(
+      SparseGrid::CheckIndexBoundsInsideWorld(index_min, index_dims, voxel_size));
+  for (const BrickCoord& b : bricks) {
+    PLX_RETURN_IF_ERROR(SparseGrid::CheckBrickInsideWorld(b, voxel_size));
+  }
+  return CheckNoDuplicateBricks(bricks);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -410,14 +437,12 @@ void WriteMap(const PlenoxelMap& map, MapWriter& w) {
 absl::Status SaveMap(const PlenoxelMap& map, const std::string& path) {
   const SparseGrid& grid = map.grid;
   const std::string what = absl::StrCat("cannot save map to ", path);
-  // Refuse to write anything LoadMap would reject.
-  if (!std::isfinite(grid.voxel_size()) || grid.voxel_size() <= 0.0f) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        what, ": voxel size ", grid.voxel_size(), " is not a positive finite number"));
-  }
-  if (map.source.size() > kMaxMapSourceBytes) {
-    return absl::InvalidArgumentError(absl::StrCat(what, ": source text is ", map.source.size(),
-                                                   " bytes, the limit is ", kMaxMapSourceBytes));
+  // Refuse to write anything LoadMap would reject (the same checks), so a saved map always
+  // loads again.
+  if (absl::Status s = CheckStorableMap(grid.voxel_size(), map.source.size(), grid.index_min(),
+                                        grid.index_dims(), grid.brick_coords());
+      !s.ok()) {
+    return absl::Status(s.code(), absl::StrCat(what, ": ", s.message()));
   }
   const int64_t bricks = grid.num_bricks();
 
@@ -461,7 +486,12 @@ absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMap(const std::string& path) {
     bricks[i] = {LoadI32(p), LoadI32(p + 4), LoadI32(p + 8)};
   }
   table = {};
-  PLX_RETURN_IF_ERROR(CheckNoDuplicateBricks(bricks, path));
+  // The same checks SaveMap makes before writing (a file that fails them was not written by it).
+  if (absl::Status s = CheckStorableMap(info.voxel_size, info.source.size(), info.index_min,
+                                        info.index_dims, bricks);
+      !s.ok()) {
+    return absl::DataLossError(absl::StrCat(path, ": ", s.message(), "; the file is corrupt"));
+  }
 
   auto map = std::make_unique<PlenoxelMap>(info.voxel_size);
   map->render = info.render;

@@ -1,6 +1,7 @@
 #include "core/grid/sparse_grid.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <limits>
 #include <mutex>
@@ -9,15 +10,59 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
+#include "core/common/world_extent.h"
 
 namespace plx {
 namespace {
-// Extra bricks added on each side when the index grows, so a map that grows a little at a time
-// does not rebuild its index on every allocation.
-constexpr int32_t kGrowthMargin = 4;
+constexpr int32_t kGrowthMargin = SparseGrid::kIndexGrowthMargin;
+// |brick coordinate| never exceeds this whatever the voxel size: vertex coordinates are 8 per
+// brick and index differences add another factor 2, all in int32 (2^26 * 8 * 2 = 2^30).
+constexpr int64_t kMaxBrickCoordinate = int64_t{1} << 26;
 }  // namespace
 
 SparseGrid::SparseGrid(float voxel_size) : voxel_size_(voxel_size) {}
+
+BrickRange SparseGrid::WorldBrickRange(float voxel_size) {
+  const double brick_size = static_cast<double>(voxel_size) * kBrickEdge;
+  const auto clamp = [](double b) {
+    if (!(b > -static_cast<double>(kMaxBrickCoordinate))) return -kMaxBrickCoordinate;  // NaN too
+    if (b > static_cast<double>(kMaxBrickCoordinate)) return kMaxBrickCoordinate;
+    return static_cast<int64_t>(b);
+  };
+  // Points p in [-E, E] lie in bricks floor(p / brick_size).
+  return BrickRange{clamp(std::floor(-kWorldExtentMeters / brick_size)),
+                    clamp(std::floor(kWorldExtentMeters / brick_size))};
+}
+
+absl::Status SparseGrid::CheckBrickInsideWorld(const BrickCoord& b, float voxel_size) {
+  const BrickRange range = WorldBrickRange(voxel_size);
+  for (int32_t c : {b.x, b.y, b.z}) {
+    if (c < range.lo || c > range.hi) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "brick (", b.x, ", ", b.y, ", ", b.z, ") is outside the world extent of +-",
+          kWorldExtentMeters, " m per axis (bricks ", range.lo, " to ", range.hi, " at ",
+          voxel_size, " m voxels)"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status SparseGrid::CheckIndexBoundsInsideWorld(const std::array<int32_t, 3>& min,
+                                                     const std::array<int32_t, 3>& dims,
+                                                     float voxel_size) {
+  const BrickRange range = WorldBrickRange(voxel_size);
+  for (int a = 0; a < 3; ++a) {
+    const int64_t end = int64_t{min[a]} + dims[a];  // exclusive
+    if (dims[a] < 0 || min[a] < range.lo - kGrowthMargin ||
+        end > range.hi + 1 + kGrowthMargin) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "index bounds [", min[a], ", ", end, ") on axis ", a,
+          " are outside the world extent (bricks ", range.lo - kGrowthMargin, " to ",
+          range.hi + kGrowthMargin, " at ", voxel_size, " m voxels)"));
+    }
+  }
+  return absl::OkStatus();
+}
 
 namespace {
 
@@ -248,11 +293,10 @@ absl::Status SparseGrid::GrowIndexToCover(absl::Span<const BrickCoord> bricks) {
 absl::Status SparseGrid::SetIndexBounds(const std::array<int32_t, 3>& min,
                                         const std::array<int32_t, 3>& dims) {
   if (num_bricks() > 0) return absl::FailedPreconditionError("index bounds of a non-empty grid");
-  int64_t entries = 1;
-  for (int a = 0; a < 3; ++a) {
-    if (dims[a] < 0) return absl::InvalidArgumentError("negative index size");
-    entries *= dims[a];
-  }
+  PLX_RETURN_IF_ERROR(CheckIndexBoundsInsideWorld(min, dims, voxel_size_));
+  // Each factor is below 2^28 here; the product is checked as it grows, so it cannot overflow.
+  int64_t entries = dims[0] == 0 || dims[1] == 0 || dims[2] == 0 ? 0 : 1;
+  for (int a = 0; a < 3 && entries <= kMaxIndexEntries; ++a) entries *= dims[a];
   if (entries > kMaxIndexEntries) {
     return absl::ResourceExhaustedError(absl::StrCat("index of ", entries, " bricks is too large"));
   }
@@ -298,6 +342,8 @@ void SparseGrid::SetBrickOrigin(int64_t slot) {
 absl::StatusOr<int64_t> SparseGrid::AllocateBricks(absl::Span<const BrickCoord> bricks,
                                                    float initial_density) {
   return CatchAllocationFailure("allocating bricks", [&]() -> absl::StatusOr<int64_t> {
+    // Before anything changes: a brick outside the world would wrap the index's coordinates.
+    for (const BrickCoord& b : bricks) PLX_RETURN_IF_ERROR(CheckBrickInsideWorld(b, voxel_size_));
     PLX_RETURN_IF_ERROR(GrowIndexToCover(bricks));
     int64_t added = 0;
     for (const BrickCoord& b : bricks) {

@@ -46,10 +46,31 @@ struct GridMemory {
 // Floats per brick: 512 densities, then 512 * 27 SH coefficients.
 inline constexpr int64_t kBrickFloats = int64_t{kBrickVertices} * kValuesPerVertex;
 
+// Brick coordinates [lo, hi] per axis (the same on every axis).
+struct BrickRange {
+  int64_t lo = 0, hi = 0;
+};
+
 class SparseGrid {
  public:
   // The coarse index is capped so a runaway allocation fails cleanly instead of eating memory.
   static constexpr int64_t kMaxIndexEntries = int64_t{1} << 27;
+  // Bricks added on each side when the index grows (so a map growing a little at a time does
+  // not rebuild its index on every allocation); index bounds reach this far past the bricks.
+  static constexpr int32_t kIndexGrowthMargin = 4;
+
+  // The bricks a grid of `voxel_size` may store: those holding a point within the world extent
+  // (core/common/world_extent.h), clamped so that every vertex coordinate the grid computes
+  // (8 per brick, relative to the index) stays far inside int32.
+  static BrickRange WorldBrickRange(float voxel_size);
+  // InvalidArgument naming the brick and the range when a coordinate is outside
+  // WorldBrickRange(voxel_size).
+  static absl::Status CheckBrickInsideWorld(const BrickCoord& brick, float voxel_size);
+  // InvalidArgument unless dims are not negative and [min, min + dims) lies within
+  // WorldBrickRange(voxel_size) widened by kIndexGrowthMargin on each side.
+  static absl::Status CheckIndexBoundsInsideWorld(const std::array<int32_t, 3>& min,
+                                                  const std::array<int32_t, 3>& dims,
+                                                  float voxel_size);
 
   explicit SparseGrid(float voxel_size);
   // Copies would silently share bricks without marking them: use Publish or ShareCopy.
@@ -64,13 +85,15 @@ class SparseGrid {
   const std::vector<BrickCoord>& brick_coords() const { return brick_coords_; }
 
   // Stores every brick of `bricks` that is not stored yet, in the given order; new vertices get
-  // density `initial_density` and zero SH. Returns how many were added.
+  // density `initial_density` and zero SH. Returns how many were added. InvalidArgument, and no
+  // brick added, when one is outside the world (CheckBrickInsideWorld).
   absl::StatusOr<int64_t> AllocateBricks(absl::Span<const BrickCoord> bricks,
                                          float initial_density = 0.0f);
 
   // Sets the coarse index bounds (in bricks) of an empty grid, e.g. to restore a saved map's:
   // ray marching works in index coordinates, so the same bounds give bit-identical renders.
-  // Later allocations outside them still grow the index.
+  // Later allocations outside them still grow the index. InvalidArgument for bounds outside the
+  // world (CheckIndexBoundsInsideWorld).
   absl::Status SetIndexBounds(const std::array<int32_t, 3>& min, const std::array<int32_t, 3>& dims);
 
   // Slot of a brick, or -1.

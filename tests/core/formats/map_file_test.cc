@@ -387,6 +387,45 @@ TEST_F(MapFileTest, DuplicateBrickIsRejected) {
               HasSubstr("brick (20, -11, 0) appears twice in the brick table (entries 1 and 3)"));
 }
 
+// What SaveMap writes, LoadMap reads: maps whose bricks sit at the very edges of the world
+// extent (core/common/world_extent.h), at the finest, the default and the coarsest voxel
+// sizes, come back bit-exact.
+TEST_F(MapFileTest, MapsAtTheWorldsEdgesRoundTrip) {
+  for (float voxel : {0.001f, 0.02f, 1.0f}) {
+    const BrickRange r = SparseGrid::WorldBrickRange(voxel);
+    const int32_t lo = static_cast<int32_t>(r.lo), hi = static_cast<int32_t>(r.hi);
+    const std::vector<std::vector<BrickCoord>> corners = {
+        {{hi, hi, hi}, {hi - 1, hi, hi - 2}},
+        {{lo, lo, lo}, {lo + 2, lo, lo + 1}},
+        {{lo, hi, 0}, {lo + 1, hi - 1, -1}}};
+    for (const std::vector<BrickCoord>& bricks : corners) {
+      SCOPED_TRACE(absl::StrCat("voxel ", voxel, " brick ", bricks[0].x, " ", bricks[0].y, " ",
+                                bricks[0].z));
+      PlenoxelMap map(voxel);
+      ASSERT_TRUE(map.grid.AllocateBricks(bricks).ok());
+      FillRandom(map, 99u, -1.0f, 10.0f);
+      ASSERT_TRUE(SaveMap(map, path_).ok());
+      const absl::StatusOr<std::unique_ptr<PlenoxelMap>> loaded = LoadMap(path_);
+      ASSERT_TRUE(loaded.ok()) << loaded.status();
+      ExpectSameMap(map, **loaded);
+      EXPECT_EQ((*loaded)->grid.index_min(), map.grid.index_min());
+      EXPECT_EQ((*loaded)->grid.index_dims(), map.grid.index_dims());
+    }
+  }
+}
+
+// A brick table entry outside the world (what a far keyframe used to allocate) is corruption:
+// SaveMap can no longer write one, so LoadMap says so instead of allocating around it.
+TEST_F(MapFileTest, BrickOutsideTheWorldIsRejected) {
+  std::string bytes = SaveTestMap();
+  const size_t table = 88 + MakeTestMap()->source.size();
+  StoreLe(bytes, table + 2 * 12, static_cast<uint32_t>(int32_t{1} << 30), 4);  // entry 2's x
+  Reseal(bytes);
+  const absl::Status status = LoadBytes(bytes);
+  EXPECT_EQ(status.code(), absl::StatusCode::kDataLoss) << status;
+  EXPECT_THAT(Msg(status), HasSubstr("brick (1073741824, 0, 0) is outside the world extent"));
+}
+
 TEST_F(MapFileTest, MissingFileIsNotFound) {
   const absl::Status status = LoadMap(dir_ + "/nope.plxmap").status();
   EXPECT_EQ(status.code(), absl::StatusCode::kNotFound) << status;
