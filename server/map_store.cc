@@ -50,6 +50,12 @@ std::vector<std::string> MapStore::LoadAllFromDataDir() {
   std::error_code ec;
   for (const auto& entry : std::filesystem::directory_iterator(options_.data_dir, ec)) {
     if (entry.path().extension() != ".plx") continue;
+    // Only regular files (or links to them): reading a FIFO would block the start for ever.
+    std::error_code type_ec;
+    if (!entry.is_regular_file(type_ec)) {
+      problems.push_back(absl::StrCat(entry.path().string(), ": not a regular file, skipped"));
+      continue;
+    }
     const std::string name = entry.path().stem().string();
     if (!CheckMapName(name, "file").ok()) {
       problems.push_back(absl::StrCat(entry.path().string(), ": not a valid map name, skipped"));

@@ -99,9 +99,21 @@ struct OpenedFile {
   int64_t size = 0;
 };
 
+// What a file that is not a regular one is, for the error message.
+const char* FileTypeName(mode_t mode) {
+  if (S_ISDIR(mode)) return "a directory";
+  if (S_ISFIFO(mode)) return "a FIFO";
+  if (S_ISSOCK(mode)) return "a socket";
+  if (S_ISCHR(mode) || S_ISBLK(mode)) return "a device";
+  return "not a regular file";
+}
+
 absl::StatusOr<OpenedFile> OpenForRead(const std::string& path) {
   OpenedFile file;
-  file.fd = ScopedFd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+  // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer, for ever, and
+  // with it every later load and save on the daemon's file worker. The mode is checked right
+  // after; for a regular file O_NONBLOCK changes nothing.
+  file.fd = ScopedFd(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK));
   if (file.fd.get() < 0) {
     const int err = errno;
     return ErrnoError(err, absl::StrCat("cannot open map file ", path));
@@ -111,9 +123,11 @@ absl::StatusOr<OpenedFile> OpenForRead(const std::string& path) {
     const int err = errno;
     return ErrnoError(err, absl::StrCat("cannot stat ", path));
   }
-  // A directory opens fine on Linux and would otherwise read as a zero-byte "truncated map".
+  // Only regular files are read: a directory would read as a zero-byte "truncated map", a FIFO
+  // or a device could block any read.
   if (!S_ISREG(st.st_mode)) {
-    return absl::InvalidArgumentError(absl::StrCat(path, ": not a regular file"));
+    return absl::InvalidArgumentError(absl::StrCat(path, ": not a regular file (",
+                                                   FileTypeName(st.st_mode), ")"));
   }
   file.size = static_cast<int64_t>(st.st_size);
   return file;

@@ -1,6 +1,7 @@
 #include "core/io/atomic_write.h"
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -57,8 +58,17 @@ absl::StatusOr<AtomicFileWriter> AtomicFileWriter::Open(const std::string& path,
                                                         bool keep_extension) {
   if (absl::Status s = CheckParentDirectory(path, what); !s.ok()) return s;
   std::string temp = TempPath(path, keep_extension);
-  const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  // O_NONBLOCK: something other than a regular file already at the temporary's name (a FIFO)
+  // must fail the write, not block it (a FIFO without a reader gives ENXIO at once).
+  const int fd =
+      ::open(temp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_NONBLOCK, 0644);
   if (fd < 0) return FileWriteError(errno, absl::StrCat(what, ": cannot create temp file ", temp));
+  struct stat st;
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    ::close(fd);  // not ours to remove: the writer below would unlink it
+    return absl::FailedPreconditionError(
+        absl::StrCat(what, ": temp file ", temp, " exists and is not a regular file"));
+  }
   return AtomicFileWriter(path, std::move(temp), what, fd);
 }
 

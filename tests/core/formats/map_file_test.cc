@@ -4,6 +4,7 @@
 
 #include <signal.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -30,6 +31,7 @@
 #include "core/render/render_view.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/fifo_valve.h"
 #include "tests/grid_fill.h"
 #include "tests/test_util.h"
 
@@ -513,6 +515,33 @@ TEST_F(MapFileTest, FailedRenameRemovesTemp) {
   EXPECT_THAT(Msg(status), HasSubstr("renaming"));
   EXPECT_THAT(ListDir(dir_), ElementsAre("room.plxmap"));
   EXPECT_TRUE(fs::is_directory(path_ + "/occupied"));
+}
+
+// A FIFO named like a map (a daemon's data dir holds whatever is put there): reading it must
+// fail at once, not wait in open() for a writer that never comes.
+TEST_F(MapFileTest, FifoIsNotAMapAndNeverBlocks) {
+  ASSERT_EQ(::mkfifo(path_.c_str(), 0644), 0) << std::strerror(errno);
+  plx::testing::FifoValve valve(path_, plx::testing::FifoValve::Role::kWriter);
+  const absl::Status loaded = LoadMap(path_).status();
+  const absl::Status info = ReadMapInfo(path_).status();
+  EXPECT_FALSE(valve.released()) << "LoadMap or ReadMapInfo blocked opening the FIFO";
+  EXPECT_EQ(loaded.code(), absl::StatusCode::kInvalidArgument) << loaded;
+  EXPECT_THAT(Msg(loaded), HasSubstr(path_ + ": not a regular file (a FIFO)"));
+  EXPECT_EQ(info.code(), absl::StatusCode::kInvalidArgument) << info;
+}
+
+// The same for the writer: a FIFO at the temporary's name fails the save instead of blocking it.
+TEST_F(MapFileTest, FifoAtTheTempNameFailsTheSaveWithoutBlocking) {
+  const std::string temp = absl::StrCat(path_, ".tmp.", ::getpid());
+  ASSERT_EQ(::mkfifo(temp.c_str(), 0644), 0) << std::strerror(errno);
+  absl::Status saved;
+  {
+    plx::testing::FifoValve valve(temp, plx::testing::FifoValve::Role::kReader);
+    saved = SaveMap(*MakeTestMap(), path_);
+    EXPECT_FALSE(valve.released()) << "SaveMap blocked opening the FIFO";
+  }
+  EXPECT_FALSE(saved.ok());
+  EXPECT_FALSE(fs::exists(path_));
 }
 
 // ---------------------------------------------------------------------------------------------
