@@ -103,6 +103,16 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   store.max_maps = options.max_maps;
   store.max_map_bytes = options.max_map_bytes;
   d->maps_ = std::make_unique<MapStore>(store);
+  // Temporaries of saves a crash interrupted are never read again: remove them (and say so).
+  for (const StaleTempFile& stale : d->maps_->RemoveStaleTempFiles()) {
+    if (stale.removed.ok()) {
+      LogEvent("info", "stale_temp_removed",
+               {{"path", stale.path}, {"pid", std::to_string(stale.pid)}});
+    } else {
+      LogEvent("warning", "stale_temp_not_removed",
+               {{"path", stale.path}, {"reason", std::string(stale.removed.message())}});
+    }
+  }
   for (const std::string& problem : d->maps_->LoadAllFromDataDir()) {
     LogEvent("warning", "map_not_loaded", {{"reason", problem}});
   }

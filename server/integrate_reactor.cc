@@ -33,6 +33,8 @@ absl::Status IntegrateReactor::HandleFirstMessage() {
   if (o.iterations_per_keyframe() > 0) {
     options_.iterations_per_keyframe = static_cast<int>(o.iterations_per_keyframe());
   }
+  // --max-map-mb is checked before each keyframe's bricks are allocated, not only at publish.
+  options_.mapper.max_map_bytes = state_->maps->max_map_bytes();
   if (o.max_depth() > 0) {
     options_.mapper.allocation.max_depth = o.max_depth();
     options_.mapper.fusion.max_depth = o.max_depth();

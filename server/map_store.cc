@@ -1,5 +1,8 @@
 #include "server/map_store.h"
 
+#include <unistd.h>
+
+#include <cerrno>
 #include <filesystem>
 
 #include "absl/strings/str_cat.h"
@@ -116,11 +119,15 @@ absl::Status MapStore::Delete(const std::string& name) {
     return absl::FailedPreconditionError(
         absl::StrCat("map \"", name, "\" is being mapped; cancel the Integrate stream first"));
   }
-  maps_.erase(name);
-  if (!options_.data_dir.empty()) {
-    std::error_code ec;
-    std::filesystem::remove(PathOf(name), ec);
+  // The file first: a map whose file stays would come back at the next start.
+  if (!e->file.empty() && ::unlink(e->file.c_str()) != 0) {
+    const int err = errno;
+    if (err != ENOENT) {
+      return FileWriteError(err, absl::StrCat("map \"", name, "\" was not deleted: removing ",
+                                              e->file));
+    }
   }
+  maps_.erase(name);
   return absl::OkStatus();
 }
 
@@ -137,11 +144,18 @@ absl::StatusOr<MapStatus> MapStore::Save(const std::string& name) {
     version = e->version;
   }
   // Written outside the lock: readers and the mapping job carry on.
-  PLX_RETURN_IF_ERROR(SaveMap(*map, PathOf(name)));
+  const std::string path = PathOf(name);
+  PLX_RETURN_IF_ERROR(SaveMap(*map, path));
   std::lock_guard<std::mutex> lock(mutex_);
-  PLX_ASSIGN_OR_RETURN(Entry * e, Find(name));
-  if (e->version == version) e->dirty = false;
-  return StatusOf(name, *e);
+  absl::StatusOr<Entry*> e = Find(name);
+  if (!e.ok()) {
+    // Deleted while it was written: the file must not bring it back at the next start.
+    ::unlink(path.c_str());
+    return e.status();
+  }
+  (*e)->file = path;
+  if ((*e)->version == version) (*e)->dirty = false;
+  return StatusOf(name, **e);
 }
 
 absl::StatusOr<MapStatus> MapStore::Load(const std::string& name) {
@@ -153,7 +167,17 @@ absl::StatusOr<MapStatus> MapStore::Load(const std::string& name) {
   if (!std::filesystem::exists(path)) {
     return absl::NotFoundError(absl::StrCat("no saved map \"", name, "\" (", path, ")"));
   }
-  PLX_ASSIGN_OR_RETURN(std::unique_ptr<PlenoxelMap> loaded, LoadMap(path));
+  {
+    // A full store refuses before reading the file (checked again below).
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!maps_.count(name) && static_cast<int>(maps_.size()) >= options_.max_maps) {
+      return absl::ResourceExhaustedError(
+          absl::StrCat("the daemon holds its maximum of ", options_.max_maps, " maps"));
+    }
+  }
+  LoadMapOptions load;
+  load.max_memory_bytes = options_.max_map_bytes;
+  PLX_ASSIGN_OR_RETURN(std::unique_ptr<PlenoxelMap> loaded, LoadMap(path, load));
   // Published maps are shared by concurrent readers, so they must not need a lazy refresh.
   PLX_RETURN_IF_ERROR(RefreshOccupancyIfStale(*MakeCpuBackend(), *loaded));
   std::shared_ptr<const PlenoxelMap> map(std::move(loaded));
@@ -173,6 +197,7 @@ absl::StatusOr<MapStatus> MapStore::Load(const std::string& name) {
   e.map = std::move(map);
   e.version += 1;
   e.dirty = false;
+  e.file = path;
   return StatusOf(name, e);
 }
 
@@ -184,6 +209,20 @@ absl::Status MapStore::SaveDirty() {
     if (!saved.ok() && first.ok()) first = saved.status();
   }
   return first;
+}
+
+std::vector<std::string> MapStore::DirtyNames() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  std::vector<std::string> names;
+  for (const auto& [name, e] : maps_) {
+    if (e.dirty) names.push_back(name);
+  }
+  return names;
+}
+
+std::vector<StaleTempFile> MapStore::RemoveStaleTempFiles() {
+  if (options_.data_dir.empty()) return {};
+  return plx::RemoveStaleTempFiles(options_.data_dir, ".plx");
 }
 
 absl::Status MapStore::BeginMapping(const std::string& name) {

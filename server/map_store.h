@@ -13,6 +13,7 @@
 
 #include "absl/status/statusor.h"
 #include "core/grid/plenoxel_map.h"
+#include "core/io/atomic_write.h"
 
 namespace plx::server {
 
@@ -46,16 +47,28 @@ class MapStore {
 
   // Loads every <data_dir>/*.plx; files that fail to load are reported, not fatal.
   std::vector<std::string> LoadAllFromDataDir();
+  // Removes the temporaries of saves interrupted by a crash (core/io/atomic_write.h
+  // RemoveStaleTempFiles) from the data dir; the daemon logs each one.
+  std::vector<StaleTempFile> RemoveStaleTempFiles();
 
   absl::StatusOr<MapStatus> Create(const std::string& name, float voxel_size);
   absl::StatusOr<MapStatus> Info(const std::string& name) const;
   std::vector<MapStatus> List() const;
   absl::StatusOr<MapVersion> Latest(const std::string& name) const;
+  // Forgets the map and removes the file this store loaded it from or last saved it to (no
+  // other: a file of the same name the store never read stays). When that file cannot be
+  // removed the map is kept and the error returned, so it does not come back at the next start
+  // after an OK.
   absl::Status Delete(const std::string& name);
   absl::StatusOr<MapStatus> Save(const std::string& name);
+  // Loads <data_dir>/<name>.plx; RESOURCE_EXHAUSTED before reading the payload when its header
+  // says it needs more than max_map_bytes, or when the store is full.
   absl::StatusOr<MapStatus> Load(const std::string& name);
   // Saves every dirty map (drain); returns the first error after trying them all.
   absl::Status SaveDirty();
+  // Names of the maps changed since they were last saved.
+  std::vector<std::string> DirtyNames() const;
+  int64_t max_map_bytes() const { return options_.max_map_bytes; }
 
   // One mapping job per map: FAILED_PRECONDITION when another holds the lease.
   absl::Status BeginMapping(const std::string& name);
@@ -74,6 +87,7 @@ class MapStore {
     int keyframes = 0;
     bool dirty = false;
     bool mapping = false;
+    std::string file;  // the file this store loaded the map from or saved it to; empty: none
   };
   MapStatus StatusOf(const std::string& name, const Entry& e) const;
   std::string PathOf(const std::string& name) const;

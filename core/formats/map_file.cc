@@ -15,6 +15,7 @@
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
+#include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
 #include "core/io/atomic_write.h"
 #include "core/io/checksum.h"
@@ -446,9 +447,7 @@ void WriteMap(const PlenoxelMap& map, MapWriter& w) {
   }
 }
 
-}  // namespace
-
-absl::Status SaveMap(const PlenoxelMap& map, const std::string& path) {
+absl::Status SaveMapUnguarded(const PlenoxelMap& map, const std::string& path) {
   const SparseGrid& grid = map.grid;
   const std::string what = absl::StrCat("cannot save map to ", path);
   // Refuse to write anything LoadMap would reject (the same checks), so a saved map always
@@ -477,15 +476,20 @@ absl::Status SaveMap(const PlenoxelMap& map, const std::string& path) {
   return file.Commit();
 }
 
-absl::StatusOr<MapFileInfo> ReadMapInfo(const std::string& path) {
+absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMapUnguarded(const std::string& path,
+                                                              const LoadMapOptions& options) {
   PLX_ASSIGN_OR_RETURN(const OpenedFile file, OpenForRead(path));
   PLX_ASSIGN_OR_RETURN(ParsedHeader header, ReadHeader(file, path));
-  return std::move(header.info);
-}
-
-absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMap(const std::string& path) {
-  PLX_ASSIGN_OR_RETURN(const OpenedFile file, OpenForRead(path));
-  PLX_ASSIGN_OR_RETURN(ParsedHeader header, ReadHeader(file, path));
+  if (options.max_memory_bytes > 0) {
+    // From the header alone, before the payload is read or anything allocated.
+    const int64_t needed =
+        SparseGrid::EstimateMemory(header.info.bricks, header.info.index_dims).total_bytes();
+    if (needed > options.max_memory_bytes) {
+      return absl::ResourceExhaustedError(absl::StrCat(
+          path, ": the map needs at least ", needed / 1000000, " MB (", header.info.bricks,
+          " bricks), over the limit of ", options.max_memory_bytes / 1000000, " MB per map"));
+    }
+  }
   PLX_RETURN_IF_ERROR(VerifyChecksum(file, path));
   const MapFileInfo& info = header.info;
   const int64_t n = info.bricks;
@@ -536,6 +540,28 @@ absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMap(const std::string& path) {
     offset += kShFloatsPerBrick * static_cast<int64_t>(sizeof(float));
   }
   return map;
+}
+
+}  // namespace
+
+absl::Status SaveMap(const PlenoxelMap& map, const std::string& path) {
+  return CatchAllocationFailure(absl::StrCat("saving ", path),
+                                [&] { return SaveMapUnguarded(map, path); });
+}
+
+absl::StatusOr<MapFileInfo> ReadMapInfo(const std::string& path) {
+  PLX_ASSIGN_OR_RETURN(const OpenedFile file, OpenForRead(path));
+  PLX_ASSIGN_OR_RETURN(ParsedHeader header, ReadHeader(file, path));
+  return std::move(header.info);
+}
+
+absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMap(const std::string& path,
+                                                     const LoadMapOptions& options) {
+  // A request's allocation failure (the brick table, the grid) fails the request, not the
+  // process.
+  return CatchAllocationFailure(absl::StrCat("loading ", path), [&] {
+    return LoadMapUnguarded(path, options);
+  });
 }
 
 }  // namespace plx

@@ -5,6 +5,7 @@
 #include <cstring>
 #include <limits>
 #include <mutex>
+#include <optional>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -250,8 +251,23 @@ int32_t SparseGrid::FindBrick(const BrickCoord& brick) const {
   return i < 0 ? -1 : brick_slot_[i];
 }
 
-absl::Status SparseGrid::GrowIndexToCover(absl::Span<const BrickCoord> bricks) {
-  if (bricks.empty()) return absl::OkStatus();
+namespace {
+// Entries of an index of `dims`, saturating just above kMaxIndexEntries (each factor may be
+// up to 2^27, so the plain product could overflow int64).
+int64_t IndexEntries(const std::array<int64_t, 3>& dims) {
+  if (dims[0] <= 0 || dims[1] <= 0 || dims[2] <= 0) return 0;
+  int64_t entries = 1;
+  for (int a = 0; a < 3; ++a) {
+    entries *= dims[a];
+    if (entries > SparseGrid::kMaxIndexEntries) return SparseGrid::kMaxIndexEntries + 1;
+  }
+  return entries;
+}
+}  // namespace
+
+std::optional<SparseGrid::IndexBounds> SparseGrid::BoundsCovering(
+    absl::Span<const BrickCoord> bricks) const {
+  if (bricks.empty()) return std::nullopt;
   std::array<int64_t, 3> lo, hi;
   bool inside = index_dims_[0] > 0 && index_dims_[1] > 0 && index_dims_[2] > 0;
   for (int a = 0; a < 3; ++a) {
@@ -267,38 +283,65 @@ absl::Status SparseGrid::GrowIndexToCover(absl::Span<const BrickCoord> bricks) {
       hi[a] = std::max<int64_t>(hi[a], c[a]);
     }
   }
-  if (!grow) return absl::OkStatus();
-  std::array<int64_t, 3> dims;
-  int64_t entries = 1;
+  if (!grow) return std::nullopt;
+  IndexBounds bounds;
   for (int a = 0; a < 3; ++a) {
-    lo[a] -= kGrowthMargin;
-    hi[a] += kGrowthMargin;
-    dims[a] = hi[a] - lo[a] + 1;
-    entries *= dims[a];
+    bounds.min[a] = lo[a] - kGrowthMargin;
+    bounds.dims[a] = hi[a] + kGrowthMargin - bounds.min[a] + 1;
   }
-  if (entries > kMaxIndexEntries) {
+  return bounds;
+}
+
+absl::Status SparseGrid::GrowIndexToCover(absl::Span<const BrickCoord> bricks) {
+  const std::optional<IndexBounds> bounds = BoundsCovering(bricks);
+  if (!bounds) return absl::OkStatus();
+  const std::array<int64_t, 3>& dims = bounds->dims;
+  if (IndexEntries(dims) > kMaxIndexEntries) {
     return absl::ResourceExhaustedError(absl::StrCat(
         "map bounds of ", dims[0], "x", dims[1], "x", dims[2], " bricks (",
         dims[0] * kBrickEdge * voxel_size_, " m wide at ", voxel_size_,
         " m voxels) exceed the index limit; use a larger voxel size or a smaller depth range"));
   }
   for (int a = 0; a < 3; ++a) {
-    index_min_[a] = static_cast<int32_t>(lo[a]);
+    index_min_[a] = static_cast<int32_t>(bounds->min[a]);
     index_dims_[a] = static_cast<int32_t>(dims[a]);
   }
   RebuildIndex();
   return absl::OkStatus();
 }
 
+GridMemory SparseGrid::MemoryAfterAllocating(absl::Span<const BrickCoord> bricks) const {
+  GridMemory m = Memory();
+  int64_t added = 0;
+  for (const BrickCoord& b : bricks) added += FindBrick(b) < 0 ? 1 : 0;
+  m.bricks += added;
+  m.vertices += added * kBrickVertices;
+  m.parameter_bytes += added * kBrickFloats * static_cast<int64_t>(sizeof(float));
+  m.index_bytes += added * kIndexBytesPerBrick;
+  if (const std::optional<IndexBounds> bounds = BoundsCovering(bricks)) {
+    const int64_t old_entries = int64_t{index_dims_[0]} * index_dims_[1] * index_dims_[2];
+    m.index_bytes += (IndexEntries(bounds->dims) - old_entries) * kIndexBytesPerEntry;
+  }
+  return m;
+}
+
+GridMemory SparseGrid::EstimateMemory(int64_t bricks, const std::array<int32_t, 3>& index_dims) {
+  GridMemory m;
+  m.bricks = bricks;
+  m.vertices = bricks * kBrickVertices;
+  m.parameter_bytes = bricks * kBrickFloats * static_cast<int64_t>(sizeof(float));
+  m.index_bytes = bricks * kIndexBytesPerBrick +
+                  IndexEntries({index_dims[0], index_dims[1], index_dims[2]}) * kIndexBytesPerEntry;
+  return m;
+}
+
 absl::Status SparseGrid::SetIndexBounds(const std::array<int32_t, 3>& min,
                                         const std::array<int32_t, 3>& dims) {
   if (num_bricks() > 0) return absl::FailedPreconditionError("index bounds of a non-empty grid");
   PLX_RETURN_IF_ERROR(CheckIndexBoundsInsideWorld(min, dims, voxel_size_));
-  // Each factor is below 2^28 here; the product is checked as it grows, so it cannot overflow.
-  int64_t entries = dims[0] == 0 || dims[1] == 0 || dims[2] == 0 ? 0 : 1;
-  for (int a = 0; a < 3 && entries <= kMaxIndexEntries; ++a) entries *= dims[a];
-  if (entries > kMaxIndexEntries) {
-    return absl::ResourceExhaustedError(absl::StrCat("index of ", entries, " bricks is too large"));
+  if (IndexEntries({dims[0], dims[1], dims[2]}) > kMaxIndexEntries) {
+    return absl::ResourceExhaustedError(absl::StrCat("index of ", dims[0], "x", dims[1], "x",
+                                                     dims[2], " bricks is too large"));
   }
   index_min_ = min;
   index_dims_ = dims;

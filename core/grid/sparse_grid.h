@@ -14,6 +14,7 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -166,6 +167,13 @@ class SparseGrid {
   static void ReleasePooledBricks();
 
   GridMemory Memory() const;
+  // What Memory() would report after AllocateBricks(bricks) (`bricks` without repeats), without
+  // allocating: a limit is checked before the allocation. A lower bound: cell-occupancy blocks are counted once per
+  // new brick, though a brick may activate up to 8.
+  GridMemory MemoryAfterAllocating(absl::Span<const BrickCoord> bricks) const;
+  // The same lower bound for a grid of `bricks` bricks and an index of `index_dims` (a map
+  // file's header, before loading it).
+  static GridMemory EstimateMemory(int64_t bricks, const std::array<int32_t, 3>& index_dims);
 
   // Cell occupancy (GridViewT::cell_bits) starts conservative (every cell of an active block
   // occupied) and is made exact for the current densities by a backend's RefreshOccupancy.
@@ -186,7 +194,18 @@ class SparseGrid {
   using BrickStorage = std::shared_ptr<float>;
   static BrickStorage NewBrickStorage();
 
+  struct IndexBounds {
+    std::array<int64_t, 3> min = {0, 0, 0}, dims = {0, 0, 0};
+  };
+  // Index bounds covering the current ones and `bricks` (plus the growth margin), or nullopt
+  // when the current ones already cover them.
+  std::optional<IndexBounds> BoundsCovering(absl::Span<const BrickCoord> bricks) const;
   absl::Status GrowIndexToCover(absl::Span<const BrickCoord> bricks);
+  // Index memory (see Memory()): per brick, its slot-table pointers (2), origin (3 int32) and at
+  // least one active block's occupancy bits (8 uint64) and position (1 int64); per index entry,
+  // its slot and block offset (2 int32).
+  static constexpr int64_t kIndexBytesPerBrick = 2 * 8 + 3 * 4 + 8 * 8 + 8;
+  static constexpr int64_t kIndexBytesPerEntry = 2 * 4;
   void RebuildIndex();
   void SetBrickOrigin(int64_t slot);
   void ActivateBlock(int64_t index);

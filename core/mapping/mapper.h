@@ -58,6 +58,12 @@ struct MapperOptions {
   // single step pays for cloning most of the map (a mapping session sets this).
   int max_clones_per_iteration = 0;
 
+  // The most bytes the map may take (SparseGrid::Memory); 0 = no limit. Checked before each
+  // keyframe's bricks are allocated (SparseGrid::MemoryAfterAllocating): a keyframe that would
+  // take the map over it is refused with RESOURCE_EXHAUSTED and nothing is allocated. The
+  // optimiser's state (about twice the map's parameters) comes on top.
+  int64_t max_map_bytes = 0;
+
   uint32_t seed = 20200823;
   RenderOptions render;
   int progress_every = 25;  // iterations between progress reports

@@ -428,6 +428,30 @@ TEST_F(MapFileTest, BrickOutsideTheWorldIsRejected) {
   EXPECT_THAT(Msg(status), HasSubstr("brick (1073741824, 0, 0) is outside the world extent"));
 }
 
+// A map over the caller's memory limit is refused from its header, before the payload is read
+// or any brick allocated.
+TEST_F(MapFileTest, MapOverTheMemoryLimitIsRefusedFromItsHeader) {
+  const auto map = MakeTestMap();
+  ASSERT_TRUE(SaveMap(*map, path_).ok());
+  const int64_t needed = map->grid.Memory().total_bytes();
+  LoadMapOptions tight;
+  tight.max_memory_bytes = map->grid.Memory().parameter_bytes - 1;
+  const absl::Status refused = LoadMap(path_, tight).status();
+  EXPECT_EQ(refused.code(), absl::StatusCode::kResourceExhausted) << refused;
+  EXPECT_THAT(Msg(refused), HasSubstr("over the limit of"));
+  // Even a corrupt payload is not read: the limit comes first.
+  std::string bytes = ReadBytes(path_);
+  bytes[bytes.size() - 100] ^= 1;
+  WriteBytes(path_, bytes);
+  EXPECT_EQ(LoadMap(path_, tight).status().code(), absl::StatusCode::kResourceExhausted);
+  ASSERT_TRUE(SaveMap(*map, path_).ok());
+  LoadMapOptions enough;
+  enough.max_memory_bytes = needed;
+  const absl::StatusOr<std::unique_ptr<PlenoxelMap>> loaded = LoadMap(path_, enough);
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  ExpectSameMap(*map, **loaded);
+}
+
 TEST_F(MapFileTest, MissingFileIsNotFound) {
   const absl::Status status = LoadMap(dir_ + "/nope.plxmap").status();
   EXPECT_EQ(status.code(), absl::StatusCode::kNotFound) << status;
