@@ -30,6 +30,7 @@ struct DaemonOptions {
   int64_t max_map_bytes = int64_t{4} << 30;
   int max_streams = 32;
   int max_message_bytes = 64 << 20;
+  int64_t max_render_pixels = kDefaultMaxRenderPixels;  // width * height of one Render
   int threads = 0;                         // CPU backend threads (0 = all cores)
   // Compute devices, one worker each: kCpu one CPU worker; kCuda one worker per GPU in `gpus`
   // (Start fails when there is none); kAuto like kCuda when a GPU is visible, else kCpu.

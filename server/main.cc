@@ -48,6 +48,9 @@ int main(int argc, char** argv) {
       .Add("max-map-mb", "MB", "memory per map", "4096")
       .Add("max-streams", "N", "concurrent streaming calls", "32")
       .Add("max-message-mb", "MB", "largest message accepted or sent", "64")
+      .Add("max-render-pixels", "N",
+           "most pixels (width x height) one Render may ask for; more is RESOURCE_EXHAUSTED",
+           std::to_string(plx::server::kDefaultMaxRenderPixels))
       .Add("backend", "cpu|cuda|auto",
            "compute backend: cuda = one worker per GPU of --gpus (fails at start without "
            "one); auto = cuda when a GPU is visible, else one CPU worker",
@@ -71,11 +74,13 @@ int main(int argc, char** argv) {
   auto max_map_mb = flags.GetInt("max-map-mb", 1, 1 << 24);
   auto max_streams = flags.GetInt("max-streams", 1, 100000);
   auto max_message_mb = flags.GetInt("max-message-mb", 1, 2047);
+  // Up to the largest view the API accepts (16384 x 16384).
+  auto max_render_pixels = flags.GetInt("max-render-pixels", 1, 16384 * 16384);
   auto threads = flags.GetInt("threads", 0, 4096);
   auto drain = flags.GetDouble("drain-seconds", 0.0, 3600.0);
   for (const absl::Status& s : {metrics_port.status(), max_maps.status(), max_map_mb.status(),
-                                max_streams.status(), max_message_mb.status(), threads.status(),
-                                drain.status()}) {
+                                max_streams.status(), max_message_mb.status(),
+                                max_render_pixels.status(), threads.status(), drain.status()}) {
     if (!s.ok()) return Usage(s);
   }
   options.metrics_port = *metrics_port;
@@ -83,6 +88,7 @@ int main(int argc, char** argv) {
   options.max_map_bytes = int64_t{*max_map_mb} << 20;
   options.max_streams = *max_streams;
   options.max_message_bytes = *max_message_mb << 20;
+  options.max_render_pixels = *max_render_pixels;
   options.threads = *threads;
   absl::StatusOr<plx::BackendKind> backend = plx::ParseBackendKind(flags.GetString("backend"));
   if (!backend.ok()) return Usage(backend.status());
