@@ -102,6 +102,7 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   store.data_dir = options.data_dir;
   store.max_maps = options.max_maps;
   store.max_map_bytes = options.max_map_bytes;
+  store.test_only_save_delay = options.test_only_save_delay;
   d->maps_ = std::make_unique<MapStore>(store);
   // Temporaries of saves a crash interrupted are never read again: remove them (and say so).
   for (const StaleTempFile& stale : d->maps_->RemoveStaleTempFiles()) {
@@ -205,12 +206,24 @@ absl::Status Daemon::Drain(absl::Duration grace) {
                     std::chrono::milliseconds(absl::ToInt64Milliseconds(grace)));
   workers_->StopAll();
   io_->Stop();
-  const absl::Status saved = maps_->SaveDirty();
-  if (!saved.ok()) LogEvent("error", "save_failed", {{"reason", std::string(saved.message())}});
+  // Every dirty map is tried; each one that could not be saved gets its own line.
+  const std::vector<UnsavedMap> unsaved = maps_->SaveDirty();
+  std::vector<std::string> names;
+  for (const UnsavedMap& map : unsaved) {
+    LogEvent("error", "map_not_saved",
+             {{"map", map.name}, {"reason", std::string(map.reason.message())}});
+    names.push_back(map.name);
+  }
   metrics_.reset();
-  LogEvent("info", "stopped", {});
-  return saved;
+  LogEvent(unsaved.empty() ? "info" : "error", "stopped",
+           {{"unsaved_maps", absl::StrJoin(names, ",")}});
+  if (unsaved.empty()) return absl::OkStatus();
+  return absl::Status(unsaved.front().reason.code(),
+                      absl::StrCat(unsaved.size(), " map(s) not saved: ", absl::StrJoin(names, ", "),
+                                   " (first error: ", unsaved.front().reason.message(), ")"));
 }
+
+std::vector<std::string> Daemon::UnsavedMaps() const { return maps_->DirtyNames(); }
 
 Daemon::~Daemon() {
   if (server_ && !drained_) Drain(absl::Seconds(1)).IgnoreError();

@@ -3,15 +3,19 @@
 #include <signal.h>
 
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <iostream>
+#include <mutex>
 #include <sstream>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "app/flags.h"
 #include "app/make_backend.h"
 #include "server/daemon.h"
+#include "server/stop_watchdog.h"
 
 namespace {
 
@@ -34,7 +38,9 @@ int main(int argc, char** argv) {
   plx::FlagSet flags("plenoxd",
                      "The plenoxd daemon: RGB-D maps as Plenoxel radiance fields over gRPC.\n"
                      "Clients: `plenox --server HOST:PORT ...`, clients/python. Stops cleanly on\n"
-                     "SIGTERM (drains, saves dirty maps to --data-dir, exits 0).");
+                     "SIGTERM (drains, saves dirty maps to --data-dir, exits 0; 1 when a map\n"
+                     "could not be saved, 3 when --drain-seconds + --stop-grace-seconds passed).\n"
+                     "Limits and their defaults: docs/LIMITS.md.");
   flags.Add("listen", "HOST:PORT", "address to serve on (0.0.0.0:PORT for all interfaces)",
             "127.0.0.1:50051")
       .Add("data-dir", "DIR", "maps are loaded from and saved to DIR/<name>.plx")
@@ -57,7 +63,11 @@ int main(int argc, char** argv) {
            "auto")
       .Add("gpus", "all|0,1,...", "CUDA devices to use with --backend cuda or auto", "all")
       .Add("threads", "N", "CPU threads of the CPU worker (0 = all cores)", "0")
-      .Add("drain-seconds", "S", "how long running calls may finish on SIGTERM", "5");
+      .Add("drain-seconds", "S", "how long running calls may finish on SIGTERM", "5")
+      .Add("stop-grace-seconds", "S",
+           "after --drain-seconds, how long saving dirty maps may take; then plenoxd logs each "
+           "map not saved and exits 3",
+           "30");
   std::vector<std::string> args(argv + 1, argv + argc);
   absl::StatusOr<bool> parsed = flags.Parse(args);
   if (!parsed.ok()) return Usage(parsed.status());
@@ -78,9 +88,11 @@ int main(int argc, char** argv) {
   auto max_render_pixels = flags.GetInt("max-render-pixels", 1, 16384 * 16384);
   auto threads = flags.GetInt("threads", 0, 4096);
   auto drain = flags.GetDouble("drain-seconds", 0.0, 3600.0);
+  auto stop_grace = flags.GetDouble("stop-grace-seconds", 0.0, 86400.0);
   for (const absl::Status& s : {metrics_port.status(), max_maps.status(), max_map_mb.status(),
                                 max_streams.status(), max_message_mb.status(),
-                                max_render_pixels.status(), threads.status(), drain.status()}) {
+                                max_render_pixels.status(), threads.status(), drain.status(),
+                                stop_grace.status()}) {
     if (!s.ok()) return Usage(s);
   }
   options.metrics_port = *metrics_port;
@@ -109,6 +121,15 @@ int main(int argc, char** argv) {
     if (options.auth_token.empty()) {
       return Usage(absl::InvalidArgumentError("--auth-token-file: the file is empty"));
     }
+  }
+  // TEST ONLY, deliberately not a flag: tests of the stop watchdog make every save hang this
+  // long (docs/LIMITS.md). Never set in production.
+  if (const char* delay = std::getenv("PLENOXD_TEST_ONLY_SAVE_DELAY_S")) {
+    double seconds = 0.0;
+    if (!absl::SimpleAtod(delay, &seconds) || !(seconds >= 0.0)) {
+      return Usage(absl::InvalidArgumentError("$PLENOXD_TEST_ONLY_SAVE_DELAY_S: not seconds"));
+    }
+    options.test_only_save_delay = absl::Seconds(seconds);
   }
   if (flags.IsSet("tls-cert") != flags.IsSet("tls-key")) {
     return Usage(absl::InvalidArgumentError("--tls-cert and --tls-key go together"));
@@ -141,7 +162,23 @@ int main(int argc, char** argv) {
 
   int signal_number = 0;
   sigwait(&stop_signals, &signal_number);
+  // Whatever the drain gets stuck on, the process ends within --drain-seconds plus
+  // --stop-grace-seconds, naming the maps it could not save. The watchdog asks the daemon while
+  // it exists, then the names the drain left behind.
+  std::mutex unsaved_mutex;
+  plx::server::Daemon* live = daemon->get();
+  std::vector<std::string> left_unsaved;
+  plx::server::StopWatchdog watchdog(absl::Seconds(*drain) + absl::Seconds(*stop_grace), [&] {
+    std::lock_guard<std::mutex> lock(unsaved_mutex);
+    return live != nullptr ? live->UnsavedMaps() : left_unsaved;
+  });
   const absl::Status saved = (*daemon)->Drain(absl::Seconds(*drain));
+  {
+    std::lock_guard<std::mutex> lock(unsaved_mutex);
+    left_unsaved = live->UnsavedMaps();
+    live = nullptr;
+  }
   daemon->reset();
+  watchdog.Disarm();
   return saved.ok() ? 0 : 1;
 }

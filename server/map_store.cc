@@ -6,6 +6,7 @@
 #include <filesystem>
 
 #include "absl/strings/str_cat.h"
+#include "absl/time/clock.h"
 #include "core/common/status_macros.h"
 #include "core/cpu/cpu_backend.h"
 #include "core/formats/map_file.h"
@@ -143,6 +144,9 @@ absl::StatusOr<MapStatus> MapStore::Save(const std::string& name) {
     map = e->map;
     version = e->version;
   }
+  if (options_.test_only_save_delay > absl::ZeroDuration()) {
+    absl::SleepFor(options_.test_only_save_delay);
+  }
   // Written outside the lock: readers and the mapping job carry on.
   const std::string path = PathOf(name);
   PLX_RETURN_IF_ERROR(SaveMap(*map, path));
@@ -201,14 +205,14 @@ absl::StatusOr<MapStatus> MapStore::Load(const std::string& name) {
   return StatusOf(name, e);
 }
 
-absl::Status MapStore::SaveDirty() {
-  absl::Status first;
+std::vector<UnsavedMap> MapStore::SaveDirty() {
+  std::vector<UnsavedMap> unsaved;
   for (const MapStatus& s : List()) {
     if (!s.dirty) continue;
     absl::StatusOr<MapStatus> saved = Save(s.name);
-    if (!saved.ok() && first.ok()) first = saved.status();
+    if (!saved.ok()) unsaved.push_back({s.name, saved.status()});
   }
-  return first;
+  return unsaved;
 }
 
 std::vector<std::string> MapStore::DirtyNames() const {

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "absl/time/time.h"
 #include "core/grid/plenoxel_map.h"
 #include "core/io/atomic_write.h"
 
@@ -21,6 +22,15 @@ struct MapStoreOptions {
   std::string data_dir;               // empty: nothing is persisted
   int max_maps = 16;
   int64_t max_map_bytes = int64_t{4} << 30;
+  // TEST ONLY (the stop watchdog's test, via $PLENOXD_TEST_ONLY_SAVE_DELAY_S in main.cc): every
+  // save first sleeps this long, a save stuck on a hung file system. Zero in production.
+  absl::Duration test_only_save_delay = absl::ZeroDuration();
+};
+
+// A dirty map that could not be saved, and why.
+struct UnsavedMap {
+  std::string name;
+  absl::Status reason;
 };
 
 struct MapStatus {
@@ -64,8 +74,8 @@ class MapStore {
   // Loads <data_dir>/<name>.plx; RESOURCE_EXHAUSTED before reading the payload when its header
   // says it needs more than max_map_bytes, or when the store is full.
   absl::StatusOr<MapStatus> Load(const std::string& name);
-  // Saves every dirty map (drain); returns the first error after trying them all.
-  absl::Status SaveDirty();
+  // Saves every dirty map (drain), trying them all; returns those that could not be saved.
+  std::vector<UnsavedMap> SaveDirty();
   // Names of the maps changed since they were last saved.
   std::vector<std::string> DirtyNames() const;
   int64_t max_map_bytes() const { return options_.max_map_bytes; }

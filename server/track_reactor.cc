@@ -1,6 +1,7 @@
 #include "server/track_reactor.h"
 
 #include "absl/strings/str_cat.h"
+#include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
 #include "core/geometry/world_pose.h"
 #include "server/grpc_status.h"
@@ -88,8 +89,10 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
     pending_.reset();
   }
   pb::PoseEstimate estimate;
-  absl::Status failure;
-  if (work) {
+  // The backend's errors (memory, device) and out of memory anywhere in the step end this
+  // stream with a status; they must not escape into the worker thread.
+  const absl::Status failure = CatchAllocationFailure("tracking a frame", [&]() -> absl::Status {
+    if (!work) return absl::OkStatus();
     // Follow the mapping job: newer published versions replace the one being tracked against.
     absl::StatusOr<MapVersion> latest = state_->maps->Latest(map_name_);
     if (latest.ok() && latest->version != map_.version) {
@@ -111,11 +114,8 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
     } else {
       absl::StatusOr<TrackingResult> tracked =
           tracker_->Track(frame, work->frame.calibration.pinhole, work->frame.client_pose);
-      if (tracked.ok()) {
-        result = *std::move(tracked);
-      } else {
-        failure = tracked.status();  // the backend's (memory, device): this stream ends
-      }
+      if (!tracked.ok()) return tracked.status();
+      result = *std::move(tracked);
     }
     estimate.set_timestamp(frame.timestamp);
     PoseToProto(result.pose, estimate.mutable_pose());
@@ -129,7 +129,8 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
     state_->metrics->frames_tracked++;
     if (result.state == TrackingState::kLost) state_->metrics->frames_lost++;
     state_->metrics->ObserveTrackLatency(seconds);
-  }
+    return absl::OkStatus();
+  });
   std::lock_guard<std::mutex> lock(mutex_);
   if (!failure.ok()) {
     TaskDoneLocked();
