@@ -51,7 +51,9 @@ int main(int argc, char** argv) {
            "-1")
       .Add("metrics-host", "IP", "address for the metrics endpoint", "127.0.0.1")
       .Add("max-maps", "N", "maps held at once", "16")
-      .Add("max-map-mb", "MB", "memory per map", "4096")
+      .Add("max-map-mb", "MB",
+           "memory per map, checked before a keyframe's bricks or a loaded map are allocated",
+           "4096")
       .Add("max-streams", "N", "concurrent streaming calls", "32")
       .Add("max-message-mb", "MB", "largest message accepted or sent", "64")
       .Add("max-render-pixels", "N",
