@@ -218,9 +218,10 @@ absl::Status Daemon::Drain(absl::Duration grace) {
   LogEvent(unsaved.empty() ? "info" : "error", "stopped",
            {{"unsaved_maps", absl::StrJoin(names, ",")}});
   if (unsaved.empty()) return absl::OkStatus();
-  return absl::Status(unsaved.front().reason.code(),
-                      absl::StrCat(unsaved.size(), " map(s) not saved: ", absl::StrJoin(names, ", "),
-                                   " (first error: ", unsaved.front().reason.message(), ")"));
+  return absl::Status(
+      unsaved.front().reason.code(),
+      absl::StrCat(unsaved.size(), " map(s) not saved: ", absl::StrJoin(names, ", "),
+                   " (first error: ", unsaved.front().reason.message(), ")"));
 }
 
 std::vector<std::string> Daemon::UnsavedMaps() const { return maps_->DirtyNames(); }

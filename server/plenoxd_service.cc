@@ -414,8 +414,9 @@ grpc::ServerUnaryReactor* PlenoxdService::Render(grpc::CallbackServerContext* co
     return reactor;
   }
   state_->workers->Pick().Post(
-      Priority::kInteractive, [this, context, reactor, request, response, pose = *pose,
-                               k = calibration->pinhole, map = *map](Backend* backend, bool stopped) {
+      Priority::kInteractive,
+      [this, context, reactor, request, response, pose = *pose, k = calibration->pinhole,
+       map = *map](Backend* backend, bool stopped) {
         if (absl::Status queued = QueuedCallStatus(stopped, context); !queued.ok()) {
           Finish(reactor, "Render", queued);
           return;

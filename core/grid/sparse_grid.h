@@ -168,8 +168,8 @@ class SparseGrid {
 
   GridMemory Memory() const;
   // What Memory() would report after AllocateBricks(bricks) (`bricks` without repeats), without
-  // allocating: a limit is checked before the allocation. A lower bound: cell-occupancy blocks are counted once per
-  // new brick, though a brick may activate up to 8.
+  // allocating: a limit is checked before the allocation. A lower bound: cell-occupancy blocks
+  // are counted once per new brick, though a brick may activate up to 8.
   GridMemory MemoryAfterAllocating(absl::Span<const BrickCoord> bricks) const;
   // The same lower bound for a grid of `bricks` bricks and an index of `index_dims` (a map
   // file's header, before loading it).

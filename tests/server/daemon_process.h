@@ -26,6 +26,10 @@ namespace plx::server::testing {
 inline constexpr char kPlenoxdBinary[] = PLENOXD_BINARY;
 #endif
 
+inline double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
 inline std::string ReadWholeFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   std::ostringstream s;
@@ -113,13 +117,13 @@ class DaemonProcess {
         ::kill(pid_, SIGKILL);
         ::waitpid(pid_, &status, 0);
         pid_ = -1;
-        exit.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        exit.seconds = SecondsSince(start);
         return exit;
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
     pid_ = -1;
-    exit.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    exit.seconds = SecondsSince(start);
     if (WIFEXITED(status)) exit.code = WEXITSTATUS(status);
     if (WIFSIGNALED(status)) exit.code = 128 + WTERMSIG(status);
     return exit;

@@ -23,9 +23,10 @@ using ::testing::HasSubstr;
 TEST(WorldExtentTest, PosesInsideTheExtentPassAndOthersNameTheField) {
   const double e = kWorldExtentMeters;
   EXPECT_TRUE(CheckPoseInsideWorld(SE3(Eigen::Quaterniond::Identity(), {e, -e, 0.0}), "p").ok());
-  for (const Eigen::Vector3d& t :
-       {Eigen::Vector3d(1e10, 0, 0), Eigen::Vector3d(0, -e - 1.0, 0), Eigen::Vector3d(0, 0, 2 * e)}) {
-    const absl::Status s = CheckPoseInsideWorld(SE3(Eigen::Quaterniond::Identity(), t), "frame.pose");
+  for (const Eigen::Vector3d& t : {Eigen::Vector3d(1e10, 0, 0), Eigen::Vector3d(0, -e - 1.0, 0),
+                                   Eigen::Vector3d(0, 0, 2 * e)}) {
+    const absl::Status s =
+        CheckPoseInsideWorld(SE3(Eigen::Quaterniond::Identity(), t), "frame.pose");
     EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << t.transpose();
     EXPECT_THAT(s.message(), HasSubstr("frame.pose: translation"));
     EXPECT_THAT(s.message(), HasSubstr("outside the world extent of +-10000 m"));
@@ -93,12 +94,15 @@ TEST(WorldExtentTest, DepthBeyondTheWorldAllocatesNoBricks) {
   DepthImage depth(40, 30, 1, 2.0f);
   const SE3 far(Eigen::Quaterniond::Identity(), {1e10, 0, 0});
   EXPECT_TRUE(BricksNearSurface(depth, far, k, 0.02f, AllocationOptions()).empty());
-  // A camera at the edge looking outwards keeps only the bricks inside.
-  const SE3 edge(Eigen::Quaterniond::Identity(), {0, 0, kWorldExtentMeters - 1.0});
+  // A camera looking outwards at a wall on the edge keeps only the bricks inside.
+  const SE3 edge(Eigen::Quaterniond::Identity(), {0, 0, kWorldExtentMeters - 3.0});
   DepthImage deep(40, 30, 1, 3.0f);
-  const std::vector<BrickCoord> bricks = BricksNearSurface(deep, edge, k, 0.02f, AllocationOptions());
+  const std::vector<BrickCoord> bricks =
+      BricksNearSurface(deep, edge, k, 0.02f, AllocationOptions());
+  EXPECT_FALSE(bricks.empty());
   for (const BrickCoord& b : bricks) {
-    EXPECT_TRUE(SparseGrid::CheckBrickInsideWorld(b, 0.02f).ok()) << b.x << " " << b.y << " " << b.z;
+    EXPECT_TRUE(SparseGrid::CheckBrickInsideWorld(b, 0.02f).ok())
+        << b.x << " " << b.y << " " << b.z;
   }
 }
 

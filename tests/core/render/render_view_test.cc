@@ -76,7 +76,8 @@ TEST(RenderViewTest, ThePixelLimitNamesTheSizeAndTheLimit) {
   const absl::Status s =
       CheckRenderPixels(PinholeIntrinsics{500, 500, 320, 240, 8192, 8192}, int64_t{3840} * 2160);
   EXPECT_EQ(s.code(), absl::StatusCode::kResourceExhausted);
-  EXPECT_EQ(s.message(), "8192 x 8192 = 67108864 pixels, over the limit of 8294400 pixels per render");
+  EXPECT_EQ(s.message(),
+            "8192 x 8192 = 67108864 pixels, over the limit of 8294400 pixels per render");
 }
 
 }  // namespace
