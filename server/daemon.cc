@@ -112,7 +112,18 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   store.data_dir = options.data_dir;
   store.max_maps = options.max_maps;
   store.max_map_bytes = options.max_map_bytes;
+  store.test_only_save_delay = options.test_only_save_delay;
   d->maps_ = std::make_unique<MapStore>(store);
+  // Temporaries of saves a crash interrupted are never read again: remove them (and say so).
+  for (const StaleTempFile& stale : d->maps_->RemoveStaleTempFiles()) {
+    if (stale.removed.ok()) {
+      LogEvent("info", "stale_temp_removed",
+               {{"path", stale.path}, {"pid", std::to_string(stale.pid)}});
+    } else {
+      LogEvent("warning", "stale_temp_not_removed",
+               {{"path", stale.path}, {"reason", std::string(stale.removed.message())}});
+    }
+  }
   for (const std::string& problem : d->maps_->LoadAllFromDataDir()) {
     LogEvent("warning", "map_not_loaded", {{"reason", problem}});
   }
@@ -129,6 +140,7 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   d->state_.config.auth_token = options.auth_token;
   d->state_.config.max_streams = options.max_streams;
   d->state_.config.max_frame_pixels = options.max_frame_pixels;
+  d->state_.config.max_render_pixels = options.max_render_pixels;
   d->state_.config.version = PlenoxdVersion();
   d->state_.config.backend = BackendKindText(options.backend);
   d->state_.config.cuda_built = BuiltWithCuda();
@@ -209,12 +221,25 @@ absl::Status Daemon::Drain(absl::Duration grace) {
                     std::chrono::milliseconds(absl::ToInt64Milliseconds(grace)));
   workers_->StopAll();
   io_->Stop();
-  const absl::Status saved = maps_->SaveDirty();
-  if (!saved.ok()) LogEvent("error", "save_failed", {{"reason", std::string(saved.message())}});
+  // Every dirty map is tried; each one that could not be saved gets its own line.
+  const std::vector<UnsavedMap> unsaved = maps_->SaveDirty();
+  std::vector<std::string> names;
+  for (const UnsavedMap& map : unsaved) {
+    LogEvent("error", "map_not_saved",
+             {{"map", map.name}, {"reason", std::string(map.reason.message())}});
+    names.push_back(map.name);
+  }
   http_.reset();
-  LogEvent("info", "stopped", {});
-  return saved;
+  LogEvent(unsaved.empty() ? "info" : "error", "stopped",
+           {{"unsaved_maps", absl::StrJoin(names, ",")}});
+  if (unsaved.empty()) return absl::OkStatus();
+  return absl::Status(
+      unsaved.front().reason.code(),
+      absl::StrCat(unsaved.size(), " map(s) not saved: ", absl::StrJoin(names, ", "),
+                   " (first error: ", unsaved.front().reason.message(), ")"));
 }
+
+std::vector<std::string> Daemon::UnsavedMaps() const { return maps_->DirtyNames(); }
 
 Daemon::~Daemon() {
   if (server_ && !drained_) Drain(absl::Seconds(1)).IgnoreError();

@@ -34,11 +34,15 @@ struct DaemonOptions {
   // Pixels (width x height) of one Track/Integrate frame; larger frames are RESOURCE_EXHAUSTED
   // before their images are decoded. 4K UHD: a decoded frame (float colour + depth) is 133 MB.
   int64_t max_frame_pixels = 3840 * 2160;
+  int64_t max_render_pixels = kDefaultMaxRenderPixels;  // width * height of one Render
   int threads = 0;                         // CPU backend threads (0 = all cores)
   // Compute devices, one worker each: kCpu one CPU worker; kCuda one worker per GPU in `gpus`
   // (Start fails when there is none); kAuto like kCuda when a GPU is visible, else kCpu.
   BackendKind backend = BackendKind::kAuto;
   std::optional<std::vector<int>> gpus;    // CUDA device ids (ParseGpuList); nullopt = all
+  // TEST ONLY: every map save first sleeps this long (MapStoreOptions::test_only_save_delay);
+  // main.cc sets it from $PLENOXD_TEST_ONLY_SAVE_DELAY_S for the stop watchdog's test.
+  absl::Duration test_only_save_delay = absl::ZeroDuration();
 };
 
 // The version GetServerInfo reports (the CMake project's VERSION).
@@ -53,9 +57,14 @@ class Daemon {
   int metrics_port() const { return http_ ? http_->port() : -1; }
 
   // Stops taking calls (health NOT_SERVING, new calls UNAVAILABLE), lets running calls finish
-  // for up to `grace` and cancels the rest, stops the workers and saves every dirty map.
-  // Returns the first save error. Safe to call twice.
+  // for up to `grace` and cancels the rest, stops the workers and saves every dirty map, logging
+  // a map_not_saved line for each that could not be saved. Returns an error naming them all
+  // (the first one's code) when any failed. Safe to call twice. Not bounded in time by itself:
+  // plenoxd's main bounds it with a StopWatchdog (server/stop_watchdog.h).
   absl::Status Drain(absl::Duration grace);
+
+  // Maps changed since they were last saved (for the stop watchdog's last words).
+  std::vector<std::string> UnsavedMaps() const;
 
   DaemonState& state() { return state_; }
   std::string RenderMetrics() const;

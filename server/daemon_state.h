@@ -16,12 +16,18 @@
 
 namespace plx::server {
 
+// Pixels one Render may ask for (--max-render-pixels): a 4K view (3840 x 2160). Rendering is
+// cut into row tiles and stops when the call is cancelled, but a view this size still holds a
+// CPU worker for seconds and needs ~20 bytes per pixel besides the encoded images.
+inline constexpr int64_t kDefaultMaxRenderPixels = int64_t{3840} * 2160;
+
 struct DaemonConfig {
   std::string auth_token;   // empty: no authentication
   int max_streams = 32;     // concurrent streaming RPCs
   // Largest frame (intrinsics width x height) Track and Integrate accept; checked before any
   // image is decoded (DaemonOptions::max_frame_pixels).
   int64_t max_frame_pixels = 3840 * 2160;
+  int64_t max_render_pixels = kDefaultMaxRenderPixels;  // per Render call
   // For GetServerInfo.
   std::string version;      // plenoxd's version (PLX_VERSION)
   std::string backend;      // --backend: "cpu", "cuda" or "auto"

@@ -5,7 +5,9 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
+#include "core/geometry/world_pose.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
 
@@ -38,6 +40,8 @@ absl::Status IntegrateReactor::HandleFirstMessage() {
     return absl::InvalidArgumentError(absl::StrCat(
         "options.max_depth: must be finite and > 0 metres (0 = the default), got ", o.max_depth()));
   }
+  // --max-map-mb is checked before each keyframe's bricks are allocated, not only at publish.
+  options_.mapper.max_map_bytes = state_->maps->max_map_bytes();
   if (o.max_depth() > 0) {
     options_.mapper.allocation.max_depth = o.max_depth();
     options_.mapper.fusion.max_depth = o.max_depth();
@@ -61,10 +65,12 @@ absl::Status IntegrateReactor::HandleFirstMessage() {
 absl::Status IntegrateReactor::HandleRequestLocked(bool first) {
   if (first) PLX_RETURN_IF_ERROR(HandleFirstMessage());
   if (request_.has_frame()) {
+    const std::string field = absl::StrCat("frame[", received_, "]");
     PLX_ASSIGN_OR_RETURN(CheckedFrame frame,
-                         CheckFrame(std::move(*request_.mutable_frame()),
-                                    absl::StrCat("frame[", received_, "]"), true,
+                         CheckFrame(std::move(*request_.mutable_frame()), field, true,
                                     state_->config.max_frame_pixels));
+    // Core refuses such a keyframe too; checked here to name the field.
+    PLX_RETURN_IF_ERROR(CheckPoseInsideWorld(*frame.client_pose, field + ".pose"));
     queue_.push_back(std::move(frame));
     ++received_;
     ScheduleLocked();
@@ -87,6 +93,10 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
   bool input_closed = false;
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    // A cancelled call stops before its next bounded step (OnCancel may not have run yet).
+    if (!cancelled && !failed() && context_->IsCancelled()) {
+      FailLocked(absl::CancelledError("cancelled by the client"));
+    }
     if (cancelled || finished() || failed()) {
       TaskDoneLocked();
       if (cancelled) FailLocked(absl::UnavailableError("plenoxd is shutting down"));
@@ -106,49 +116,33 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
   // The mapping policy (budget, chunking, publishing) is the session's (core/mapping); this
   // task only moves keyframes in and versions out.
   const auto task_start = std::chrono::steady_clock::now();
-  absl::Status status = absl::OkStatus();
-  if (!session_) {
-    absl::StatusOr<MapVersion> latest = state_->maps->Latest(map_name_);
-    absl::StatusOr<std::unique_ptr<MappingSession>> session =
-        latest.ok() ? MappingSession::Create(options_, backend, latest->map)
-                    : absl::StatusOr<std::unique_ptr<MappingSession>>(latest.status());
-    if (session.ok()) {
-      session_ = *std::move(session);
-    } else {
-      status = session.status();
-    }
-  }
   bool client_error = false;  // a keyframe's data was bad: the stream ends, no error log
-  for (CheckedFrame& f : frames) {
-    if (!status.ok()) break;
-    absl::StatusOr<DecodedFrame> decoded = DecodeCheckedFrame(std::move(f));
-    if (!decoded.ok()) {
-      status = decoded.status();
-      client_error = status.code() == absl::StatusCode::kInvalidArgument;
-      break;
-    }
-    const SE3 pose = *decoded->client_pose;
-    status = session_->AddKeyframe(std::move(decoded->frame), pose, decoded->calibration.pinhole);
-  }
   MappingStepResult step;
-  if (status.ok()) {
-    absl::StatusOr<MappingStepResult> stepped = session_->Step(/*finish=*/input_closed);
-    if (stepped.ok()) {
-      step = *std::move(stepped);
-    } else {
-      status = stepped.status();
+  // Out of memory anywhere in the step fails this job with RESOURCE_EXHAUSTED; it must not
+  // escape into the worker thread.
+  const absl::Status status = CatchAllocationFailure("mapping", [&]() -> absl::Status {
+    if (!session_) {
+      PLX_ASSIGN_OR_RETURN(const MapVersion latest, state_->maps->Latest(map_name_));
+      PLX_ASSIGN_OR_RETURN(session_, MappingSession::Create(options_, backend, latest.map));
     }
-  }
-  state_->metrics->keyframes_integrated += step.keyframes_integrated;
-  if (status.ok() && step.published) {
-    absl::StatusOr<uint64_t> version =
-        state_->maps->Publish(map_name_, step.published, step.keyframes_in_published);
-    if (version.ok()) {
-      version_ = *version;
-    } else {
-      status = version.status();
+    for (CheckedFrame& f : frames) {
+      absl::StatusOr<DecodedFrame> decoded = DecodeCheckedFrame(std::move(f));
+      if (!decoded.ok()) {
+        client_error = decoded.status().code() == absl::StatusCode::kInvalidArgument;
+        return decoded.status();
+      }
+      const SE3 pose = *decoded->client_pose;
+      PLX_RETURN_IF_ERROR(
+          session_->AddKeyframe(std::move(decoded->frame), pose, decoded->calibration.pinhole));
     }
-  }
+    PLX_ASSIGN_OR_RETURN(step, session_->Step(/*finish=*/input_closed));
+    state_->metrics->keyframes_integrated += step.keyframes_integrated;
+    if (step.published) {
+      PLX_ASSIGN_OR_RETURN(version_, state_->maps->Publish(map_name_, step.published,
+                                                           step.keyframes_in_published));
+    }
+    return absl::OkStatus();
+  });
 
   // Every tracking frame on this worker waits for a task in progress: say when one was long.
   if (const double task_s = SecondsSince(task_start); task_s > kSlowTaskSeconds) {

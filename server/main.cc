@@ -3,13 +3,20 @@
 #include <signal.h>
 
 #include <cstdio>
+#include <cstdlib>
+#include <fstream>
 #include <iostream>
+#include <mutex>
+#include <sstream>
 
+#include "absl/strings/ascii.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "app/flags.h"
 #include "app/make_backend.h"
 #include "server/daemon.h"
 #include "server/secret_files.h"
+#include "server/stop_watchdog.h"
 
 namespace {
 
@@ -28,7 +35,9 @@ int main(int argc, char** argv) {
   plx::FlagSet flags("plenoxd",
                      "The plenoxd daemon: RGB-D maps as Plenoxel radiance fields over gRPC.\n"
                      "Clients: `plenox --server HOST:PORT ...`, clients/python. Stops cleanly on\n"
-                     "SIGTERM (drains, saves dirty maps to --data-dir, exits 0).");
+                     "SIGTERM (drains, saves dirty maps to --data-dir, exits 0; 1 when a map\n"
+                     "could not be saved, 3 when --drain-seconds + --stop-grace-seconds passed).\n"
+                     "Limits and their defaults: docs/LIMITS.md.");
   flags.Add("listen", "HOST:PORT", "address to serve on (0.0.0.0:PORT for all interfaces)",
             "127.0.0.1:50051")
       .Add("data-dir", "DIR", "maps are loaded from and saved to DIR/<name>.plx")
@@ -44,20 +53,29 @@ int main(int argc, char** argv) {
            "-1")
       .Add("metrics-host", "IP", "address for the metrics endpoint", "127.0.0.1")
       .Add("max-maps", "N", "maps held at once", "16")
-      .Add("max-map-mb", "MB", "memory per map", "4096")
+      .Add("max-map-mb", "MB",
+           "memory per map, checked before a keyframe's bricks or a loaded map are allocated",
+           "4096")
       .Add("max-streams", "N", "concurrent streaming calls", "32")
       .Add("max-message-mb", "MB", "largest message accepted or sent", "64")
       .Add("max-frame-pixels", "N",
            "largest Track/Integrate frame, width x height (default 4K UHD, 3840x2160); larger "
            "frames get RESOURCE_EXHAUSTED before their images are decoded",
            "8294400")
+      .Add("max-render-pixels", "N",
+           "most pixels (width x height) one Render may ask for; more is RESOURCE_EXHAUSTED",
+           std::to_string(plx::server::kDefaultMaxRenderPixels))
       .Add("backend", "cpu|cuda|auto",
            "compute backend: cuda = one worker per GPU of --gpus (fails at start without "
            "one); auto = cuda when a GPU is visible, else one CPU worker",
            "auto")
       .Add("gpus", "all|0,1,...", "CUDA devices to use with --backend cuda or auto", "all")
       .Add("threads", "N", "CPU threads of the CPU worker (0 = all cores)", "0")
-      .Add("drain-seconds", "S", "how long running calls may finish on SIGTERM", "5");
+      .Add("drain-seconds", "S", "how long running calls may finish on SIGTERM", "5")
+      .Add("stop-grace-seconds", "S",
+           "after --drain-seconds, how long saving dirty maps may take; then plenoxd logs each "
+           "map not saved and exits 3",
+           "30");
   std::vector<std::string> args(argv + 1, argv + argc);
   absl::StatusOr<bool> parsed = flags.Parse(args);
   if (!parsed.ok()) return Usage(parsed.status());
@@ -76,11 +94,15 @@ int main(int argc, char** argv) {
   auto max_message_mb = flags.GetInt("max-message-mb", 1, 2047);
   // Frames are at most 16384 pixels a side (IntrinsicsFromProto).
   auto max_frame_pixels = flags.GetInt("max-frame-pixels", 1, 16384 * 16384);
+  // Up to the largest view the API accepts (16384 x 16384).
+  auto max_render_pixels = flags.GetInt("max-render-pixels", 1, 16384 * 16384);
   auto threads = flags.GetInt("threads", 0, 4096);
   auto drain = flags.GetDouble("drain-seconds", 0.0, 3600.0);
+  auto stop_grace = flags.GetDouble("stop-grace-seconds", 0.0, 86400.0);
   for (const absl::Status& s : {metrics_port.status(), max_maps.status(), max_map_mb.status(),
                                 max_streams.status(), max_message_mb.status(),
-                                max_frame_pixels.status(), threads.status(), drain.status()}) {
+                                max_frame_pixels.status(), max_render_pixels.status(),
+                                threads.status(), drain.status(), stop_grace.status()}) {
     if (!s.ok()) return Usage(s);
   }
   options.metrics_port = *metrics_port;
@@ -89,6 +111,7 @@ int main(int argc, char** argv) {
   options.max_streams = *max_streams;
   options.max_message_bytes = *max_message_mb << 20;
   options.max_frame_pixels = *max_frame_pixels;
+  options.max_render_pixels = *max_render_pixels;
   options.threads = *threads;
   absl::StatusOr<plx::BackendKind> backend = plx::ParseBackendKind(flags.GetString("backend"));
   if (!backend.ok()) return Usage(backend.status());
@@ -107,6 +130,15 @@ int main(int argc, char** argv) {
     auto token = plx::server::ReadAuthTokenFile(flags.GetString("auth-token-file"));
     if (!token.ok()) return Usage(FlagError("--auth-token-file", token.status()));
     options.auth_token = *token;
+  }
+  // TEST ONLY, deliberately not a flag: tests of the stop watchdog make every save hang this
+  // long (docs/LIMITS.md). Never set in production.
+  if (const char* delay = std::getenv("PLENOXD_TEST_ONLY_SAVE_DELAY_S")) {
+    double seconds = 0.0;
+    if (!absl::SimpleAtod(delay, &seconds) || !(seconds >= 0.0)) {
+      return Usage(absl::InvalidArgumentError("$PLENOXD_TEST_ONLY_SAVE_DELAY_S: not seconds"));
+    }
+    options.test_only_save_delay = absl::Seconds(seconds);
   }
   if (flags.IsSet("tls-cert") != flags.IsSet("tls-key")) {
     return Usage(absl::InvalidArgumentError("--tls-cert and --tls-key go together"));
@@ -137,7 +169,23 @@ int main(int argc, char** argv) {
 
   int signal_number = 0;
   sigwait(&stop_signals, &signal_number);
+  // Whatever the drain gets stuck on, the process ends within --drain-seconds plus
+  // --stop-grace-seconds, naming the maps it could not save. The watchdog asks the daemon while
+  // it exists, then the names the drain left behind.
+  std::mutex unsaved_mutex;
+  plx::server::Daemon* live = daemon->get();
+  std::vector<std::string> left_unsaved;
+  plx::server::StopWatchdog watchdog(absl::Seconds(*drain) + absl::Seconds(*stop_grace), [&] {
+    std::lock_guard<std::mutex> lock(unsaved_mutex);
+    return live != nullptr ? live->UnsavedMaps() : left_unsaved;
+  });
   const absl::Status saved = (*daemon)->Drain(absl::Seconds(*drain));
+  {
+    std::lock_guard<std::mutex> lock(unsaved_mutex);
+    left_unsaved = live->UnsavedMaps();
+    live = nullptr;
+  }
   daemon->reset();
+  watchdog.Disarm();
   return saved.ok() ? 0 : 1;
 }

@@ -1,8 +1,12 @@
 #include "server/map_store.h"
 
+#include <unistd.h>
+
+#include <cerrno>
 #include <filesystem>
 
 #include "absl/strings/str_cat.h"
+#include "absl/time/clock.h"
 #include "core/common/status_macros.h"
 #include "core/cpu/cpu_backend.h"
 #include "core/formats/map_file.h"
@@ -50,6 +54,12 @@ std::vector<std::string> MapStore::LoadAllFromDataDir() {
   std::error_code ec;
   for (const auto& entry : std::filesystem::directory_iterator(options_.data_dir, ec)) {
     if (entry.path().extension() != ".plx") continue;
+    // Only regular files (or links to them): reading a FIFO would block the start for ever.
+    std::error_code type_ec;
+    if (!entry.is_regular_file(type_ec)) {
+      problems.push_back(absl::StrCat(entry.path().string(), ": not a regular file, skipped"));
+      continue;
+    }
     const std::string name = entry.path().stem().string();
     if (!CheckMapName(name, "file").ok()) {
       problems.push_back(absl::StrCat(entry.path().string(), ": not a valid map name, skipped"));
@@ -110,11 +120,15 @@ absl::Status MapStore::Delete(const std::string& name) {
     return absl::FailedPreconditionError(
         absl::StrCat("map \"", name, "\" is being mapped; cancel the Integrate stream first"));
   }
-  maps_.erase(name);
-  if (!options_.data_dir.empty()) {
-    std::error_code ec;
-    std::filesystem::remove(PathOf(name), ec);
+  // The file first: a map whose file stays would come back at the next start.
+  if (!e->file.empty() && ::unlink(e->file.c_str()) != 0) {
+    const int err = errno;
+    if (err != ENOENT) {
+      return FileWriteError(err, absl::StrCat("map \"", name, "\" was not deleted: removing ",
+                                              e->file));
+    }
   }
+  maps_.erase(name);
   return absl::OkStatus();
 }
 
@@ -130,12 +144,22 @@ absl::StatusOr<MapStatus> MapStore::Save(const std::string& name) {
     map = e->map;
     version = e->version;
   }
+  if (options_.test_only_save_delay > absl::ZeroDuration()) {
+    absl::SleepFor(options_.test_only_save_delay);
+  }
   // Written outside the lock: readers and the mapping job carry on.
-  PLX_RETURN_IF_ERROR(SaveMap(*map, PathOf(name)));
+  const std::string path = PathOf(name);
+  PLX_RETURN_IF_ERROR(SaveMap(*map, path));
   std::lock_guard<std::mutex> lock(mutex_);
-  PLX_ASSIGN_OR_RETURN(Entry * e, Find(name));
-  if (e->version == version) e->dirty = false;
-  return StatusOf(name, *e);
+  absl::StatusOr<Entry*> e = Find(name);
+  if (!e.ok()) {
+    // Deleted while it was written: the file must not bring it back at the next start.
+    ::unlink(path.c_str());
+    return e.status();
+  }
+  (*e)->file = path;
+  if ((*e)->version == version) (*e)->dirty = false;
+  return StatusOf(name, **e);
 }
 
 absl::StatusOr<MapStatus> MapStore::Load(const std::string& name) {
@@ -147,7 +171,17 @@ absl::StatusOr<MapStatus> MapStore::Load(const std::string& name) {
   if (!std::filesystem::exists(path)) {
     return absl::NotFoundError(absl::StrCat("no saved map \"", name, "\" (", path, ")"));
   }
-  PLX_ASSIGN_OR_RETURN(std::unique_ptr<PlenoxelMap> loaded, LoadMap(path));
+  {
+    // A full store refuses before reading the file (checked again below).
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!maps_.count(name) && static_cast<int>(maps_.size()) >= options_.max_maps) {
+      return absl::ResourceExhaustedError(
+          absl::StrCat("the daemon holds its maximum of ", options_.max_maps, " maps"));
+    }
+  }
+  LoadMapOptions load;
+  load.max_memory_bytes = options_.max_map_bytes;
+  PLX_ASSIGN_OR_RETURN(std::unique_ptr<PlenoxelMap> loaded, LoadMap(path, load));
   // Published maps are shared by concurrent readers, so they must not need a lazy refresh.
   PLX_RETURN_IF_ERROR(RefreshOccupancyIfStale(*MakeCpuBackend(), *loaded));
   std::shared_ptr<const PlenoxelMap> map(std::move(loaded));
@@ -167,17 +201,32 @@ absl::StatusOr<MapStatus> MapStore::Load(const std::string& name) {
   e.map = std::move(map);
   e.version += 1;
   e.dirty = false;
+  e.file = path;
   return StatusOf(name, e);
 }
 
-absl::Status MapStore::SaveDirty() {
-  absl::Status first;
+std::vector<UnsavedMap> MapStore::SaveDirty() {
+  std::vector<UnsavedMap> unsaved;
   for (const MapStatus& s : List()) {
     if (!s.dirty) continue;
     absl::StatusOr<MapStatus> saved = Save(s.name);
-    if (!saved.ok() && first.ok()) first = saved.status();
+    if (!saved.ok()) unsaved.push_back({s.name, saved.status()});
   }
-  return first;
+  return unsaved;
+}
+
+std::vector<std::string> MapStore::DirtyNames() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  std::vector<std::string> names;
+  for (const auto& [name, e] : maps_) {
+    if (e.dirty) names.push_back(name);
+  }
+  return names;
+}
+
+std::vector<StaleTempFile> MapStore::RemoveStaleTempFiles() {
+  if (options_.data_dir.empty()) return {};
+  return plx::RemoveStaleTempFiles(options_.data_dir, ".plx");
 }
 
 absl::Status MapStore::BeginMapping(const std::string& name) {

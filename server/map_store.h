@@ -12,7 +12,9 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "absl/time/time.h"
 #include "core/grid/plenoxel_map.h"
+#include "core/io/atomic_write.h"
 
 namespace plx::server {
 
@@ -20,6 +22,15 @@ struct MapStoreOptions {
   std::string data_dir;               // empty: nothing is persisted
   int max_maps = 16;
   int64_t max_map_bytes = int64_t{4} << 30;
+  // TEST ONLY (the stop watchdog's test, via $PLENOXD_TEST_ONLY_SAVE_DELAY_S in main.cc): every
+  // save first sleeps this long, a save stuck on a hung file system. Zero in production.
+  absl::Duration test_only_save_delay = absl::ZeroDuration();
+};
+
+// A dirty map that could not be saved, and why.
+struct UnsavedMap {
+  std::string name;
+  absl::Status reason;
 };
 
 struct MapStatus {
@@ -46,16 +57,28 @@ class MapStore {
 
   // Loads every <data_dir>/*.plx; files that fail to load are reported, not fatal.
   std::vector<std::string> LoadAllFromDataDir();
+  // Removes the temporaries of saves interrupted by a crash (core/io/atomic_write.h
+  // RemoveStaleTempFiles) from the data dir; the daemon logs each one.
+  std::vector<StaleTempFile> RemoveStaleTempFiles();
 
   absl::StatusOr<MapStatus> Create(const std::string& name, float voxel_size);
   absl::StatusOr<MapStatus> Info(const std::string& name) const;
   std::vector<MapStatus> List() const;
   absl::StatusOr<MapVersion> Latest(const std::string& name) const;
+  // Forgets the map and removes the file this store loaded it from or last saved it to (no
+  // other: a file of the same name the store never read stays). When that file cannot be
+  // removed the map is kept and the error returned, so it does not come back at the next start
+  // after an OK.
   absl::Status Delete(const std::string& name);
   absl::StatusOr<MapStatus> Save(const std::string& name);
+  // Loads <data_dir>/<name>.plx; RESOURCE_EXHAUSTED before reading the payload when its header
+  // says it needs more than max_map_bytes, or when the store is full.
   absl::StatusOr<MapStatus> Load(const std::string& name);
-  // Saves every dirty map (drain); returns the first error after trying them all.
-  absl::Status SaveDirty();
+  // Saves every dirty map (drain), trying them all; returns those that could not be saved.
+  std::vector<UnsavedMap> SaveDirty();
+  // Names of the maps changed since they were last saved.
+  std::vector<std::string> DirtyNames() const;
+  int64_t max_map_bytes() const { return options_.max_map_bytes; }
 
   // One mapping job per map: FAILED_PRECONDITION when another holds the lease.
   absl::Status BeginMapping(const std::string& name);
@@ -74,6 +97,7 @@ class MapStore {
     int keyframes = 0;
     bool dirty = false;
     bool mapping = false;
+    std::string file;  // the file this store loaded the map from or saved it to; empty: none
   };
   MapStatus StatusOf(const std::string& name, const Entry& e) const;
   std::string PathOf(const std::string& name) const;

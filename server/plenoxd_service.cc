@@ -4,9 +4,13 @@
 #include <cmath>
 #include <deque>
 #include <mutex>
+#include <new>
 
 #include "absl/strings/str_cat.h"
+#include "core/common/allocation_guard.h"
+#include "core/common/status_macros.h"
 #include "core/formats/ply_export.h"
+#include "core/geometry/world_pose.h"
 #include "core/mapping/mapper.h"
 #include "core/render/render_view.h"
 #include "server/grpc_status.h"
@@ -28,6 +32,17 @@ void ToProto(const MapStatus& s, pb::MapInfo* out) {
   out->set_dirty(s.dirty);
   out->set_mapping(s.mapping);
   out->set_source(s.source);
+}
+
+// Whether a call's task, now taken from a worker's queue, should still run: UNAVAILABLE when
+// the worker stopped (the daemon drains), CANCELLED when the call was cancelled while it was
+// queued (client gone, deadline passed: nobody would read the result), else OK.
+absl::Status QueuedCallStatus(bool worker_stopped, const grpc::CallbackServerContext* context) {
+  if (worker_stopped) return absl::UnavailableError("plenoxd is shutting down");
+  if (context->IsCancelled()) {
+    return absl::CancelledError("the call was cancelled before its work started");
+  }
+  return absl::OkStatus();
 }
 
 absl::Status StatusToProto(const absl::StatusOr<MapStatus>& status, pb::MapInfo* out) {
@@ -53,7 +68,7 @@ class ExportReactor final : public grpc::ServerWriteReactor<pb::ExportChunk> {
 
   ExportReactor(DaemonState* state, grpc::CallbackServerContext* context,
                 const pb::ExportRequest* request)
-      : state_(state) {
+      : state_(state), context_(context) {
     absl::Status status = AcquireStreamSlot(*state_, context);
     if (!status.ok()) {
       Done(status);
@@ -78,12 +93,19 @@ class ExportReactor final : public grpc::ServerWriteReactor<pb::ExportChunk> {
     const float min_density = request->min_density() > 0 ? request->min_density()
                                                           : kDefaultExportMinDensity;
     state_->workers->Pick().Post(
-        Priority::kBackground, [this, map = *map, min_density](Backend*, bool cancelled) {
-          if (cancelled) {
-            Done(absl::UnavailableError("plenoxd is shutting down"));
+        Priority::kBackground, [this, map = *map, min_density](Backend*, bool stopped) {
+          if (absl::Status queued = QueuedCallStatus(stopped, context_); !queued.ok()) {
+            Done(queued);
             return;
           }
-          bytes_ = ExportSurfacePointsPly(*map.map, min_density).bytes;
+          // A call cancelled while exporting stops within a few bricks.
+          absl::StatusOr<PlyExport> ply = ExportSurfacePointsPly(
+              *map.map, min_density, [this] { return context_->IsCancelled(); });
+          if (!ply.ok()) {
+            Done(ply.status());
+            return;
+          }
+          bytes_ = std::move(ply->bytes);
           WriteNext();
         });
   }
@@ -108,7 +130,12 @@ class ExportReactor final : public grpc::ServerWriteReactor<pb::ExportChunk> {
       return;
     }
     const size_t n = std::min(kChunkBytes, bytes_.size() - offset_);
-    chunk_.set_data(bytes_.substr(offset_, n));
+    try {
+      chunk_.set_data(bytes_.data() + offset_, n);
+    } catch (const std::bad_alloc&) {
+      Done(absl::ResourceExhaustedError("Export: out of memory"));
+      return;
+    }
     chunk_.set_offset(offset_);
     offset_ += n;
     sent_last_ = offset_ >= bytes_.size();
@@ -116,11 +143,17 @@ class ExportReactor final : public grpc::ServerWriteReactor<pb::ExportChunk> {
     StartWrite(&chunk_);
   }
   void Done(const absl::Status& status) {
-    if (!status.ok()) state_->metrics->rpc_errors++;
+    if (!status.ok()) {
+      state_->metrics->rpc_errors++;
+      LogEvent("warning", "rpc", {{"method", "Export"},
+                                  {"code", absl::StatusCodeToString(status.code())},
+                                  {"message", std::string(status.message())}});
+    }
     Finish(ToGrpcStatus(status));
   }
 
   DaemonState* state_;
+  grpc::CallbackServerContext* const context_;
   bool holds_slot_ = false;
   std::string bytes_;
   size_t offset_ = 0;
@@ -316,11 +349,16 @@ grpc::ServerUnaryReactor* PlenoxdService::SaveMap(grpc::CallbackServerContext* c
   }
   // Writing hundreds of MB takes a while: off the gRPC thread, on the I/O worker.
   const std::string name = request->name();
-  state_->io->Post(Priority::kInteractive, [this, reactor, name, response](Backend*, bool cancelled) {
-    Finish(reactor, "SaveMap",
-           cancelled ? absl::UnavailableError("plenoxd is shutting down")
-                     : StatusToProto(state_->maps->Save(name), response));
-  });
+  state_->io->Post(Priority::kInteractive,
+                   [this, context, reactor, name, response](Backend*, bool stopped) {
+                     absl::Status status = QueuedCallStatus(stopped, context);
+                     if (status.ok()) {
+                       status = CatchAllocationFailure("SaveMap", [&] {
+                         return StatusToProto(state_->maps->Save(name), response);
+                       });
+                     }
+                     Finish(reactor, "SaveMap", status);
+                   });
   return reactor;
 }
 
@@ -334,11 +372,16 @@ grpc::ServerUnaryReactor* PlenoxdService::LoadMap(grpc::CallbackServerContext* c
     return reactor;
   }
   const std::string name = request->name();
-  state_->io->Post(Priority::kInteractive, [this, reactor, name, response](Backend*, bool cancelled) {
-    Finish(reactor, "LoadMap",
-           cancelled ? absl::UnavailableError("plenoxd is shutting down")
-                     : StatusToProto(state_->maps->Load(name), response));
-  });
+  state_->io->Post(Priority::kInteractive,
+                   [this, context, reactor, name, response](Backend*, bool stopped) {
+                     absl::Status status = QueuedCallStatus(stopped, context);
+                     if (status.ok()) {
+                       status = CatchAllocationFailure("LoadMap", [&] {
+                         return StatusToProto(state_->maps->Load(name), response);
+                       });
+                     }
+                     Finish(reactor, "LoadMap", status);
+                   });
   return reactor;
 }
 
@@ -355,12 +398,21 @@ grpc::ServerUnaryReactor* PlenoxdService::Render(grpc::CallbackServerContext* co
     pose = request->has_pose() ? PoseFromProto(request->pose(), "pose")
                                : absl::InvalidArgumentError("pose: missing");
     status = pose.status();
+    if (status.ok()) status = CheckPoseInsideWorld(*pose, "pose");
   }
   if (status.ok()) {
     calibration = request->has_intrinsics()
                       ? IntrinsicsFromProto(request->intrinsics(), "intrinsics", false)
                       : absl::InvalidArgumentError("intrinsics: missing");
     status = calibration.status();
+  }
+  if (status.ok()) {
+    // One render's work is capped: a huge view would hold a device for minutes.
+    if (absl::Status s = CheckRenderPixels(calibration->pinhole, state_->config.max_render_pixels);
+        !s.ok()) {
+      status = absl::Status(s.code(),
+                            absl::StrCat("intrinsics: ", s.message(), " (--max-render-pixels)"));
+    }
   }
   if (status.ok()) {
     map = state_->maps->Latest(request->map());
@@ -371,25 +423,29 @@ grpc::ServerUnaryReactor* PlenoxdService::Render(grpc::CallbackServerContext* co
     return reactor;
   }
   state_->workers->Pick().Post(
-      Priority::kInteractive, [this, reactor, request, response, pose = *pose,
-                               k = calibration->pinhole, map = *map](Backend* backend, bool cancelled) {
-        if (cancelled) {
-          Finish(reactor, "Render", absl::UnavailableError("plenoxd is shutting down"));
+      Priority::kInteractive,
+      [this, context, reactor, request, response, pose = *pose, k = calibration->pinhole,
+       map = *map](Backend* backend, bool stopped) {
+        if (absl::Status queued = QueuedCallStatus(stopped, context); !queued.ok()) {
+          Finish(reactor, "Render", queued);
           return;
         }
-        absl::StatusOr<RenderedView> rendered_view = RenderView(*backend, *map.map, pose, k);
-        if (!rendered_view.ok()) {
-          Finish(reactor, "Render", rendered_view.status());
-          return;
-        }
-        const RenderedView& view = *rendered_view;
-        int64_t rendered = 0;
-        for (float o : view.opacity.data) rendered += o >= kRenderedOpacity;
-        response->set_coverage(static_cast<double>(rendered) / std::max<int64_t>(1, view.opacity.num_pixels()));
-        response->set_map_version(map.version);
-        state_->metrics->renders++;
-        Finish(reactor, "Render",
-               RenderedViewToProto(view, request->color_encoding(), request->depth_encoding(), response));
+        Finish(reactor, "Render", CatchAllocationFailure("Render", [&]() -> absl::Status {
+                 RenderViewOptions options;
+                 // Between row tiles: a deadline or a cancellation frees the device within a
+                 // tile, not after the whole view.
+                 options.cancelled = [context] { return context->IsCancelled(); };
+                 PLX_ASSIGN_OR_RETURN(const RenderedView view,
+                                      RenderView(*backend, *map.map, pose, k, options));
+                 int64_t rendered = 0;
+                 for (float o : view.opacity.data) rendered += o >= kRenderedOpacity;
+                 response->set_coverage(static_cast<double>(rendered) /
+                                        std::max<int64_t>(1, view.opacity.num_pixels()));
+                 response->set_map_version(map.version);
+                 state_->metrics->renders++;
+                 return RenderedViewToProto(view, request->color_encoding(),
+                                            request->depth_encoding(), response);
+               }));
       });
   return reactor;
 }

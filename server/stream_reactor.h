@@ -18,6 +18,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "core/common/allocation_guard.h"
 #include "server/daemon_state.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
@@ -57,7 +58,11 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
           "map: a stream works on one map (\"", map_name_, "\"), got \"", request_.map(), "\"")));
       return;
     }
-    if (absl::Status s = HandleRequestLocked(first); !s.ok()) {
+    // Out of memory while handling one message fails this stream with RESOURCE_EXHAUSTED (an
+    // exception must not unwind into gRPC's thread and leave the stream without a status).
+    if (absl::Status s = CatchAllocationFailure(absl::StrCat("handling a ", request_name_),
+                                                [&] { return HandleRequestLocked(first); });
+        !s.ok()) {
       FailLocked(s);
       return;
     }
@@ -93,7 +98,8 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
     std::vector<LogField> fields = {{"method", method_}};
     for (LogField& field : LogFields()) fields.push_back(std::move(field));
     fields.emplace_back("status", std::to_string(final_status_.error_code()));
-    LogEvent("info", "rpc", fields);
+    if (!final_status_.ok()) fields.emplace_back("message", final_status_.error_message());
+    LogEvent(final_status_.ok() ? "info" : "warning", "rpc", fields);
     delete this;
   }
 

@@ -1,7 +1,9 @@
 #include "server/track_reactor.h"
 
 #include "absl/strings/str_cat.h"
+#include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
+#include "core/geometry/world_pose.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
 
@@ -48,6 +50,7 @@ absl::Status TrackReactor::HandleRequestLocked(bool first) {
     PLX_RETURN_IF_ERROR(HandleFirstMessage());
     if (request_.has_initial_pose()) {
       PLX_ASSIGN_OR_RETURN(const SE3 pose, PoseFromProto(request_.initial_pose(), "initial_pose"));
+      PLX_RETURN_IF_ERROR(CheckPoseInsideWorld(pose, "initial_pose"));
       // Held until a frame arrives: the first message may name the map and the start only.
       initial_pose_ = pose;
     }
@@ -56,6 +59,9 @@ absl::Status TrackReactor::HandleRequestLocked(bool first) {
     PLX_ASSIGN_OR_RETURN(CheckedFrame frame,
                          CheckFrame(std::move(*request_.mutable_frame()), "frame", false,
                                     state_->config.max_frame_pixels));
+    if (frame.client_pose) {
+      PLX_RETURN_IF_ERROR(CheckPoseInsideWorld(*frame.client_pose, "frame.pose"));
+    }
     // Latest wins: a frame still waiting is stale now, except the stream's starting frame,
     // which defines its origin (then the new frame is the one dropped).
     if (pending_) {
@@ -90,19 +96,18 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
     pending_.reset();
   }
   pb::PoseEstimate estimate;
-  absl::Status failure;
   bool client_error = false;  // the frame's data was bad: no error log, the stream just ends
   std::optional<DecodedFrame> decoded;
-  if (work) {
+  // The backend's errors (memory, device) and out of memory anywhere in the step end this
+  // stream with a status; they must not escape into the worker thread.
+  const absl::Status failure = CatchAllocationFailure("tracking a frame", [&]() -> absl::Status {
+    if (!work) return absl::OkStatus();
     absl::StatusOr<DecodedFrame> d = DecodeCheckedFrame(std::move(work->frame));
-    if (d.ok()) {
-      decoded = *std::move(d);
-    } else {
-      failure = d.status();
-      client_error = failure.code() == absl::StatusCode::kInvalidArgument;
+    if (!d.ok()) {
+      client_error = d.status().code() == absl::StatusCode::kInvalidArgument;
+      return d.status();
     }
-  }
-  if (decoded) {
+    decoded = *std::move(d);
     // Follow the mapping job: newer published versions replace the one being tracked against.
     absl::StatusOr<MapVersion> latest = state_->maps->Latest(map_name_);
     if (latest.ok() && latest->version != map_.version) {
@@ -124,11 +129,8 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
     } else {
       absl::StatusOr<TrackingResult> tracked =
           tracker_->Track(frame, decoded->calibration.pinhole, decoded->client_pose);
-      if (tracked.ok()) {
-        result = *std::move(tracked);
-      } else {
-        failure = tracked.status();  // the backend's (memory, device): this stream ends
-      }
+      if (!tracked.ok()) return tracked.status();  // the backend's (memory, device)
+      result = *std::move(tracked);
     }
     estimate.set_timestamp(frame.timestamp);
     PoseToProto(result.pose, estimate.mutable_pose());
@@ -142,7 +144,8 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
     state_->metrics->frames_tracked++;
     if (result.state == TrackingState::kLost) state_->metrics->frames_lost++;
     state_->metrics->ObserveTrackLatency(seconds);
-  }
+    return absl::OkStatus();
+  });
   std::lock_guard<std::mutex> lock(mutex_);
   if (!failure.ok()) {
     TaskDoneLocked();

@@ -15,6 +15,7 @@
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
+#include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
 #include "core/io/atomic_write.h"
 #include "core/io/checksum.h"
@@ -99,9 +100,21 @@ struct OpenedFile {
   int64_t size = 0;
 };
 
+// What a file that is not a regular one is, for the error message.
+const char* FileTypeName(mode_t mode) {
+  if (S_ISDIR(mode)) return "a directory";
+  if (S_ISFIFO(mode)) return "a FIFO";
+  if (S_ISSOCK(mode)) return "a socket";
+  if (S_ISCHR(mode) || S_ISBLK(mode)) return "a device";
+  return "not a regular file";
+}
+
 absl::StatusOr<OpenedFile> OpenForRead(const std::string& path) {
   OpenedFile file;
-  file.fd = ScopedFd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+  // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer, for ever, and
+  // with it every later load and save on the daemon's file worker. The mode is checked right
+  // after; for a regular file O_NONBLOCK changes nothing.
+  file.fd = ScopedFd(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK));
   if (file.fd.get() < 0) {
     const int err = errno;
     return ErrnoError(err, absl::StrCat("cannot open map file ", path));
@@ -111,9 +124,11 @@ absl::StatusOr<OpenedFile> OpenForRead(const std::string& path) {
     const int err = errno;
     return ErrnoError(err, absl::StrCat("cannot stat ", path));
   }
-  // A directory opens fine on Linux and would otherwise read as a zero-byte "truncated map".
+  // Only regular files are read: a directory would read as a zero-byte "truncated map", a FIFO
+  // or a device could block any read.
   if (!S_ISREG(st.st_mode)) {
-    return absl::InvalidArgumentError(absl::StrCat(path, ": not a regular file"));
+    return absl::InvalidArgumentError(absl::StrCat(path, ": not a regular file (",
+                                                   FileTypeName(st.st_mode), ")"));
   }
   file.size = static_cast<int64_t>(st.st_size);
   return file;
@@ -282,20 +297,47 @@ absl::Status VerifyChecksum(const OpenedFile& file, const std::string& path) {
 
 // AllocateBricks would silently merge duplicates and shift every later slot, so the payload
 // would land in the wrong bricks; refuse instead.
-absl::Status CheckNoDuplicateBricks(const std::vector<BrickCoord>& bricks,
-                                    const std::string& path) {
+absl::Status CheckNoDuplicateBricks(const std::vector<BrickCoord>& bricks) {
   absl::flat_hash_map<BrickCoord, int64_t> first_entry;
   first_entry.reserve(bricks.size());
   for (int64_t i = 0; i < static_cast<int64_t>(bricks.size()); ++i) {
     const auto [it, inserted] = first_entry.emplace(bricks[i], i);
     if (!inserted) {
       const BrickCoord& b = bricks[i];
-      return absl::DataLossError(absl::StrCat(path, ": brick (", b.x, ", ", b.y, ", ", b.z,
-                                              ") appears twice in the brick table (entries ",
-                                              it->second, " and ", i, "); the file is corrupt"));
+      return absl::InvalidArgumentError(absl::StrCat("brick (", b.x, ", ", b.y, ", ", b.z,
+                                                     ") appears twice in the brick table "
+                                                     "(entries ", it->second, " and ", i, ")"));
     }
   }
   return absl::OkStatus();
+}
+
+// What a map must satisfy to be stored, checked by both sides: LoadMap refuses to build, and
+// SaveMap to write, a map that breaks any of it, so a file SaveMap wrote is a file LoadMap reads.
+// The message names no file; callers prefix the path.
+absl::Status CheckStorableMap(float voxel_size, size_t source_bytes,
+                              const std::array<int32_t, 3>& index_min,
+                              const std::array<int32_t, 3>& index_dims,
+                              const std::vector<BrickCoord>& bricks) {
+  if (!std::isfinite(voxel_size) || voxel_size <= 0.0f) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("voxel size ", voxel_size, " is not a positive finite number"));
+  }
+  if (source_bytes > kMaxMapSourceBytes) {
+    return absl::InvalidArgumentError(absl::StrCat("source text is ", source_bytes,
+                                                   " bytes, the limit is ", kMaxMapSourceBytes));
+  }
+  if (static_cast<int64_t>(bricks.size()) > kMaxBricks) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(bricks.size(), " bricks exceed the limit of ", kMaxBricks));
+  }
+  // Inside the world (core/common/world_extent.h): the grid's coordinates cannot wrap.
+  PLX_RETURN_IF_ERROR(
+      SparseGrid::CheckIndexBoundsInsideWorld(index_min, index_dims, voxel_size));
+  for (const BrickCoord& b : bricks) {
+    PLX_RETURN_IF_ERROR(SparseGrid::CheckBrickInsideWorld(b, voxel_size));
+  }
+  return CheckNoDuplicateBricks(bricks);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -405,19 +447,15 @@ void WriteMap(const PlenoxelMap& map, MapWriter& w) {
   }
 }
 
-}  // namespace
-
-absl::Status SaveMap(const PlenoxelMap& map, const std::string& path) {
+absl::Status SaveMapUnguarded(const PlenoxelMap& map, const std::string& path) {
   const SparseGrid& grid = map.grid;
   const std::string what = absl::StrCat("cannot save map to ", path);
-  // Refuse to write anything LoadMap would reject.
-  if (!std::isfinite(grid.voxel_size()) || grid.voxel_size() <= 0.0f) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        what, ": voxel size ", grid.voxel_size(), " is not a positive finite number"));
-  }
-  if (map.source.size() > kMaxMapSourceBytes) {
-    return absl::InvalidArgumentError(absl::StrCat(what, ": source text is ", map.source.size(),
-                                                   " bytes, the limit is ", kMaxMapSourceBytes));
+  // Refuse to write anything LoadMap would reject (the same checks), so a saved map always
+  // loads again.
+  if (absl::Status s = CheckStorableMap(grid.voxel_size(), map.source.size(), grid.index_min(),
+                                        grid.index_dims(), grid.brick_coords());
+      !s.ok()) {
+    return absl::Status(s.code(), absl::StrCat(what, ": ", s.message()));
   }
   const int64_t bricks = grid.num_bricks();
 
@@ -438,15 +476,20 @@ absl::Status SaveMap(const PlenoxelMap& map, const std::string& path) {
   return file.Commit();
 }
 
-absl::StatusOr<MapFileInfo> ReadMapInfo(const std::string& path) {
+absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMapUnguarded(const std::string& path,
+                                                              const LoadMapOptions& options) {
   PLX_ASSIGN_OR_RETURN(const OpenedFile file, OpenForRead(path));
   PLX_ASSIGN_OR_RETURN(ParsedHeader header, ReadHeader(file, path));
-  return std::move(header.info);
-}
-
-absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMap(const std::string& path) {
-  PLX_ASSIGN_OR_RETURN(const OpenedFile file, OpenForRead(path));
-  PLX_ASSIGN_OR_RETURN(ParsedHeader header, ReadHeader(file, path));
+  if (options.max_memory_bytes > 0) {
+    // From the header alone, before the payload is read or anything allocated.
+    const int64_t needed =
+        SparseGrid::EstimateMemory(header.info.bricks, header.info.index_dims).total_bytes();
+    if (needed > options.max_memory_bytes) {
+      return absl::ResourceExhaustedError(absl::StrCat(
+          path, ": the map needs at least ", needed / 1000000, " MB (", header.info.bricks,
+          " bricks), over the limit of ", options.max_memory_bytes / 1000000, " MB per map"));
+    }
+  }
   PLX_RETURN_IF_ERROR(VerifyChecksum(file, path));
   const MapFileInfo& info = header.info;
   const int64_t n = info.bricks;
@@ -461,7 +504,12 @@ absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMap(const std::string& path) {
     bricks[i] = {LoadI32(p), LoadI32(p + 4), LoadI32(p + 8)};
   }
   table = {};
-  PLX_RETURN_IF_ERROR(CheckNoDuplicateBricks(bricks, path));
+  // The same checks SaveMap makes before writing (a file that fails them was not written by it).
+  if (absl::Status s = CheckStorableMap(info.voxel_size, info.source.size(), info.index_min,
+                                        info.index_dims, bricks);
+      !s.ok()) {
+    return absl::DataLossError(absl::StrCat(path, ": ", s.message(), "; the file is corrupt"));
+  }
 
   auto map = std::make_unique<PlenoxelMap>(info.voxel_size);
   map->render = info.render;
@@ -492,6 +540,28 @@ absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMap(const std::string& path) {
     offset += kShFloatsPerBrick * static_cast<int64_t>(sizeof(float));
   }
   return map;
+}
+
+}  // namespace
+
+absl::Status SaveMap(const PlenoxelMap& map, const std::string& path) {
+  return CatchAllocationFailure(absl::StrCat("saving ", path),
+                                [&] { return SaveMapUnguarded(map, path); });
+}
+
+absl::StatusOr<MapFileInfo> ReadMapInfo(const std::string& path) {
+  PLX_ASSIGN_OR_RETURN(const OpenedFile file, OpenForRead(path));
+  PLX_ASSIGN_OR_RETURN(ParsedHeader header, ReadHeader(file, path));
+  return std::move(header.info);
+}
+
+absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMap(const std::string& path,
+                                                     const LoadMapOptions& options) {
+  // A request's allocation failure (the brick table, the grid) fails the request, not the
+  // process.
+  return CatchAllocationFailure(absl::StrCat("loading ", path), [&] {
+    return LoadMapUnguarded(path, options);
+  });
 }
 
 }  // namespace plx

@@ -67,15 +67,27 @@ struct MapFileInfo {
 };
 
 // Writes `map` to `path` atomically (temp file, fsync, rename). NotFound when the directory does
-// not exist (it is not created); other failures name the path and the system's reason, and
-// leave any previous file at `path` untouched and no temp file behind.
+// not exist (it is not created); InvalidArgument for a map LoadMap would refuse (the same checks
+// run on both sides, so whatever SaveMap writes LoadMap reads); ResourceExhausted when out of
+// memory or disk. Failures name the path and the system's reason, and leave any previous file at
+// `path` untouched and no temp file behind.
 absl::Status SaveMap(const PlenoxelMap& map, const std::string& path);
 
-// Reads a map file written by SaveMap. Errors name the file: NotFound (missing), InvalidArgument
-// (not a map file), Unimplemented (other format version), DataLoss (truncated, inconsistent
-// sizes, bad voxel size, checksum mismatch, duplicate bricks). The checksum is verified before
-// the grid is built; no allocation exceeds what the file's actual size can back.
-absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMap(const std::string& path);
+struct LoadMapOptions {
+  // A map whose grid would need more memory than this (SparseGrid::EstimateMemory of the
+  // header's brick count and index size) is refused with ResourceExhausted before anything is
+  // allocated or the payload is read. 0: no limit.
+  int64_t max_memory_bytes = 0;
+};
+
+// Reads a map file written by SaveMap. Only regular files are opened (never blocking on a FIFO).
+// Errors name the file: NotFound (missing), InvalidArgument (not a regular file, not a map file),
+// Unimplemented (other format version), DataLoss (truncated, inconsistent sizes, bad voxel size,
+// checksum mismatch, duplicate bricks, bricks outside the world extent), ResourceExhausted (over
+// options.max_memory_bytes, or out of memory). The checksum is verified before the grid is built;
+// no allocation exceeds what the file's actual size can back.
+absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMap(const std::string& path,
+                                                     const LoadMapOptions& options = {});
 
 // Reads and validates the header only, including that the file size matches the brick count.
 // Does not verify the checksum (that needs the whole file; LoadMap does it).

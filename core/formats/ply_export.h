@@ -4,8 +4,10 @@
 // (DC) spherical-harmonic term.
 #pragma once
 
+#include <functional>
 #include <string>
 
+#include "absl/status/statusor.h"
 #include "core/grid/plenoxel_map.h"
 
 namespace plx {
@@ -19,6 +21,10 @@ struct PlyExport {
 // and what `plenox export --help` promises for it.
 inline constexpr float kDefaultExportMinDensity = 5.0f;
 
-PlyExport ExportSurfacePointsPly(const PlenoxelMap& map, float min_density);
+// `cancelled` is asked every few thousand vertices; true stops the export with CANCELLED (the
+// caller gave up). Out of memory is RESOURCE_EXHAUSTED.
+absl::StatusOr<PlyExport> ExportSurfacePointsPly(
+    const PlenoxelMap& map, float min_density,
+    const std::function<bool()>& cancelled = nullptr);
 
 }  // namespace plx

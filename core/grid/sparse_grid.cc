@@ -1,23 +1,69 @@
 #include "core/grid/sparse_grid.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <limits>
 #include <mutex>
+#include <optional>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
+#include "core/common/world_extent.h"
 
 namespace plx {
 namespace {
-// Extra bricks added on each side when the index grows, so a map that grows a little at a time
-// does not rebuild its index on every allocation.
-constexpr int32_t kGrowthMargin = 4;
+constexpr int32_t kGrowthMargin = SparseGrid::kIndexGrowthMargin;
+// |brick coordinate| never exceeds this whatever the voxel size: vertex coordinates are 8 per
+// brick and index differences add another factor 2, all in int32 (2^26 * 8 * 2 = 2^30).
+constexpr int64_t kMaxBrickCoordinate = int64_t{1} << 26;
 }  // namespace
 
 SparseGrid::SparseGrid(float voxel_size) : voxel_size_(voxel_size) {}
+
+BrickRange SparseGrid::WorldBrickRange(float voxel_size) {
+  const double brick_size = static_cast<double>(voxel_size) * kBrickEdge;
+  const auto clamp = [](double b) {
+    if (!(b > -static_cast<double>(kMaxBrickCoordinate))) return -kMaxBrickCoordinate;  // NaN too
+    if (b > static_cast<double>(kMaxBrickCoordinate)) return kMaxBrickCoordinate;
+    return static_cast<int64_t>(b);
+  };
+  // Points p in [-E, E] lie in bricks floor(p / brick_size).
+  return BrickRange{clamp(std::floor(-kWorldExtentMeters / brick_size)),
+                    clamp(std::floor(kWorldExtentMeters / brick_size))};
+}
+
+absl::Status SparseGrid::CheckBrickInsideWorld(const BrickCoord& b, float voxel_size) {
+  const BrickRange range = WorldBrickRange(voxel_size);
+  for (int32_t c : {b.x, b.y, b.z}) {
+    if (c < range.lo || c > range.hi) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "brick (", b.x, ", ", b.y, ", ", b.z, ") is outside the world extent of +-",
+          kWorldExtentMeters, " m per axis (bricks ", range.lo, " to ", range.hi, " at ",
+          voxel_size, " m voxels)"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status SparseGrid::CheckIndexBoundsInsideWorld(const std::array<int32_t, 3>& min,
+                                                     const std::array<int32_t, 3>& dims,
+                                                     float voxel_size) {
+  const BrickRange range = WorldBrickRange(voxel_size);
+  for (int a = 0; a < 3; ++a) {
+    const int64_t end = int64_t{min[a]} + dims[a];  // exclusive
+    if (dims[a] < 0 || min[a] < range.lo - kGrowthMargin ||
+        end > range.hi + 1 + kGrowthMargin) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "index bounds [", min[a], ", ", end, ") on axis ", a,
+          " are outside the world extent (bricks ", range.lo - kGrowthMargin, " to ",
+          range.hi + kGrowthMargin, " at ", voxel_size, " m voxels)"));
+    }
+  }
+  return absl::OkStatus();
+}
 
 namespace {
 
@@ -205,8 +251,23 @@ int32_t SparseGrid::FindBrick(const BrickCoord& brick) const {
   return i < 0 ? -1 : brick_slot_[i];
 }
 
-absl::Status SparseGrid::GrowIndexToCover(absl::Span<const BrickCoord> bricks) {
-  if (bricks.empty()) return absl::OkStatus();
+namespace {
+// Entries of an index of `dims`, saturating just above kMaxIndexEntries (each factor may be
+// up to 2^27, so the plain product could overflow int64).
+int64_t IndexEntries(const std::array<int64_t, 3>& dims) {
+  if (dims[0] <= 0 || dims[1] <= 0 || dims[2] <= 0) return 0;
+  int64_t entries = 1;
+  for (int a = 0; a < 3; ++a) {
+    entries *= dims[a];
+    if (entries > SparseGrid::kMaxIndexEntries) return SparseGrid::kMaxIndexEntries + 1;
+  }
+  return entries;
+}
+}  // namespace
+
+std::optional<SparseGrid::IndexBounds> SparseGrid::BoundsCovering(
+    absl::Span<const BrickCoord> bricks) const {
+  if (bricks.empty()) return std::nullopt;
   std::array<int64_t, 3> lo, hi;
   bool inside = index_dims_[0] > 0 && index_dims_[1] > 0 && index_dims_[2] > 0;
   for (int a = 0; a < 3; ++a) {
@@ -222,39 +283,65 @@ absl::Status SparseGrid::GrowIndexToCover(absl::Span<const BrickCoord> bricks) {
       hi[a] = std::max<int64_t>(hi[a], c[a]);
     }
   }
-  if (!grow) return absl::OkStatus();
-  std::array<int64_t, 3> dims;
-  int64_t entries = 1;
+  if (!grow) return std::nullopt;
+  IndexBounds bounds;
   for (int a = 0; a < 3; ++a) {
-    lo[a] -= kGrowthMargin;
-    hi[a] += kGrowthMargin;
-    dims[a] = hi[a] - lo[a] + 1;
-    entries *= dims[a];
+    bounds.min[a] = lo[a] - kGrowthMargin;
+    bounds.dims[a] = hi[a] + kGrowthMargin - bounds.min[a] + 1;
   }
-  if (entries > kMaxIndexEntries) {
+  return bounds;
+}
+
+absl::Status SparseGrid::GrowIndexToCover(absl::Span<const BrickCoord> bricks) {
+  const std::optional<IndexBounds> bounds = BoundsCovering(bricks);
+  if (!bounds) return absl::OkStatus();
+  const std::array<int64_t, 3>& dims = bounds->dims;
+  if (IndexEntries(dims) > kMaxIndexEntries) {
     return absl::ResourceExhaustedError(absl::StrCat(
         "map bounds of ", dims[0], "x", dims[1], "x", dims[2], " bricks (",
         dims[0] * kBrickEdge * voxel_size_, " m wide at ", voxel_size_,
         " m voxels) exceed the index limit; use a larger voxel size or a smaller depth range"));
   }
   for (int a = 0; a < 3; ++a) {
-    index_min_[a] = static_cast<int32_t>(lo[a]);
+    index_min_[a] = static_cast<int32_t>(bounds->min[a]);
     index_dims_[a] = static_cast<int32_t>(dims[a]);
   }
   RebuildIndex();
   return absl::OkStatus();
 }
 
+GridMemory SparseGrid::MemoryAfterAllocating(absl::Span<const BrickCoord> bricks) const {
+  GridMemory m = Memory();
+  int64_t added = 0;
+  for (const BrickCoord& b : bricks) added += FindBrick(b) < 0 ? 1 : 0;
+  m.bricks += added;
+  m.vertices += added * kBrickVertices;
+  m.parameter_bytes += added * kBrickFloats * static_cast<int64_t>(sizeof(float));
+  m.index_bytes += added * kIndexBytesPerBrick;
+  if (const std::optional<IndexBounds> bounds = BoundsCovering(bricks)) {
+    const int64_t old_entries = int64_t{index_dims_[0]} * index_dims_[1] * index_dims_[2];
+    m.index_bytes += (IndexEntries(bounds->dims) - old_entries) * kIndexBytesPerEntry;
+  }
+  return m;
+}
+
+GridMemory SparseGrid::EstimateMemory(int64_t bricks, const std::array<int32_t, 3>& index_dims) {
+  GridMemory m;
+  m.bricks = bricks;
+  m.vertices = bricks * kBrickVertices;
+  m.parameter_bytes = bricks * kBrickFloats * static_cast<int64_t>(sizeof(float));
+  m.index_bytes = bricks * kIndexBytesPerBrick +
+                  IndexEntries({index_dims[0], index_dims[1], index_dims[2]}) * kIndexBytesPerEntry;
+  return m;
+}
+
 absl::Status SparseGrid::SetIndexBounds(const std::array<int32_t, 3>& min,
                                         const std::array<int32_t, 3>& dims) {
   if (num_bricks() > 0) return absl::FailedPreconditionError("index bounds of a non-empty grid");
-  int64_t entries = 1;
-  for (int a = 0; a < 3; ++a) {
-    if (dims[a] < 0) return absl::InvalidArgumentError("negative index size");
-    entries *= dims[a];
-  }
-  if (entries > kMaxIndexEntries) {
-    return absl::ResourceExhaustedError(absl::StrCat("index of ", entries, " bricks is too large"));
+  PLX_RETURN_IF_ERROR(CheckIndexBoundsInsideWorld(min, dims, voxel_size_));
+  if (IndexEntries({dims[0], dims[1], dims[2]}) > kMaxIndexEntries) {
+    return absl::ResourceExhaustedError(absl::StrCat("index of ", dims[0], "x", dims[1], "x",
+                                                     dims[2], " bricks is too large"));
   }
   index_min_ = min;
   index_dims_ = dims;
@@ -298,6 +385,8 @@ void SparseGrid::SetBrickOrigin(int64_t slot) {
 absl::StatusOr<int64_t> SparseGrid::AllocateBricks(absl::Span<const BrickCoord> bricks,
                                                    float initial_density) {
   return CatchAllocationFailure("allocating bricks", [&]() -> absl::StatusOr<int64_t> {
+    // Before anything changes: a brick outside the world would wrap the index's coordinates.
+    for (const BrickCoord& b : bricks) PLX_RETURN_IF_ERROR(CheckBrickInsideWorld(b, voxel_size_));
     PLX_RETURN_IF_ERROR(GrowIndexToCover(bricks));
     int64_t added = 0;
     for (const BrickCoord& b : bricks) {

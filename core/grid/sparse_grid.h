@@ -14,6 +14,7 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -46,10 +47,31 @@ struct GridMemory {
 // Floats per brick: 512 densities, then 512 * 27 SH coefficients.
 inline constexpr int64_t kBrickFloats = int64_t{kBrickVertices} * kValuesPerVertex;
 
+// Brick coordinates [lo, hi] per axis (the same on every axis).
+struct BrickRange {
+  int64_t lo = 0, hi = 0;
+};
+
 class SparseGrid {
  public:
   // The coarse index is capped so a runaway allocation fails cleanly instead of eating memory.
   static constexpr int64_t kMaxIndexEntries = int64_t{1} << 27;
+  // Bricks added on each side when the index grows (so a map growing a little at a time does
+  // not rebuild its index on every allocation); index bounds reach this far past the bricks.
+  static constexpr int32_t kIndexGrowthMargin = 4;
+
+  // The bricks a grid of `voxel_size` may store: those holding a point within the world extent
+  // (core/common/world_extent.h), clamped so that every vertex coordinate the grid computes
+  // (8 per brick, relative to the index) stays far inside int32.
+  static BrickRange WorldBrickRange(float voxel_size);
+  // InvalidArgument naming the brick and the range when a coordinate is outside
+  // WorldBrickRange(voxel_size).
+  static absl::Status CheckBrickInsideWorld(const BrickCoord& brick, float voxel_size);
+  // InvalidArgument unless dims are not negative and [min, min + dims) lies within
+  // WorldBrickRange(voxel_size) widened by kIndexGrowthMargin on each side.
+  static absl::Status CheckIndexBoundsInsideWorld(const std::array<int32_t, 3>& min,
+                                                  const std::array<int32_t, 3>& dims,
+                                                  float voxel_size);
 
   explicit SparseGrid(float voxel_size);
   // Copies would silently share bricks without marking them: use Publish or ShareCopy.
@@ -64,13 +86,15 @@ class SparseGrid {
   const std::vector<BrickCoord>& brick_coords() const { return brick_coords_; }
 
   // Stores every brick of `bricks` that is not stored yet, in the given order; new vertices get
-  // density `initial_density` and zero SH. Returns how many were added.
+  // density `initial_density` and zero SH. Returns how many were added. InvalidArgument, and no
+  // brick added, when one is outside the world (CheckBrickInsideWorld).
   absl::StatusOr<int64_t> AllocateBricks(absl::Span<const BrickCoord> bricks,
                                          float initial_density = 0.0f);
 
   // Sets the coarse index bounds (in bricks) of an empty grid, e.g. to restore a saved map's:
   // ray marching works in index coordinates, so the same bounds give bit-identical renders.
-  // Later allocations outside them still grow the index.
+  // Later allocations outside them still grow the index. InvalidArgument for bounds outside the
+  // world (CheckIndexBoundsInsideWorld).
   absl::Status SetIndexBounds(const std::array<int32_t, 3>& min, const std::array<int32_t, 3>& dims);
 
   // Slot of a brick, or -1.
@@ -143,6 +167,13 @@ class SparseGrid {
   static void ReleasePooledBricks();
 
   GridMemory Memory() const;
+  // What Memory() would report after AllocateBricks(bricks) (`bricks` without repeats), without
+  // allocating: a limit is checked before the allocation. A lower bound: cell-occupancy blocks
+  // are counted once per new brick, though a brick may activate up to 8.
+  GridMemory MemoryAfterAllocating(absl::Span<const BrickCoord> bricks) const;
+  // The same lower bound for a grid of `bricks` bricks and an index of `index_dims` (a map
+  // file's header, before loading it).
+  static GridMemory EstimateMemory(int64_t bricks, const std::array<int32_t, 3>& index_dims);
 
   // Cell occupancy (GridViewT::cell_bits) starts conservative (every cell of an active block
   // occupied) and is made exact for the current densities by a backend's RefreshOccupancy.
@@ -163,7 +194,18 @@ class SparseGrid {
   using BrickStorage = std::shared_ptr<float>;
   static BrickStorage NewBrickStorage();
 
+  struct IndexBounds {
+    std::array<int64_t, 3> min = {0, 0, 0}, dims = {0, 0, 0};
+  };
+  // Index bounds covering the current ones and `bricks` (plus the growth margin), or nullopt
+  // when the current ones already cover them.
+  std::optional<IndexBounds> BoundsCovering(absl::Span<const BrickCoord> bricks) const;
   absl::Status GrowIndexToCover(absl::Span<const BrickCoord> bricks);
+  // Index memory (see Memory()): per brick, its slot-table pointers (2), origin (3 int32) and at
+  // least one active block's occupancy bits (8 uint64) and position (1 int64); per index entry,
+  // its slot and block offset (2 int32).
+  static constexpr int64_t kIndexBytesPerBrick = 2 * 8 + 3 * 4 + 8 * 8 + 8;
+  static constexpr int64_t kIndexBytesPerEntry = 2 * 4;
   void RebuildIndex();
   void SetBrickOrigin(int64_t slot);
   void ActivateBlock(int64_t index);

@@ -1,11 +1,14 @@
 #include "core/io/atomic_write.h"
 
 #include <fcntl.h>
+#include <signal.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <system_error>
 #include <utility>
 
@@ -23,7 +26,54 @@ std::string TempPath(const std::string& path, bool keep_extension) {
                       keep_extension ? fs::path(path).extension().string() : std::string());
 }
 
+// The pid of a name TempPath made for a target ending in `target_extension`
+// ("<target>.tmp.<pid>" or "<target>.tmp.<pid><ext>", <ext> being the target's extension), or 0
+// for any other name.
+int64_t TempFilePid(const std::string& name, const std::string& target_extension) {
+  const size_t at = name.rfind(".tmp.");
+  if (at == std::string::npos || at == 0) return 0;
+  const std::string target = name.substr(0, at);
+  if (fs::path(target).extension() != target_extension) return 0;
+  size_t end = at + 5;
+  int64_t pid = 0;
+  while (end < name.size() && name[end] >= '0' && name[end] <= '9' && pid < (int64_t{1} << 40)) {
+    pid = pid * 10 + (name[end] - '0');
+    ++end;
+  }
+  if (end == at + 5 || pid <= 0) return 0;
+  const std::string rest = name.substr(end);
+  if (!rest.empty() && rest != fs::path(target).extension().string()) return 0;
+  return pid;
+}
+
+bool ProcessIsRunning(int64_t pid) {
+  if (pid == ::getpid()) return true;
+  if (pid > std::numeric_limits<pid_t>::max()) return false;
+  // Signal 0 checks existence only; EPERM means it exists but is not ours to signal.
+  return ::kill(static_cast<pid_t>(pid), 0) == 0 || errno == EPERM;
+}
+
 }  // namespace
+
+std::vector<StaleTempFile> RemoveStaleTempFiles(const std::string& dir,
+                                                const std::string& target_extension) {
+  std::vector<StaleTempFile> stale;
+  std::error_code ec;
+  for (const fs::directory_entry& entry : fs::directory_iterator(dir, ec)) {
+    const int64_t pid = TempFilePid(entry.path().filename().string(), target_extension);
+    if (pid == 0) continue;
+    std::error_code type_ec;
+    // symlink_status: a link is not ours to remove, whatever it points to.
+    if (!fs::is_regular_file(entry.symlink_status(type_ec)) || ProcessIsRunning(pid)) continue;
+    StaleTempFile file{entry.path().string(), pid, absl::OkStatus()};
+    if (::unlink(file.path.c_str()) != 0) {
+      const int err = errno;
+      if (err != ENOENT) file.removed = FileWriteError(err, absl::StrCat("removing ", file.path));
+    }
+    stale.push_back(std::move(file));
+  }
+  return stale;
+}
 
 absl::Status CheckParentDirectory(const std::string& path, const std::string& what) {
   fs::path dir = fs::path(path).parent_path();
@@ -57,8 +107,17 @@ absl::StatusOr<AtomicFileWriter> AtomicFileWriter::Open(const std::string& path,
                                                         bool keep_extension) {
   if (absl::Status s = CheckParentDirectory(path, what); !s.ok()) return s;
   std::string temp = TempPath(path, keep_extension);
-  const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  // O_NONBLOCK: something other than a regular file already at the temporary's name (a FIFO)
+  // must fail the write, not block it (a FIFO without a reader gives ENXIO at once).
+  const int fd =
+      ::open(temp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_NONBLOCK, 0644);
   if (fd < 0) return FileWriteError(errno, absl::StrCat(what, ": cannot create temp file ", temp));
+  struct stat st;
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    ::close(fd);  // not ours to remove: the writer below would unlink it
+    return absl::FailedPreconditionError(
+        absl::StrCat(what, ": temp file ", temp, " exists and is not a regular file"));
+  }
   return AtomicFileWriter(path, std::move(temp), what, fd);
 }
 

@@ -4,6 +4,7 @@
 // a failed rename stay replaced: rename is atomic per file, not per set).
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <utility>
 #include <vector>
@@ -56,6 +57,21 @@ class AtomicFileWriter {
   int fd_ = -1;
   bool committed_ = false;
 };
+
+// A temporary of AtomicFileWriter ("<target>.tmp.<pid>", or "<target>.tmp.<pid><ext>" with
+// the target's extension <ext>) whose writer died before Commit: a crash or kill during a save.
+struct StaleTempFile {
+  std::string path;
+  int64_t pid = 0;
+  absl::Status removed;  // OK, or why it could not be removed
+};
+
+// Removes the temporaries in `dir` (not its subfolders) of targets with `target_extension`
+// (".plx": "<name>.plx.tmp.<pid>") that are regular files and whose pid is not a running
+// process (this process counts as running, as does a pid we may not signal), and reports each
+// one. A pid reused by an unrelated process keeps its file until a later call.
+std::vector<StaleTempFile> RemoveStaleTempFiles(const std::string& dir,
+                                                const std::string& target_extension);
 
 // `files`: (path, bytes). Errors name `what` and the file: NotFound when a target's directory
 // does not exist, PermissionDenied for access errors, Unavailable for other I/O errors.

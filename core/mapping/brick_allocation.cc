@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "absl/container/flat_hash_set.h"
+#include "core/common/world_extent.h"
 #include "core/grid/grid_view.h"
 
 namespace plx {
@@ -30,6 +31,9 @@ std::vector<BrickCoord> BricksNearSurface(const DepthImage& depth, const SE3& wo
       BrickCoord last{INT32_MIN, INT32_MIN, INT32_MIN};
       for (double t = t0; t <= t1; t += step) {
         const Eigen::Vector3d p = origin + t * dir;
+        // Points past the world extent are not mapped (converting their brick coordinates to
+        // int32 could wrap around); every brick below is inside SparseGrid::WorldBrickRange.
+        if (!(p.cwiseAbs().maxCoeff() <= kWorldExtentMeters)) continue;
         const BrickCoord b{static_cast<int32_t>(std::floor(p.x() / brick_size)),
                            static_cast<int32_t>(std::floor(p.y() / brick_size)),
                            static_cast<int32_t>(std::floor(p.z() / brick_size))};

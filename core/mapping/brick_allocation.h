@@ -22,7 +22,8 @@ struct AllocationOptions {
 };
 
 // Bricks (of a grid with `voxel_size`) crossed by the segment [d - band, d + band] along the ray
-// of every sampled pixel with measured depth d. Unique, in no particular order.
+// of every sampled pixel with measured depth d. Unique, in no particular order. Points outside
+// the world extent (core/common/world_extent.h) are left out.
 std::vector<BrickCoord> BricksNearSurface(const DepthImage& depth, const SE3& world_T_camera,
                                           const PinholeIntrinsics& intrinsics, float voxel_size,
                                           const AllocationOptions& options);

@@ -77,6 +77,7 @@ absl::Status Mapper::ValidateOptions(const MapperOptions& o) {
   if (o.coarse_to_fine && !(o.upsample_at > 0.0f && o.upsample_at < 1.0f)) {
     return absl::InvalidArgumentError("upsample_at must be inside (0, 1)");
   }
+  if (o.max_map_bytes < 0) return absl::InvalidArgumentError("max_map_bytes must not be negative");
   if (!(o.allocation.max_depth > 0) || !(o.allocation.min_band > 0)) {
     return absl::InvalidArgumentError("allocation band and max depth must be positive");
   }
@@ -114,6 +115,17 @@ absl::Status Mapper::AllocateFrames(int first_frame, PlenoxelMap& map, float vox
     const std::vector<BrickCoord> bricks =
         BricksNearSurface(training_.frame(f).depth, training_.pose(f), training_.intrinsics(f),
                           voxel_size, options_.allocation);
+    if (options_.max_map_bytes > 0) {
+      // Before allocating: a keyframe that sees far or noisy depth can add gigabytes of bricks.
+      const GridMemory after = map.grid.MemoryAfterAllocating(bricks);
+      if (after.total_bytes() > options_.max_map_bytes) {
+        return absl::ResourceExhaustedError(absl::StrCat(
+            "keyframe ", f, " would add ", after.bricks - map.grid.num_bricks(),
+            " bricks and take the map to ", after.total_bytes() / 1000000,
+            " MB, over the limit of ", options_.max_map_bytes / 1000000,
+            " MB per map; nothing was allocated"));
+      }
+    }
     PLX_ASSIGN_OR_RETURN(int64_t added, map.grid.AllocateBricks(bricks, init));
     (void)added;
   }

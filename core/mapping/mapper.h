@@ -63,6 +63,11 @@ struct MapperOptions {
   // geometry keeps converging while older keyframes still anchor what they saw.
   int window_keyframes = 0;
   float window_fraction = 0.5f;
+  // The most bytes the map may take (SparseGrid::Memory); 0 = no limit. Checked before each
+  // keyframe's bricks are allocated (SparseGrid::MemoryAfterAllocating): a keyframe that would
+  // take the map over it is refused with RESOURCE_EXHAUSTED and nothing is allocated. The
+  // optimiser's state (about twice the map's parameters) comes on top.
+  int64_t max_map_bytes = 0;
 
   uint32_t seed = 20200823;
   RenderOptions render;

@@ -8,6 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
+#include "core/geometry/world_pose.h"
 
 namespace plx {
 namespace {
@@ -81,9 +82,7 @@ absl::Status MappingSession::AddKeyframe(RgbdFrame frame, const SE3& world_T_cam
         frame.color.channels, ", depth ", frame.depth.width, "x", frame.depth.height, "x",
         frame.depth.channels, ") do not match the intrinsics (", k.width, "x", k.height, ")"));
   }
-  if (!world_T_camera.matrix().allFinite()) {
-    return absl::InvalidArgumentError("keyframe pose is not finite");
-  }
+  PLX_RETURN_IF_ERROR(CheckPoseInsideWorld(world_T_camera, "keyframe pose"));
   std::lock_guard<std::mutex> lock(mutex_);
   pending_.push_back(PendingKeyframe{std::move(frame), world_T_camera, k});
   ++added_;

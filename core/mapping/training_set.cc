@@ -2,6 +2,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/geometry/kernel_camera.h"
+#include "core/geometry/world_pose.h"
 
 namespace plx {
 
@@ -15,9 +16,13 @@ absl::Status TrainingSet::AddFrame(RgbdFrame frame, const SE3& world_T_camera,
         frame.color.height, "x", frame.color.channels, " and depth ", frame.depth.width, "x",
         frame.depth.height, " do not match intrinsics ", k.width, "x", k.height));
   }
-  if (!world_T_camera.IsFinite()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("keyframe at t=", frame.timestamp, ": pose is not finite"));
+  // Finite and inside the world: a camera beyond it would allocate bricks whose coordinates
+  // wrap around, and the map could not be saved and loaded again.
+  if (absl::Status s = CheckPoseInsideWorld(world_T_camera,
+                                            absl::StrCat("keyframe at t=", frame.timestamp,
+                                                         ": pose"));
+      !s.ok()) {
+    return s;
   }
   if (frames_.size() >= (1u << 20)) return absl::ResourceExhaustedError("too many keyframes");
   const uint32_t index = static_cast<uint32_t>(frames_.size());

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -45,8 +46,27 @@ struct RenderedView {
   Image<float> opacity;
 };
 
+// How RenderView works through a view: in tiles of whole rows, asking between tiles whether
+// the caller still wants the result, so a large view holds its device for at most one tile
+// after its caller gave up (a gRPC deadline, a cancelled call) and keeps only one tile's
+// per-ray buffers besides the images.
+struct RenderViewOptions {
+  // Pixels per tile, rounded down to whole rows (at least one row).
+  int64_t tile_pixels = int64_t{1} << 18;
+  // Asked before each tile; true stops the render with CANCELLED. Null: never.
+  std::function<bool()> cancelled;
+};
+
+// Renders every pixel of the view. Errors: the backend's, CANCELLED (options.cancelled),
+// RESOURCE_EXHAUSTED when out of memory.
 absl::StatusOr<RenderedView> RenderView(Backend& backend, const PlenoxelMap& map,
                                         const SE3& world_T_camera,
-                                        const PinholeIntrinsics& intrinsics);
+                                        const PinholeIntrinsics& intrinsics,
+                                        const RenderViewOptions& options = {});
+
+// OK when a view of `intrinsics` has at most `max_pixels` pixels; otherwise RESOURCE_EXHAUSTED
+// "W x H = N pixels, over the limit of M pixels per render". A server's cap on one request's
+// work (plenoxd --max-render-pixels).
+absl::Status CheckRenderPixels(const PinholeIntrinsics& intrinsics, int64_t max_pixels);
 
 }  // namespace plx

@@ -117,5 +117,29 @@ TEST_F(AllocationFailureTest, BricksThatCannotBeAllocatedFailTheMappingJobOnly) 
   EXPECT_TRUE(tracked.ok()) << Describe(tracked);
 }
 
+// The tracker's own buffers (not a backend call's) run out on the worker: the exception used to
+// escape the worker's task and end the process; now it fails that stream only.
+TEST_F(AllocationFailureTest, TrackerBuffersThatCannotBeAllocatedFailTheStreamOnly) {
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartWithMaps({"a"});
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+  // The tracker's sampled pixel ids: 1000 int32 (plus the block header), a size no decoded
+  // image or power-of-two growth has.
+  constexpr int kRays = 1000;
+  g_fail_size = kRays * sizeof(int32_t) + kUnifiedAlignment;
+  const TrackResult failed = TrackLockStep(*d.stub, "a", {0, 1}, FastTrackOptions(kRays));
+  EXPECT_EQ(failed.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
+      << Describe(failed.status);
+  EXPECT_NE(failed.status.error_message().find("tracking a frame: out of memory"),
+            std::string::npos)
+      << Describe(failed.status);
+
+  g_fail_size = 0;
+  const TrackResult ok = TrackLockStep(*d.stub, "a", {0, 1}, FastTrackOptions(kRays));
+  EXPECT_TRUE(ok.status.ok()) << Describe(ok.status);
+  EXPECT_EQ(ok.estimates.size(), 2u);
+  EXPECT_EQ(HealthCheck(*d.health), kServing);
+}
+
 }  // namespace
 }  // namespace plx::server::testing

@@ -4,6 +4,7 @@
 
 #include <signal.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -30,6 +31,7 @@
 #include "core/render/render_view.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/fifo_valve.h"
 #include "tests/grid_fill.h"
 #include "tests/test_util.h"
 
@@ -387,6 +389,69 @@ TEST_F(MapFileTest, DuplicateBrickIsRejected) {
               HasSubstr("brick (20, -11, 0) appears twice in the brick table (entries 1 and 3)"));
 }
 
+// What SaveMap writes, LoadMap reads: maps whose bricks sit at the very edges of the world
+// extent (core/common/world_extent.h), at the finest, the default and the coarsest voxel
+// sizes, come back bit-exact.
+TEST_F(MapFileTest, MapsAtTheWorldsEdgesRoundTrip) {
+  for (float voxel : {0.001f, 0.02f, 1.0f}) {
+    const BrickRange r = SparseGrid::WorldBrickRange(voxel);
+    const int32_t lo = static_cast<int32_t>(r.lo), hi = static_cast<int32_t>(r.hi);
+    const std::vector<std::vector<BrickCoord>> corners = {
+        {{hi, hi, hi}, {hi - 1, hi, hi - 2}},
+        {{lo, lo, lo}, {lo + 2, lo, lo + 1}},
+        {{lo, hi, 0}, {lo + 1, hi - 1, -1}}};
+    for (const std::vector<BrickCoord>& bricks : corners) {
+      SCOPED_TRACE(absl::StrCat("voxel ", voxel, " brick ", bricks[0].x, " ", bricks[0].y, " ",
+                                bricks[0].z));
+      PlenoxelMap map(voxel);
+      ASSERT_TRUE(map.grid.AllocateBricks(bricks).ok());
+      FillRandom(map, 99u, -1.0f, 10.0f);
+      ASSERT_TRUE(SaveMap(map, path_).ok());
+      const absl::StatusOr<std::unique_ptr<PlenoxelMap>> loaded = LoadMap(path_);
+      ASSERT_TRUE(loaded.ok()) << loaded.status();
+      ExpectSameMap(map, **loaded);
+      EXPECT_EQ((*loaded)->grid.index_min(), map.grid.index_min());
+      EXPECT_EQ((*loaded)->grid.index_dims(), map.grid.index_dims());
+    }
+  }
+}
+
+// A brick table entry outside the world (what a far keyframe used to allocate) is corruption:
+// SaveMap can no longer write one, so LoadMap says so instead of allocating around it.
+TEST_F(MapFileTest, BrickOutsideTheWorldIsRejected) {
+  std::string bytes = SaveTestMap();
+  const size_t table = 88 + MakeTestMap()->source.size();
+  StoreLe(bytes, table + 2 * 12, static_cast<uint32_t>(int32_t{1} << 30), 4);  // entry 2's x
+  Reseal(bytes);
+  const absl::Status status = LoadBytes(bytes);
+  EXPECT_EQ(status.code(), absl::StatusCode::kDataLoss) << status;
+  EXPECT_THAT(Msg(status), HasSubstr("brick (1073741824, 0, 0) is outside the world extent"));
+}
+
+// A map over the caller's memory limit is refused from its header, before the payload is read
+// or any brick allocated.
+TEST_F(MapFileTest, MapOverTheMemoryLimitIsRefusedFromItsHeader) {
+  const auto map = MakeTestMap();
+  ASSERT_TRUE(SaveMap(*map, path_).ok());
+  const int64_t needed = map->grid.Memory().total_bytes();
+  LoadMapOptions tight;
+  tight.max_memory_bytes = map->grid.Memory().parameter_bytes - 1;
+  const absl::Status refused = LoadMap(path_, tight).status();
+  EXPECT_EQ(refused.code(), absl::StatusCode::kResourceExhausted) << refused;
+  EXPECT_THAT(Msg(refused), HasSubstr("over the limit of"));
+  // Even a corrupt payload is not read: the limit comes first.
+  std::string bytes = ReadBytes(path_);
+  bytes[bytes.size() - 100] ^= 1;
+  WriteBytes(path_, bytes);
+  EXPECT_EQ(LoadMap(path_, tight).status().code(), absl::StatusCode::kResourceExhausted);
+  ASSERT_TRUE(SaveMap(*map, path_).ok());
+  LoadMapOptions enough;
+  enough.max_memory_bytes = needed;
+  const absl::StatusOr<std::unique_ptr<PlenoxelMap>> loaded = LoadMap(path_, enough);
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  ExpectSameMap(*map, **loaded);
+}
+
 TEST_F(MapFileTest, MissingFileIsNotFound) {
   const absl::Status status = LoadMap(dir_ + "/nope.plxmap").status();
   EXPECT_EQ(status.code(), absl::StatusCode::kNotFound) << status;
@@ -474,6 +539,33 @@ TEST_F(MapFileTest, FailedRenameRemovesTemp) {
   EXPECT_THAT(Msg(status), HasSubstr("renaming"));
   EXPECT_THAT(ListDir(dir_), ElementsAre("room.plxmap"));
   EXPECT_TRUE(fs::is_directory(path_ + "/occupied"));
+}
+
+// A FIFO named like a map (a daemon's data dir holds whatever is put there): reading it must
+// fail at once, not wait in open() for a writer that never comes.
+TEST_F(MapFileTest, FifoIsNotAMapAndNeverBlocks) {
+  ASSERT_EQ(::mkfifo(path_.c_str(), 0644), 0) << std::strerror(errno);
+  plx::testing::FifoValve valve(path_, plx::testing::FifoValve::Role::kWriter);
+  const absl::Status loaded = LoadMap(path_).status();
+  const absl::Status info = ReadMapInfo(path_).status();
+  EXPECT_FALSE(valve.released()) << "LoadMap or ReadMapInfo blocked opening the FIFO";
+  EXPECT_EQ(loaded.code(), absl::StatusCode::kInvalidArgument) << loaded;
+  EXPECT_THAT(Msg(loaded), HasSubstr(path_ + ": not a regular file (a FIFO)"));
+  EXPECT_EQ(info.code(), absl::StatusCode::kInvalidArgument) << info;
+}
+
+// The same for the writer: a FIFO at the temporary's name fails the save instead of blocking it.
+TEST_F(MapFileTest, FifoAtTheTempNameFailsTheSaveWithoutBlocking) {
+  const std::string temp = absl::StrCat(path_, ".tmp.", ::getpid());
+  ASSERT_EQ(::mkfifo(temp.c_str(), 0644), 0) << std::strerror(errno);
+  absl::Status saved;
+  {
+    plx::testing::FifoValve valve(temp, plx::testing::FifoValve::Role::kReader);
+    saved = SaveMap(*MakeTestMap(), path_);
+    EXPECT_FALSE(valve.released()) << "SaveMap blocked opening the FIFO";
+  }
+  EXPECT_FALSE(saved.ok());
+  EXPECT_FALSE(fs::exists(path_));
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -96,6 +96,35 @@ TEST_F(MapperTest, RejectsBadOptionsAndEmptyInput) {
             absl::StatusCode::kInvalidArgument);
 }
 
+// The map-size limit is checked before a keyframe's bricks are allocated: over it, nothing is
+// allocated; with room for the bricks, the same keyframe maps and stays within the limit.
+TEST_F(MapperTest, AKeyframeOverTheMapSizeLimitAllocatesNothing) {
+  std::unique_ptr<Backend> backend = MakeCpuBackend(1);
+  const RgbdFrame& frame = dataset_->frames()[0];
+  MapperOptions o = Options(10);
+  o.max_map_bytes = 1 << 20;  // a few bricks of 56 KB
+  Mapper small(o, backend.get());
+  ASSERT_TRUE(small.AddKeyframe(frame, *frame.ground_truth, dataset_->calibration().pinhole).ok());
+  const absl::Status refused = small.AllocateAndInitialize();
+  EXPECT_EQ(refused.code(), absl::StatusCode::kResourceExhausted) << refused;
+  EXPECT_NE(refused.message().find("over the limit of 1 MB per map"), std::string::npos) << refused;
+  EXPECT_EQ(small.map().grid.num_bricks(), 0);
+
+  o.max_map_bytes = int64_t{1} << 30;
+  Mapper roomy(o, backend.get());
+  ASSERT_TRUE(roomy.AddKeyframe(frame, *frame.ground_truth, dataset_->calibration().pinhole).ok());
+  ASSERT_TRUE(roomy.AllocateAndInitialize().ok());
+  const GridMemory used = roomy.map().grid.Memory();
+  EXPECT_GT(used.bricks, 20);
+  EXPECT_LE(used.total_bytes(), o.max_map_bytes);
+  // The estimate the check uses is a lower bound of what the allocation really takes.
+  SparseGrid empty(roomy.map().grid.voxel_size());
+  EXPECT_LE(empty.MemoryAfterAllocating(roomy.map().grid.brick_coords()).total_bytes(),
+            used.total_bytes());
+  EXPECT_EQ(empty.MemoryAfterAllocating(roomy.map().grid.brick_coords()).parameter_bytes,
+            used.parameter_bytes);
+}
+
 TEST_F(MapperTest, ProgressCallbackCanCancel) {
   std::unique_ptr<Backend> backend = MakeCpuBackend(2);
   int calls = 0;
