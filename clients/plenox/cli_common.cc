@@ -3,10 +3,12 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <cstdio>
 #include <iostream>
+#include <thread>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -178,6 +180,15 @@ std::unique_ptr<Backend> BackendFromFlagsOrReport(const std::string& command,
     return nullptr;
   }
   return std::move(*backend);
+}
+
+SlamSession::BackendFactory MappingBackendFactory(const FlagSet& flags, bool deterministic) {
+  const BackendKind kind = ParseBackendKind(flags.GetString("backend")).value_or(BackendKind::kAuto);
+  const int device = flags.GetInt("device", 0, 1023).value_or(0);
+  int threads = flags.GetInt("threads", 0, 4096).value_or(0);
+  if (threads == 0) threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  if (deterministic) threads = 1;
+  return [kind, device, threads] { return MakeBackend(kind, device, threads); };
 }
 
 std::string BackendText(const Backend& backend) {

@@ -14,6 +14,7 @@
 #include "core/kernels/backend.h"
 #include "core/datasets/dataset.h"
 #include "core/mapping/mapper.h"
+#include "core/slam/slam_session.h"
 #include "core/tracking/tracker.h"
 
 namespace plx::cli {
@@ -109,6 +110,13 @@ std::unique_ptr<PlenoxelMap> LoadMapOrReport(const std::string& command, const F
 
 std::unique_ptr<Backend> BackendFromFlagsOrReport(const std::string& command,
                                                   const FlagSet& flags, int* exit_code);
+// The backend SLAM's mapping thread makes for itself (core/slam/slam_session.h): the kind and
+// device of the backend flags (already checked by BackendFromFlagsOrReport). A CPU backend with
+// 0 threads is the process-wide pool, which runs one loop at a time, so mapping gets a pool of
+// its own with as many threads as the cores; `deterministic` asks for one thread (a fixed order
+// of gradient adds).
+SlamSession::BackendFactory MappingBackendFactory(const FlagSet& flags, bool deterministic);
+
 // The backend for progress and summary lines: "cpu, 4 threads", or the GPU's name.
 std::string BackendText(const Backend& backend);
 

@@ -16,6 +16,7 @@
 #include "core/eval/trajectory_metrics.h"
 #include "core/formats/trajectory_file.h"
 #include "core/render/render_view.h"
+#include "core/slam/slam_dataset.h"
 #include "core/tracking/track_dataset.h"
 
 namespace plx::cli {
@@ -24,8 +25,9 @@ int RunDemo(const std::vector<std::string>& args) {
   FlagSet flags("plenox demo",
                 "Generates a synthetic RGB-D sequence with sensor-like depth noise, maps every\n"
                 "10th frame with known poses, scores the map on the held-out frames in between\n"
-                "(PSNR, depth L1, coverage), tracks every frame in the map (ATE), and writes the\n"
-                "sequence, the map, renders and the trajectory to --out.");
+                "(PSNR, depth L1, coverage), tracks every frame in the map (ATE), runs online SLAM\n"
+                "on the same frames without their poses (ATE), and writes the sequence, the map,\n"
+                "renders and both trajectories to --out.");
   flags.Add("out", "DIR", "output folder", "plenox_demo");
   AddSyntheticFlags(flags, 90, /*noise_by_default=*/true);
   AddMapperFlags(flags);
@@ -131,6 +133,31 @@ int RunDemo(const std::vector<std::string>& args) {
   absl::StatusOr<TrajectoryEvalResult> ate = EvaluateTrajectory(tracked->trajectory, ground_truth);
   if (!ate.ok()) return ReportError("demo", ate.status());
 
+  // Online SLAM on the same frames, their poses unknown (only frame 0's, as the start).
+  SlamDatasetOptions slam_options;
+  slam_options.slam.mapping.mapper = *options;
+  slam_options.slam.mapping.mapper.window_keyframes = DefaultSlamOptions().mapping.mapper.window_keyframes;
+  absl::StatusOr<SlamDatasetResult> slam = RunSlamOnDataset(
+      *dataset, *backend, MappingBackendFactory(flags, false), slam_options,
+      [&](const SlamFrameResult& r) {
+        line.Update(absl::StrFormat("slam %d/%d  %s  %.0f ms  keyframes %d", r.frame + 1,
+                                    dataset->size(), SlamStateName(r.state), r.milliseconds,
+                                    r.keyframes));
+        return true;
+      });
+  if (!slam.ok()) return ReportError("demo", slam.status());
+  const std::string slam_path = (out / "slam_trajectory.txt").string();
+  if (absl::Status s = WriteTumTrajectory(slam_path, slam->trajectory,
+                                          "plenox demo: SLAM on the synthetic sequence");
+      !s.ok()) {
+    return ReportError("demo", s);
+  }
+  absl::StatusOr<TrajectoryEvalResult> slam_ate = EvaluateTrajectory(slam->trajectory, ground_truth);
+  if (!slam_ate.ok()) return ReportError("demo", slam_ate.status());
+  line.Finish(absl::StrFormat("slam: %d frames, %d keyframes, %d lost, ATE %.2f mm",
+                              static_cast<int>(slam->trajectory.size()), slam->progress.keyframes,
+                              slam->progress.lost, 1000 * slam_ate->ate.translation_m.rmse));
+
   const MappingSummary& sum = mapped->summary;
   std::cout << absl::StrFormat(
       "\nplenox demo: %d synthetic frames, %d keyframes mapped, %d held-out frames scored\n"
@@ -138,19 +165,24 @@ int RunDemo(const std::vector<std::string>& args) {
       "  mapping      %.1f s (%.2f s per keyframe), %d bricks, map %s\n"
       "  held-out     PSNR %.2f dB, depth L1 %.2f cm (median %.2f cm), coverage %.3f\n"
       "  tracking     %d frames, ATE %.2f mm (no alignment), median %.1f ms per frame, %d lost\n"
+      "  slam         %d frames, ATE %.2f mm (no alignment), %d keyframes, %d lost, %.1f frames/s\n"
       "  outputs      %s\n"
       "    sequence   %s (TUM layout)\n"
       "    map        %s\n"
       "    renders    %s, %s (frame %d; sensor: %s, %s)\n"
-      "    trajectory %s (TUM format)\n",
+      "    trajectory %s (TUM format)\n"
+      "    slam       %s (TUM format)\n",
       dataset->size(), sum.keyframes, eval->frames, BackendText(*backend),
       sum.allocation_s + sum.optimization_s,
       (sum.allocation_s + sum.optimization_s) / sum.keyframes, sum.memory.bricks,
       Megabytes(sum.memory.total_bytes()), eval->psnr, 100 * eval->depth_l1_m,
       100 * eval->depth_l1_median_m, eval->coverage, dataset->size(),
-      1000 * ate->ate.translation_m.rmse, tracked->ms_per_frame_median, tracked->lost, out.string(),
+      1000 * ate->ate.translation_m.rmse, tracked->ms_per_frame_median, tracked->lost,
+      static_cast<int>(slam->trajectory.size()), 1000 * slam_ate->ate.translation_m.rmse,
+      slam->progress.keyframes, slam->progress.lost,
+      slam->wall_s > 0 ? slam->trajectory.size() / slam->wall_s : 0.0, out.string(),
       sequence_dir, map_path,
-      render_color, render_depth, shown, truth_color, truth_depth, trajectory_path);
+      render_color, render_depth, shown, truth_color, truth_depth, trajectory_path, slam_path);
   if (flags.GetSwitch("json")) {
     JsonObject json;
     json.Add("frames", dataset->size())
@@ -164,6 +196,9 @@ int RunDemo(const std::vector<std::string>& args) {
         .Add("ate_rmse_m", ate->ate.translation_m.rmse)
         .Add("ms_per_frame_median", tracked->ms_per_frame_median)
         .Add("lost", tracked->lost)
+        .Add("slam_ate_rmse_m", slam_ate->ate.translation_m.rmse)
+        .Add("slam_keyframes", slam->progress.keyframes)
+        .Add("slam_lost", slam->progress.lost)
         .Add("map", map_path)
         .Add("backend", backend->name());
     std::cout << json.str() << "\n";

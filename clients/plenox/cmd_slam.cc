@@ -2,10 +2,8 @@
 // grows, no ground truth used except frame 0's pose as the start when the dataset has one.
 #include <algorithm>
 #include <cmath>
-#include <thread>
 
 #include "absl/strings/str_cat.h"
-#include "app/make_backend.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "clients/plenox/map_flags.h"
@@ -147,19 +145,8 @@ int RunSlam(const std::vector<std::string>& args) {
   }
   std::unique_ptr<Backend> backend = BackendFromFlagsOrReport(kCommand, flags, &exit_code);
   if (!backend) return exit_code;
-  // Mapping gets a backend of its own, made on its thread: the same kind and device; on the
-  // CPU one thread in deterministic mode (a fixed order of gradient adds).
-  const BackendKind kind = *ParseBackendKind(flags.GetString("backend"));
-  const int device = *flags.GetInt("device", 0, 1023);
-  // A CPU backend with 0 threads is the process-wide pool, which runs one loop at a time: the
-  // mapping backend gets a pool of its own (as many threads as tracking's) so the two never
-  // queue behind each other; its threads run at a lower priority (SlamOptions::mapping_nice).
-  int threads = *flags.GetInt("threads", 0, 4096);
-  if (threads == 0) threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  if (options->slam.deterministic) threads = 1;
-  const SlamSession::BackendFactory mapping_backend = [kind, device, threads] {
-    return MakeBackend(kind, device, threads);
-  };
+  const SlamSession::BackendFactory mapping_backend =
+      MappingBackendFactory(flags, options->slam.deterministic);
   std::unique_ptr<RgbdDataset> dataset =
       OpenDatasetOrReport(kCommand, flags, *dataset_options, &exit_code);
   if (!dataset) return exit_code;

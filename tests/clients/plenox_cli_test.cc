@@ -857,6 +857,12 @@ TEST(PlenoxDemoTest, WritesSequenceMapRendersAndMetrics) {
   EXPECT_EQ(JsonNumber(json, "heldout_frames"), 3.0);
   ASSERT_TRUE(json.count("map"));
   EXPECT_EQ(json.at("map").text, out + "/map.plx");
+  // The last step: SLAM on the same frames without their poses.
+  EXPECT_TRUE(fs::is_regular_file(out + "/slam_trajectory.txt"));
+  EXPECT_EQ(ReadRows(out + "/slam_trajectory.txt").size(), 30u);
+  EXPECT_EQ(JsonNumber(json, "slam_lost").value_or(-1), 0.0) << r.Describe();
+  EXPECT_GE(JsonNumber(json, "slam_keyframes").value_or(0), 2.0);
+  EXPECT_LT(JsonNumber(json, "slam_ate_rmse_m").value_or(1), 0.03) << r.Describe();
 }
 
 // ---------------------------------------------------------------------------------------------
