@@ -9,7 +9,9 @@ packages=(cmake ninja-build g++ pkg-config ccache
           libeigen3-dev libopencv-dev libabsl-dev libgtest-dev libgmock-dev libbenchmark-dev
           # The daemon (gRPC + Protobuf, health/reflection protos) and the Python client.
           libgrpc++-dev libgrpc-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
-          grpc-proto python3-grpcio python3-grpc-tools python3-protobuf python3-numpy)
+          grpc-proto python3-grpcio python3-grpc-tools python3-protobuf python3-numpy
+          # The daemon's metrics HTTP server; OpenSSL to check TLS files before serving.
+          libcpp-httplib-dev libssl-dev)
 if [[ "${1:-}" == "--bench" ]]; then
   packages+=(python3-open3d python3-numpy python3-opencv)
 fi

@@ -12,6 +12,7 @@
 #include "absl/strings/str_join.h"
 #include "core/cpu/cpu_backend.h"
 #include "server/log.h"
+#include "server/secret_files.h"
 
 #ifndef PLX_VERSION
 #define PLX_VERSION "unknown"
@@ -83,6 +84,15 @@ absl::StatusOr<std::vector<std::unique_ptr<DeviceWorker>>> MakeWorkers(const Dae
 std::string PlenoxdVersion() { return PLX_VERSION; }
 
 absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& options) {
+  // A bad certificate or key would otherwise only show as BuildAndStart failing, which reads
+  // as "address in use".
+  if (!options.tls_cert_pem.empty() || !options.tls_key_pem.empty()) {
+    if (absl::Status s = CheckTlsPem({options.tls_cert_pem, options.tls_key_pem},
+                                     "TLS certificate", "TLS private key");
+        !s.ok()) {
+      return s;
+    }
+  }
   std::unique_ptr<Daemon> d(new Daemon());
   d->options_ = options;
   // The devices first: a daemon that cannot compute where it was told to stops before it
@@ -118,6 +128,7 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   d->state_.metrics = d->metrics_registry_.get();
   d->state_.config.auth_token = options.auth_token;
   d->state_.config.max_streams = options.max_streams;
+  d->state_.config.max_frame_pixels = options.max_frame_pixels;
   d->state_.config.version = PlenoxdVersion();
   d->state_.config.backend = BackendKindText(options.backend);
   d->state_.config.cuda_built = BuiltWithCuda();
@@ -150,11 +161,15 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   }
   d->server_->GetHealthCheckService()->SetServingStatus(true);
   if (options.metrics_port >= 0) {
-    std::string error;
+    HttpServerOptions http;
+    http.host = options.metrics_host;
+    http.port = options.metrics_port;
+    d->http_ = std::make_unique<HttpServer>(http);
     Daemon* raw = d.get();
-    d->metrics_ = MetricsHttpServer::Start(options.metrics_host, options.metrics_port,
-                                           [raw] { return raw->RenderMetrics(); }, &error);
-    if (!d->metrics_) return absl::UnavailableError(error);
+    AddMetricsRoute(*d->http_, [raw] { return raw->RenderMetrics(); });
+    if (absl::Status s = d->http_->Start(); !s.ok()) {
+      return absl::UnavailableError(absl::StrCat("metrics: ", s.message()));
+    }
   }
   LogEvent("info", "serving",
            {{"listen", options.listen}, {"port", std::to_string(d->port_)},
@@ -196,7 +211,7 @@ absl::Status Daemon::Drain(absl::Duration grace) {
   io_->Stop();
   const absl::Status saved = maps_->SaveDirty();
   if (!saved.ok()) LogEvent("error", "save_failed", {{"reason", std::string(saved.message())}});
-  metrics_.reset();
+  http_.reset();
   LogEvent("info", "stopped", {});
   return saved;
 }

@@ -14,6 +14,7 @@
 #include "absl/time/time.h"
 #include "app/make_backend.h"
 #include "server/daemon_state.h"
+#include "server/http_server.h"
 #include "server/metrics.h"
 #include "server/plenoxd_service.h"
 
@@ -30,6 +31,9 @@ struct DaemonOptions {
   int64_t max_map_bytes = int64_t{4} << 30;
   int max_streams = 32;
   int max_message_bytes = 64 << 20;
+  // Pixels (width x height) of one Track/Integrate frame; larger frames are RESOURCE_EXHAUSTED
+  // before their images are decoded. 4K UHD: a decoded frame (float colour + depth) is 133 MB.
+  int64_t max_frame_pixels = 3840 * 2160;
   int threads = 0;                         // CPU backend threads (0 = all cores)
   // Compute devices, one worker each: kCpu one CPU worker; kCuda one worker per GPU in `gpus`
   // (Start fails when there is none); kAuto like kCuda when a GPU is visible, else kCpu.
@@ -46,7 +50,7 @@ class Daemon {
   ~Daemon();
 
   int port() const { return port_; }
-  int metrics_port() const { return metrics_ ? metrics_->port() : -1; }
+  int metrics_port() const { return http_ ? http_->port() : -1; }
 
   // Stops taking calls (health NOT_SERVING, new calls UNAVAILABLE), lets running calls finish
   // for up to `grace` and cancels the rest, stops the workers and saves every dirty map.
@@ -68,7 +72,7 @@ class Daemon {
   DaemonState state_;
   std::unique_ptr<PlenoxdService> service_;
   std::unique_ptr<grpc::Server> server_;
-  std::unique_ptr<MetricsHttpServer> metrics_;
+  std::unique_ptr<HttpServer> http_;  // --metrics-port: /metrics
   int port_ = 0;
   bool drained_ = false;
 };

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <atomic>
+#include <cstdint>
 #include <string>
 
 #include <grpcpp/server_context.h>
@@ -18,6 +19,9 @@ namespace plx::server {
 struct DaemonConfig {
   std::string auth_token;   // empty: no authentication
   int max_streams = 32;     // concurrent streaming RPCs
+  // Largest frame (intrinsics width x height) Track and Integrate accept; checked before any
+  // image is decoded (DaemonOptions::max_frame_pixels).
+  int64_t max_frame_pixels = 3840 * 2160;
   // For GetServerInfo.
   std::string version;      // plenoxd's version (PLX_VERSION)
   std::string backend;      // --backend: "cpu", "cuda" or "auto"

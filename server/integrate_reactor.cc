@@ -1,6 +1,7 @@
 #include "server/integrate_reactor.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -32,6 +33,11 @@ absl::Status IntegrateReactor::HandleFirstMessage() {
   if (o.iterations_per_keyframe() > 0) {
     options_.iterations_per_keyframe = static_cast<int>(o.iterations_per_keyframe());
   }
+  // Exactly 0 means the default; anything else must be a usable depth.
+  if (!(std::isfinite(o.max_depth()) && o.max_depth() >= 0)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "options.max_depth: must be finite and > 0 metres (0 = the default), got ", o.max_depth()));
+  }
   if (o.max_depth() > 0) {
     options_.mapper.allocation.max_depth = o.max_depth();
     options_.mapper.fusion.max_depth = o.max_depth();
@@ -55,9 +61,10 @@ absl::Status IntegrateReactor::HandleFirstMessage() {
 absl::Status IntegrateReactor::HandleRequestLocked(bool first) {
   if (first) PLX_RETURN_IF_ERROR(HandleFirstMessage());
   if (request_.has_frame()) {
-    PLX_ASSIGN_OR_RETURN(
-        DecodedFrame frame,
-        FrameFromProto(request_.frame(), absl::StrCat("frame[", received_, "]"), true));
+    PLX_ASSIGN_OR_RETURN(CheckedFrame frame,
+                         CheckFrame(std::move(*request_.mutable_frame()),
+                                    absl::StrCat("frame[", received_, "]"), true,
+                                    state_->config.max_frame_pixels));
     queue_.push_back(std::move(frame));
     ++received_;
     ScheduleLocked();
@@ -76,7 +83,7 @@ void IntegrateReactor::ScheduleLocked() {
 }
 
 void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
-  std::deque<DecodedFrame> frames;
+  std::deque<CheckedFrame> frames;
   bool input_closed = false;
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -86,8 +93,9 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
       MaybeFinishLocked();
       return;
     }
-    // One keyframe per task into the session (it integrates one per step), so the decoded
-    // frames waiting stay bounded by kMaxQueuedKeyframes (backpressure on the client).
+    // One keyframe per task into the session (it integrates one per step), so the frames
+    // waiting stay bounded by kMaxQueuedKeyframes (backpressure on the client), and only the
+    // one being integrated is ever decoded.
     if (!queue_.empty()) {
       frames.push_back(std::move(queue_.front()));
       queue_.pop_front();
@@ -110,10 +118,17 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
       status = session.status();
     }
   }
-  for (DecodedFrame& f : frames) {
+  bool client_error = false;  // a keyframe's data was bad: the stream ends, no error log
+  for (CheckedFrame& f : frames) {
     if (!status.ok()) break;
-    const SE3 pose = *f.client_pose;
-    status = session_->AddKeyframe(std::move(f.frame), pose, f.calibration.pinhole);
+    absl::StatusOr<DecodedFrame> decoded = DecodeCheckedFrame(std::move(f));
+    if (!decoded.ok()) {
+      status = decoded.status();
+      client_error = status.code() == absl::StatusCode::kInvalidArgument;
+      break;
+    }
+    const SE3 pose = *decoded->client_pose;
+    status = session_->AddKeyframe(std::move(decoded->frame), pose, decoded->calibration.pinhole);
   }
   MappingStepResult step;
   if (status.ok()) {
@@ -159,8 +174,10 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
   TaskDoneLocked();
   progress.set_keyframes_received(received_);
   if (!status.ok()) {
-    LogEvent("error", "mapping_failed",
-             {{"map", map_name_}, {"job", job_id_}, {"error", status.ToString()}});
+    if (!client_error) {
+      LogEvent("error", "mapping_failed",
+               {{"map", map_name_}, {"job", job_id_}, {"error", status.ToString()}});
+    }
     FailLocked(status);
     return;
   }

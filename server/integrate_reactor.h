@@ -1,10 +1,10 @@
 // The Integrate stream (bidirectional): posed keyframes in, MappingProgress out. The first
 // message names a map created with CreateMap; the stream takes that map's writer lease (one
-// mapping job per map). Keyframes are decoded on arrival and queued; a mapping task on a device
-// worker at background priority adds them, allocates and initialises their bricks, optimises in
-// short chunks and publishes new versions of the map to readers. After the client half-closes
-// the job spends the rest of its iteration budget, publishes the final version and ends the
-// stream with a message that has done = true.
+// mapping job per map). Keyframes are checked on arrival (CheckFrame) and queued still encoded;
+// a mapping task on a device worker at background priority decodes them, adds them, allocates
+// and initialises their bricks, optimises in short chunks and publishes new versions of the map
+// to readers. After the client half-closes the job spends the rest of its iteration budget,
+// publishes the final version and ends the stream with a message that has done = true.
 #pragma once
 
 #include <chrono>
@@ -31,7 +31,7 @@ class IntegrateReactor final
 
   // A task longer than this is logged (slow_mapping_task) with where its time went.
   static constexpr double kSlowTaskSeconds = 0.3;
-  // Keyframes decoded but not yet integrated before the stream stops reading (backpressure).
+  // Keyframes received but not yet integrated before the stream stops reading (backpressure).
   static constexpr size_t kMaxQueuedKeyframes = 8;
 
  private:
@@ -50,7 +50,7 @@ class IntegrateReactor final
   // Guarded by mutex_.
   bool lease_ = false;
   bool done_sent_ = false;
-  std::deque<DecodedFrame> queue_;
+  std::deque<CheckedFrame> queue_;  // still encoded
   uint32_t received_ = 0;
 
   // Owned by the mapping task.

@@ -3,24 +3,18 @@
 #include <signal.h>
 
 #include <cstdio>
-#include <fstream>
 #include <iostream>
-#include <sstream>
 
-#include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "app/flags.h"
 #include "app/make_backend.h"
 #include "server/daemon.h"
+#include "server/secret_files.h"
 
 namespace {
 
-absl::StatusOr<std::string> ReadFile(const std::string& path, const std::string& flag) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return absl::NotFoundError(absl::StrCat(flag, ": cannot read ", path));
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
+absl::Status FlagError(const char* flag, const absl::Status& status) {
+  return absl::Status(status.code(), absl::StrCat(flag, ": ", status.message()));
 }
 
 int Usage(const absl::Status& status) {
@@ -38,16 +32,25 @@ int main(int argc, char** argv) {
   flags.Add("listen", "HOST:PORT", "address to serve on (0.0.0.0:PORT for all interfaces)",
             "127.0.0.1:50051")
       .Add("data-dir", "DIR", "maps are loaded from and saved to DIR/<name>.plx")
-      .Add("auth-token-file", "F", "require 'authorization: Bearer <token>' with the token in F")
-      .Add("tls-cert", "PEM", "serve TLS with this certificate chain (with --tls-key)")
-      .Add("tls-key", "PEM", "private key for --tls-cert")
-      .Add("metrics-port", "PORT", "serve Prometheus metrics at http://HOST:PORT/metrics (-1 = off)",
+      .Add("auth-token-file", "F",
+           "require 'authorization: Bearer <token>' with the token in F (printable ASCII, no "
+           "spaces; ends trimmed; keep F private, a readable F is logged)")
+      .Add("tls-cert", "PEM",
+           "serve TLS with this certificate chain (with --tls-key; both checked at start)")
+      .Add("tls-key", "PEM", "unencrypted private key for --tls-cert")
+      .Add("metrics-port", "PORT",
+           "serve Prometheus metrics at http://HOST:PORT/metrics (-1 = off; 16 threads, 5 s "
+           "read/write and 2 s idle timeouts)",
            "-1")
       .Add("metrics-host", "IP", "address for the metrics endpoint", "127.0.0.1")
       .Add("max-maps", "N", "maps held at once", "16")
       .Add("max-map-mb", "MB", "memory per map", "4096")
       .Add("max-streams", "N", "concurrent streaming calls", "32")
       .Add("max-message-mb", "MB", "largest message accepted or sent", "64")
+      .Add("max-frame-pixels", "N",
+           "largest Track/Integrate frame, width x height (default 4K UHD, 3840x2160); larger "
+           "frames get RESOURCE_EXHAUSTED before their images are decoded",
+           "8294400")
       .Add("backend", "cpu|cuda|auto",
            "compute backend: cuda = one worker per GPU of --gpus (fails at start without "
            "one); auto = cuda when a GPU is visible, else one CPU worker",
@@ -71,11 +74,13 @@ int main(int argc, char** argv) {
   auto max_map_mb = flags.GetInt("max-map-mb", 1, 1 << 24);
   auto max_streams = flags.GetInt("max-streams", 1, 100000);
   auto max_message_mb = flags.GetInt("max-message-mb", 1, 2047);
+  // Frames are at most 16384 pixels a side (IntrinsicsFromProto).
+  auto max_frame_pixels = flags.GetInt("max-frame-pixels", 1, 16384 * 16384);
   auto threads = flags.GetInt("threads", 0, 4096);
   auto drain = flags.GetDouble("drain-seconds", 0.0, 3600.0);
   for (const absl::Status& s : {metrics_port.status(), max_maps.status(), max_map_mb.status(),
-                                max_streams.status(), max_message_mb.status(), threads.status(),
-                                drain.status()}) {
+                                max_streams.status(), max_message_mb.status(),
+                                max_frame_pixels.status(), threads.status(), drain.status()}) {
     if (!s.ok()) return Usage(s);
   }
   options.metrics_port = *metrics_port;
@@ -83,6 +88,7 @@ int main(int argc, char** argv) {
   options.max_map_bytes = int64_t{*max_map_mb} << 20;
   options.max_streams = *max_streams;
   options.max_message_bytes = *max_message_mb << 20;
+  options.max_frame_pixels = *max_frame_pixels;
   options.threads = *threads;
   absl::StatusOr<plx::BackendKind> backend = plx::ParseBackendKind(flags.GetString("backend"));
   if (!backend.ok()) return Usage(backend.status());
@@ -96,24 +102,20 @@ int main(int argc, char** argv) {
     if (!gpus.ok()) return Usage(gpus.status());
     options.gpus = *gpus;
   }
+  // Secrets are checked here, each error naming its flag and file, before anything listens.
   if (flags.IsSet("auth-token-file")) {
-    auto token = ReadFile(flags.GetString("auth-token-file"), "--auth-token-file");
-    if (!token.ok()) return Usage(token.status());
-    options.auth_token = std::string(absl::StripAsciiWhitespace(*token));
-    if (options.auth_token.empty()) {
-      return Usage(absl::InvalidArgumentError("--auth-token-file: the file is empty"));
-    }
+    auto token = plx::server::ReadAuthTokenFile(flags.GetString("auth-token-file"));
+    if (!token.ok()) return Usage(FlagError("--auth-token-file", token.status()));
+    options.auth_token = *token;
   }
   if (flags.IsSet("tls-cert") != flags.IsSet("tls-key")) {
     return Usage(absl::InvalidArgumentError("--tls-cert and --tls-key go together"));
   }
   if (flags.IsSet("tls-cert")) {
-    auto cert = ReadFile(flags.GetString("tls-cert"), "--tls-cert");
-    auto key = ReadFile(flags.GetString("tls-key"), "--tls-key");
-    if (!cert.ok()) return Usage(cert.status());
-    if (!key.ok()) return Usage(key.status());
-    options.tls_cert_pem = *cert;
-    options.tls_key_pem = *key;
+    auto tls = plx::server::ReadTlsFiles(flags.GetString("tls-cert"), flags.GetString("tls-key"));
+    if (!tls.ok()) return Usage(FlagError("--tls-cert/--tls-key", tls.status()));
+    options.tls_cert_pem = tls->cert_pem;
+    options.tls_key_pem = tls->key_pem;
   }
 
   // Signals are taken by sigwait below, not by handlers, so they must be blocked before any

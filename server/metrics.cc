@@ -1,14 +1,6 @@
 #include "server/metrics.h"
 
-#include <arpa/inet.h>
-#include <netinet/in.h>
-#include <poll.h>
-#include <sys/socket.h>
-#include <unistd.h>
-
-#include <cerrno>
-#include <cstring>
-#include <memory>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -104,74 +96,10 @@ std::string Metrics::Render(const Gauges& g) const {
   return out;
 }
 
-std::unique_ptr<MetricsHttpServer> MetricsHttpServer::Start(const std::string& host, int port,
-                                                            std::function<std::string()> render,
-                                                            std::string* error) {
-  const int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  if (fd < 0) {
-    *error = absl::StrCat("metrics socket: ", std::strerror(errno));
-    return nullptr;
-  }
-  const int one = 1;
-  setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof(one));
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_port = htons(static_cast<uint16_t>(port));
-  if (inet_pton(AF_INET, host.c_str(), &addr.sin_addr) != 1) {
-    *error = absl::StrCat("metrics: not an IPv4 address: ", host);
-    close(fd);
-    return nullptr;
-  }
-  if (bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0 || listen(fd, 8) != 0) {
-    *error = absl::StrCat("metrics: cannot listen on ", host, ":", port, ": ", std::strerror(errno));
-    close(fd);
-    return nullptr;
-  }
-  socklen_t len = sizeof(addr);
-  getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
-  return std::unique_ptr<MetricsHttpServer>(
-      new MetricsHttpServer(fd, ntohs(addr.sin_port), std::move(render)));
-}
-
-MetricsHttpServer::MetricsHttpServer(int fd, int port, std::function<std::string()> render)
-    : fd_(fd), port_(port), render_(std::move(render)), thread_([this] { Loop(); }) {}
-
-MetricsHttpServer::~MetricsHttpServer() {
-  stopping_ = true;
-  if (thread_.joinable()) thread_.join();
-  close(fd_);
-}
-
-void MetricsHttpServer::Loop() {
-  while (!stopping_) {
-    pollfd p{fd_, POLLIN, 0};
-    if (poll(&p, 1, 200) <= 0) continue;  // wake up regularly to notice stopping_
-    const int client = accept4(fd_, nullptr, nullptr, SOCK_CLOEXEC);
-    if (client < 0) continue;
-    timeval timeout{2, 0};
-    setsockopt(client, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof(timeout));
-    char buffer[2048];
-    const ssize_t n = recv(client, buffer, sizeof(buffer) - 1, 0);
-    std::string request(buffer, n > 0 ? static_cast<size_t>(n) : 0);
-    std::string body, status = "200 OK", type = "text/plain; version=0.0.4";
-    if (request.rfind("GET /metrics", 0) == 0) {
-      body = render_();
-    } else {
-      status = "404 Not Found";
-      type = "text/plain";
-      body = "plenoxd serves GET /metrics\n";
-    }
-    const std::string response = absl::StrCat("HTTP/1.0 ", status, "\r\nContent-Type: ", type,
-                                              "\r\nContent-Length: ", body.size(),
-                                              "\r\nConnection: close\r\n\r\n", body);
-    size_t sent = 0;
-    while (sent < response.size()) {
-      const ssize_t k = send(client, response.data() + sent, response.size() - sent, MSG_NOSIGNAL);
-      if (k <= 0) break;
-      sent += static_cast<size_t>(k);
-    }
-    close(client);
-  }
+void AddMetricsRoute(HttpServer& server, std::function<std::string()> render) {
+  server.Get("/metrics", [render = std::move(render)] {
+    return HttpResponse{200, "text/plain; version=0.0.4", render()};
+  });
 }
 
 }  // namespace plx::server

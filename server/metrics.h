@@ -1,5 +1,6 @@
-// Daemon metrics in the Prometheus text format (served on --metrics-port): counters and a
-// tracking-latency histogram updated by the handlers, gauges read when scraped.
+// Daemon metrics in the Prometheus text format (served at /metrics on the --metrics-port
+// HttpServer): counters and a tracking-latency histogram updated by the handlers, gauges read
+// when scraped.
 #pragma once
 
 #include <array>
@@ -7,8 +8,9 @@
 #include <cstdint>
 #include <functional>
 #include <string>
-#include <thread>
 #include <vector>
+
+#include "server/http_server.h"
 
 namespace plx::server {
 
@@ -51,26 +53,7 @@ class Metrics {
   std::atomic<int64_t> latency_micros_sum_{0};
 };
 
-// A minimal HTTP/1.0 server answering GET /metrics (anything else: 404) on 127.0.0.1 or the
-// given host. One connection at a time is plenty for a scraper.
-class MetricsHttpServer {
- public:
-  // Binds now; `port` 0 picks a free port (see port()).
-  static std::unique_ptr<MetricsHttpServer> Start(const std::string& host, int port,
-                                                  std::function<std::string()> render,
-                                                  std::string* error);
-  ~MetricsHttpServer();
-  int port() const { return port_; }
-
- private:
-  MetricsHttpServer(int fd, int port, std::function<std::string()> render);
-  void Loop();
-
-  int fd_;
-  int port_;
-  std::function<std::string()> render_;
-  std::atomic<bool> stopping_{false};
-  std::thread thread_;
-};
+// Serves `render()` (the Prometheus text) at GET /metrics on `server`.
+void AddMetricsRoute(HttpServer& server, std::function<std::string()> render);
 
 }  // namespace plx::server

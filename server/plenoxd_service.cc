@@ -1,6 +1,7 @@
 #include "server/plenoxd_service.h"
 
 #include <algorithm>
+#include <cmath>
 #include <deque>
 #include <mutex>
 
@@ -64,6 +65,14 @@ class ExportReactor final : public grpc::ServerWriteReactor<pb::ExportChunk> {
         status.ok() ? state_->maps->Latest(request->map()) : absl::StatusOr<MapVersion>(status);
     if (!map.ok()) {
       Done(map.status());
+      return;
+    }
+    // Exactly 0 means the default; a negative or non-finite threshold is a client's mistake,
+    // not a request for the default.
+    if (!(std::isfinite(request->min_density()) && request->min_density() >= 0)) {
+      Done(absl::InvalidArgumentError(absl::StrCat(
+          "min_density: must be finite and >= 0 (0 = the default, ", kDefaultExportMinDensity,
+          "), got ", request->min_density())));
       return;
     }
     const float min_density = request->min_density() > 0 ? request->min_density()

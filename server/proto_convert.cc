@@ -2,10 +2,12 @@
 
 #include <cmath>
 #include <cstring>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
+#include "core/io/image_header.h"
 #include "core/io/image_io.h"
 
 namespace plx::server {
@@ -15,8 +17,9 @@ absl::Status Invalid(const std::string& field, const std::string& what) {
   return absl::InvalidArgumentError(absl::StrCat(field, ": ", what));
 }
 
-absl::StatusOr<ColorImage> DecodeColor(const pb::Frame& frame, const std::string& field, int width,
-                                       int height) {
+// The cheap half of the image checks (on the gRPC thread): raw byte counts, and for encoded
+// images the header against the intrinsics, so nothing is decoded that cannot be used.
+absl::Status CheckColor(const pb::Frame& frame, const std::string& field, int width, int height) {
   const std::string name = field + ".color";
   switch (frame.color_encoding()) {
     case pb::COLOR_ENCODING_RAW_RGB8: {
@@ -25,27 +28,20 @@ absl::StatusOr<ColorImage> DecodeColor(const pb::Frame& frame, const std::string
         return Invalid(name, absl::StrCat("raw RGB8 needs ", expected, " bytes for ", width, "x",
                                           height, ", got ", frame.color().size()));
       }
-      ColorImage image(width, height, 3);
-      const uint8_t* src = reinterpret_cast<const uint8_t*>(frame.color().data());
-      for (size_t i = 0; i < expected; ++i) image.data[i] = src[i] * (1.0f / 255.0f);
-      return image;
+      return absl::OkStatus();
     }
     case pb::COLOR_ENCODING_PNG:
     case pb::COLOR_ENCODING_JPEG: {
-      PLX_ASSIGN_OR_RETURN(cv::Mat rgb, DecodeColorBuffer(frame.color(), name));
-      if (rgb.cols != width || rgb.rows != height) {
-        return Invalid(name, absl::StrCat("image is ", rgb.cols, "x", rgb.rows,
-                                          ", the intrinsics say ", width, "x", height));
-      }
-      return ColorImageFromMat(rgb);
+      // Either label takes either format: the header says which one the bytes are.
+      PLX_ASSIGN_OR_RETURN(const ImageHeader header, ReadImageHeader(frame.color(), name));
+      return CheckFrameImageHeader(header, FrameImageRole::kColor, width, height, name);
     }
     default:
       return Invalid(field + ".color_encoding", "must be PNG, JPEG or RAW_RGB8");
   }
 }
 
-absl::StatusOr<DepthImage> DecodeDepth(const pb::Frame& frame, const std::string& field, int width,
-                                       int height, double depth_scale) {
+absl::Status CheckDepth(const pb::Frame& frame, const std::string& field, int width, int height) {
   const std::string name = field + ".depth";
   switch (frame.depth_encoding()) {
     case pb::DEPTH_ENCODING_RAW_U16: {
@@ -54,26 +50,59 @@ absl::StatusOr<DepthImage> DecodeDepth(const pb::Frame& frame, const std::string
         return Invalid(name, absl::StrCat("raw uint16 depth needs ", 2 * pixels, " bytes for ",
                                           width, "x", height, ", got ", frame.depth().size()));
       }
-      DepthImage image(width, height, 1);
-      const uint8_t* src = reinterpret_cast<const uint8_t*>(frame.depth().data());
-      const double inv = 1.0 / depth_scale;
-      for (size_t i = 0; i < pixels; ++i) {
-        const uint16_t raw = static_cast<uint16_t>(src[2 * i] | (src[2 * i + 1] << 8));
-        image.data[i] = static_cast<float>(raw * inv);
-      }
-      return image;
+      return absl::OkStatus();
     }
     case pb::DEPTH_ENCODING_PNG16: {
-      PLX_ASSIGN_OR_RETURN(cv::Mat raw, DecodeDepthBuffer(frame.depth(), name));
-      if (raw.cols != width || raw.rows != height) {
-        return Invalid(name, absl::StrCat("image is ", raw.cols, "x", raw.rows,
-                                          ", the intrinsics say ", width, "x", height));
-      }
-      return DepthImageFromMat(raw, depth_scale);
+      PLX_ASSIGN_OR_RETURN(const ImageHeader header, ReadImageHeader(frame.depth(), name));
+      return CheckFrameImageHeader(header, FrameImageRole::kDepth, width, height, name);
     }
     default:
       return Invalid(field + ".depth_encoding", "must be PNG16 or RAW_U16");
   }
+}
+
+// The decoder's size is checked again: for any image the codec accepts it agrees with the
+// header, and the check costs nothing.
+absl::Status CheckDecodedSize(const cv::Mat& image, const std::string& name, int width,
+                              int height) {
+  if (image.cols != width || image.rows != height) {
+    return Invalid(name, absl::StrCat("image is ", image.cols, "x", image.rows,
+                                      ", the intrinsics say ", width, "x", height));
+  }
+  return absl::OkStatus();
+}
+
+// The expensive half (on a worker), for a frame CheckColor/CheckDepth passed.
+absl::StatusOr<ColorImage> DecodeColor(const pb::Frame& frame, const std::string& field, int width,
+                                       int height) {
+  const std::string name = field + ".color";
+  if (frame.color_encoding() == pb::COLOR_ENCODING_RAW_RGB8) {
+    ColorImage image(width, height, 3);
+    const uint8_t* src = reinterpret_cast<const uint8_t*>(frame.color().data());
+    for (size_t i = 0; i < image.data.size(); ++i) image.data[i] = src[i] * (1.0f / 255.0f);
+    return image;
+  }
+  PLX_ASSIGN_OR_RETURN(cv::Mat rgb, DecodeColorBuffer(frame.color(), name));
+  PLX_RETURN_IF_ERROR(CheckDecodedSize(rgb, name, width, height));
+  return ColorImageFromMat(rgb);
+}
+
+absl::StatusOr<DepthImage> DecodeDepth(const pb::Frame& frame, const std::string& field, int width,
+                                       int height, double depth_scale) {
+  const std::string name = field + ".depth";
+  if (frame.depth_encoding() == pb::DEPTH_ENCODING_RAW_U16) {
+    DepthImage image(width, height, 1);
+    const uint8_t* src = reinterpret_cast<const uint8_t*>(frame.depth().data());
+    const double inv = 1.0 / depth_scale;
+    for (size_t i = 0; i < image.data.size(); ++i) {
+      const uint16_t raw = static_cast<uint16_t>(src[2 * i] | (src[2 * i + 1] << 8));
+      image.data[i] = static_cast<float>(raw * inv);
+    }
+    return image;
+  }
+  PLX_ASSIGN_OR_RETURN(cv::Mat raw, DecodeDepthBuffer(frame.depth(), name));
+  PLX_RETURN_IF_ERROR(CheckDecodedSize(raw, name, width, height));
+  return DepthImageFromMat(raw, depth_scale);
 }
 
 }  // namespace
@@ -93,37 +122,46 @@ absl::StatusOr<CameraCalibration> IntrinsicsFromProto(const pb::Intrinsics& k,
   return c;
 }
 
-namespace {
-
-absl::StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const std::string& field,
-                                         bool require_pose) {
+absl::StatusOr<CheckedFrame> CheckFrame(pb::Frame frame, const std::string& field,
+                                        bool require_pose, int64_t max_pixels) {
   if (!frame.has_intrinsics()) return Invalid(field + ".intrinsics", "missing");
-  DecodedFrame out;
+  CheckedFrame out;
   PLX_ASSIGN_OR_RETURN(out.calibration,
                        IntrinsicsFromProto(frame.intrinsics(), field + ".intrinsics", true));
-  if (!std::isfinite(frame.timestamp())) return Invalid(field + ".timestamp", "not finite");
   const int w = out.calibration.pinhole.width, h = out.calibration.pinhole.height;
-  out.frame.timestamp = frame.timestamp();
-  PLX_ASSIGN_OR_RETURN(out.frame.color, DecodeColor(frame, field, w, h));
-  PLX_ASSIGN_OR_RETURN(out.frame.depth,
-                       DecodeDepth(frame, field, w, h, out.calibration.depth_scale));
+  if (absl::Status s = CheckFramePixels(w, h, max_pixels, field + ".intrinsics"); !s.ok()) {
+    return absl::ResourceExhaustedError(absl::StrCat(s.message(), " (--max-frame-pixels)"));
+  }
+  if (!std::isfinite(frame.timestamp())) return Invalid(field + ".timestamp", "not finite");
+  PLX_RETURN_IF_ERROR(CheckColor(frame, field, w, h));
+  PLX_RETURN_IF_ERROR(CheckDepth(frame, field, w, h));
   if (frame.has_pose()) {
     PLX_ASSIGN_OR_RETURN(out.client_pose, PoseFromProto(frame.pose(), field + ".pose"));
   } else if (require_pose) {
     return Invalid(field + ".pose", "required (mapping needs every keyframe's pose)");
   }
-  out.camera_id = frame.camera_id();
+  out.frame = std::move(frame);
+  out.field = field;
   return out;
 }
 
-}  // namespace
-
-absl::StatusOr<DecodedFrame> FrameFromProto(const pb::Frame& frame, const std::string& field,
-                                            bool require_pose) {
+absl::StatusOr<DecodedFrame> DecodeCheckedFrame(CheckedFrame checked) {
   // Decoded images are UnifiedVectors: out of memory throws std::bad_alloc, which must fail this
-  // request, not unwind through gRPC's callback thread.
-  return CatchAllocationFailure(absl::StrCat("decoding ", field),
-                                [&] { return DecodeFrame(frame, field, require_pose); });
+  // request, not unwind through the worker.
+  return CatchAllocationFailure(
+      absl::StrCat("decoding ", checked.field), [&]() -> absl::StatusOr<DecodedFrame> {
+        const pb::Frame& f = checked.frame;
+        const int w = checked.calibration.pinhole.width, h = checked.calibration.pinhole.height;
+        DecodedFrame out;
+        out.frame.timestamp = f.timestamp();
+        PLX_ASSIGN_OR_RETURN(out.frame.color, DecodeColor(f, checked.field, w, h));
+        PLX_ASSIGN_OR_RETURN(out.frame.depth, DecodeDepth(f, checked.field, w, h,
+                                                          checked.calibration.depth_scale));
+        out.calibration = checked.calibration;
+        out.camera_id = f.camera_id();
+        out.client_pose = checked.client_pose;
+        return out;
+      });
 }
 
 absl::Status RenderedViewToProto(const RenderedView& view, pb::ColorEncoding color_encoding,

@@ -2,6 +2,7 @@
 // rejects (e.g. "frame.intrinsics.fx"), so handlers only convert, call core and map the status.
 #pragma once
 
+#include <cstdint>
 #include <optional>
 #include <string>
 
@@ -24,19 +25,36 @@ absl::StatusOr<CameraCalibration> IntrinsicsFromProto(const pb::Intrinsics& intr
                                                       const std::string& field,
                                                       bool require_depth_scale);
 
+// A frame whose cheap checks passed on the gRPC thread: intrinsics, timestamp and pose, the
+// encodings, raw byte counts, and the PNG/JPEG headers against the intrinsics and the pixel
+// limit. Its images are still encoded: DecodeCheckedFrame decodes them in the stream's task on
+// a device worker, so no gRPC callback thread ever runs a codec, and a frame that latest-wins
+// tracking drops is never decoded.
+struct CheckedFrame {
+  pb::Frame frame;    // the wire frame (images encoded)
+  std::string field;  // names the frame in errors: "frame", "frame[3]"
+  CameraCalibration calibration;
+  // The pose the client sent with the frame (world_T_camera), if any: the pose prior for
+  // Track, the keyframe's pose for Integrate (where CheckFrame requires it).
+  std::optional<SE3> client_pose;
+};
+
 struct DecodedFrame {
   RgbdFrame frame;  // colour in [0,1], depth in metres; no ground truth (a client sends none)
   CameraCalibration calibration;
   std::string camera_id;
-  // The pose the client sent with the frame (world_T_camera), if any: the pose prior for
-  // Track, the keyframe's pose for Integrate (where FrameFromProto requires it).
   std::optional<SE3> client_pose;
 };
 
-// Decodes and checks a frame: intrinsics, encodings, image sizes against the intrinsics, pose
-// finite. `require_pose`: Integrate needs one on every frame.
-absl::StatusOr<DecodedFrame> FrameFromProto(const pb::Frame& frame, const std::string& field,
-                                            bool require_pose);
+// Checks a frame without decoding it (see CheckedFrame). `require_pose`: Integrate needs one on
+// every frame. Frames over `max_pixels` (the intrinsics' width x height) are
+// RESOURCE_EXHAUSTED; every other failure is INVALID_ARGUMENT naming the field.
+absl::StatusOr<CheckedFrame> CheckFrame(pb::Frame frame, const std::string& field,
+                                        bool require_pose, int64_t max_pixels);
+
+// Decodes a checked frame's images (INVALID_ARGUMENT naming the field when the data behind a
+// good header is corrupt; RESOURCE_EXHAUSTED when memory runs out).
+absl::StatusOr<DecodedFrame> DecodeCheckedFrame(CheckedFrame checked);
 
 // Encodes a rendered view for a RenderResponse.
 absl::Status RenderedViewToProto(const RenderedView& view, pb::ColorEncoding color_encoding,

@@ -27,6 +27,11 @@ absl::Status TrackReactor::HandleFirstMessage() {
   if (!map.ok()) return map.status();
   map_ = *map;
   const pb::TrackOptions& o = request_.options();
+  // proto3 enums are open: an unknown number arrives as itself and must not become the default.
+  if (!pb::TrackOptions::Mode_IsValid(o.mode())) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "options.mode: unknown mode ", o.mode(), " (UNSPECIFIED, GAUSS_NEWTON or ADAM)"));
+  }
   options_ = TrackerOptionsForMode(o.mode() == pb::TrackOptions::MODE_ADAM
                                       ? TrackingMode::kAdam
                                       : TrackingMode::kGaussNewton);
@@ -48,7 +53,9 @@ absl::Status TrackReactor::HandleRequestLocked(bool first) {
     }
   }
   if (request_.has_frame()) {
-    PLX_ASSIGN_OR_RETURN(DecodedFrame frame, FrameFromProto(request_.frame(), "frame", false));
+    PLX_ASSIGN_OR_RETURN(CheckedFrame frame,
+                         CheckFrame(std::move(*request_.mutable_frame()), "frame", false,
+                                    state_->config.max_frame_pixels));
     // Latest wins: a frame still waiting is stale now, except the stream's starting frame,
     // which defines its origin (then the new frame is the one dropped).
     if (pending_) {
@@ -84,7 +91,18 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
   }
   pb::PoseEstimate estimate;
   absl::Status failure;
+  bool client_error = false;  // the frame's data was bad: no error log, the stream just ends
+  std::optional<DecodedFrame> decoded;
   if (work) {
+    absl::StatusOr<DecodedFrame> d = DecodeCheckedFrame(std::move(work->frame));
+    if (d.ok()) {
+      decoded = *std::move(d);
+    } else {
+      failure = d.status();
+      client_error = failure.code() == absl::StatusCode::kInvalidArgument;
+    }
+  }
+  if (decoded) {
     // Follow the mapping job: newer published versions replace the one being tracked against.
     absl::StatusOr<MapVersion> latest = state_->maps->Latest(map_name_);
     if (latest.ok() && latest->version != map_.version) {
@@ -92,12 +110,12 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
       if (tracker_) tracker_->set_map(map_.map.get());
     }
     if (!tracker_) tracker_ = std::make_unique<Tracker>(map_.map.get(), backend, options_);
-    const RgbdFrame& frame = work->frame.frame;
+    const RgbdFrame& frame = decoded->frame;
     TrackingResult result;
     if (work->initial_pose || !tracker_started_) {
       // The stream's first frame: start from the given pose (or the frame's prior, or the
       // identity) and report it, as the in-process tracker does for frame 0.
-      const SE3 start = work->initial_pose.value_or(work->frame.client_pose.value_or(SE3()));
+      const SE3 start = work->initial_pose.value_or(decoded->client_pose.value_or(SE3()));
       tracker_->Reset(start, frame.timestamp);
       tracker_started_ = true;
       result.pose = start;
@@ -105,7 +123,7 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
       result.reason = work->initial_pose ? "initial pose" : "initial pose (frame prior or identity)";
     } else {
       absl::StatusOr<TrackingResult> tracked =
-          tracker_->Track(frame, work->frame.calibration.pinhole, work->frame.client_pose);
+          tracker_->Track(frame, decoded->calibration.pinhole, decoded->client_pose);
       if (tracked.ok()) {
         result = *std::move(tracked);
       } else {
@@ -128,11 +146,13 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
   std::lock_guard<std::mutex> lock(mutex_);
   if (!failure.ok()) {
     TaskDoneLocked();
-    LogEvent("error", "track_failed", {{"map", map_name_}, {"error", failure.ToString()}});
+    if (!client_error) {
+      LogEvent("error", "track_failed", {{"map", map_name_}, {"error", failure.ToString()}});
+    }
     FailLocked(failure);
     return;
   }
-  if (work && !finished()) {
+  if (decoded && !finished()) {
     estimate.set_dropped(dropped_);
     dropped_ = 0;
     WriteLocked(std::move(estimate));

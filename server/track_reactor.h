@@ -1,7 +1,9 @@
 // The Track stream (bidirectional): frames in, one PoseEstimate out per frame served. Frames are
-// decoded on arrival; tracking runs on a device worker at interactive priority. While a frame
-// is being tracked, newer frames replace the waiting one (latest wins) and the next estimate
-// reports how many were dropped. The tracker follows the newest published version of the map.
+// checked on arrival (CheckFrame: sizes, headers, pose) and decoded by the tracking task, which
+// runs on a device worker at interactive priority. While a frame is being tracked, newer frames
+// replace the waiting one (latest wins, so a dropped frame is never decoded) and the next
+// estimate reports how many were dropped. The tracker follows the newest published version of
+// the map.
 #pragma once
 
 #include <chrono>
@@ -28,7 +30,7 @@ class TrackReactor final
 
  private:
   struct Pending {
-    DecodedFrame frame;
+    CheckedFrame frame;  // still encoded
     std::chrono::steady_clock::time_point received;
     std::optional<SE3> initial_pose;  // the stream's start: reported as-is, resets the tracker
   };

@@ -12,6 +12,7 @@ int RunEvalMap(const std::vector<std::string>& args);
 int RunEvalTraj(const std::vector<std::string>& args);
 int RunRender(const std::vector<std::string>& args);
 int RunTrack(const std::vector<std::string>& args);
+int RunSlam(const std::vector<std::string>& args);
 int RunSynth(const std::vector<std::string>& args);
 int RunDemo(const std::vector<std::string>& args);
 

@@ -21,6 +21,7 @@ constexpr char kUsage[] =
     "  demo       generate a synthetic RGB-D sequence, map it, score held-out views, track it\n"
     "  map        build a map from a dataset with known poses\n"
     "  track      localise every frame of a dataset in a map (writes a TUM trajectory)\n"
+    "  slam       online SLAM: poses for unposed frames while the map grows (TUM trajectory)\n"
     "  eval-map   score a map on a dataset's held-out frames (PSNR, depth L1, coverage)\n"
     "  eval-traj  compare an estimated trajectory with ground truth (ATE, RPE)\n"
     "  render     render colour and depth images of a map from a pose\n"
@@ -41,7 +42,7 @@ constexpr char kUsage[] =
 
 // Commands that only exist against a daemon, and commands that only run in-process.
 const std::set<std::string> kDaemonOnly = {"export", "maps", "save", "load", "info"};
-const std::set<std::string> kInProcessOnly = {"demo", "eval-map", "eval-traj", "synth"};
+const std::set<std::string> kInProcessOnly = {"demo", "eval-map", "eval-traj", "slam", "synth"};
 
 int UsageError(const std::string& message) {
   std::cerr << "plenox: " << message << "\n(plenox --help for usage)\n";
@@ -159,6 +160,7 @@ int main(int argc, char** argv) {
   if (command == "eval-map") return plx::cli::RunEvalMap(args);
   if (command == "eval-traj") return plx::cli::RunEvalTraj(args);
   if (command == "track") return plx::cli::RunTrack(args);
+  if (command == "slam") return plx::cli::RunSlam(args);
   if (command == "render") return plx::cli::RunRender(args);
   if (command == "synth") return plx::cli::RunSynth(args);
   if (command == "demo") return plx::cli::RunDemo(args);

@@ -1,6 +1,7 @@
 #include "core/io/image_io.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
@@ -13,6 +14,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
+#include "core/io/image_header.h"
 
 namespace plx {
 namespace {
@@ -122,8 +124,13 @@ absl::StatusOr<cv::Mat> CheckDepth16(const cv::Mat& image, const std::string& pa
   return image;
 }
 
+std::atomic<int64_t> buffers_decoded{0};
+
 absl::StatusOr<cv::Mat> DecodeBuffer(const std::string& bytes, const std::string& what) {
-  if (bytes.empty()) return absl::InvalidArgumentError(absl::StrCat(what, ": empty image"));
+  // Bytes from the network reach only OpenCV's PNG and JPEG codecs, whose headers callers can
+  // check first (image_header.h); imdecode alone would try every format it was built with.
+  PLX_RETURN_IF_ERROR(ReadImageHeader(bytes, what).status());
+  buffers_decoded.fetch_add(1, std::memory_order_relaxed);
   cv::Mat image;
   try {
     const cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8UC1,
@@ -187,6 +194,8 @@ absl::StatusOr<std::string> EncodeMat(const cv::Mat& image, const std::string& e
 }  // namespace
 
 std::string SizeString(int width, int height) { return absl::StrCat(width, "x", height); }
+
+int64_t ImageBuffersDecoded() { return buffers_decoded.load(std::memory_order_relaxed); }
 
 absl::StatusOr<cv::Mat> DecodeColorFile(const std::string& path) {
   PLX_ASSIGN_OR_RETURN(cv::Mat image, ReadRaw(path));

@@ -5,6 +5,7 @@
 // Depth files: 16-bit, 1 channel; metres = value / depth_scale, 0 = no measurement.
 #pragma once
 
+#include <cstdint>
 #include <string>
 
 #include <opencv2/core.hpp>
@@ -22,9 +23,16 @@ absl::StatusOr<cv::Mat> DecodeColorFile(const std::string& path);
 absl::StatusOr<cv::Mat> DecodeDepthFile(const std::string& path);
 
 // The same from encoded bytes in memory (PNG, JPEG); `what` names the source in errors
-// (e.g. "frame.color").
+// (e.g. "frame.color"). Bytes that are not a PNG or JPEG (ReadImageHeader) are refused without
+// reaching the codecs. These decode whatever size the header declares: callers that take
+// images from clients check the header first (CheckFrameImageHeader, CheckFramePixels).
 absl::StatusOr<cv::Mat> DecodeColorBuffer(const std::string& bytes, const std::string& what);
 absl::StatusOr<cv::Mat> DecodeDepthBuffer(const std::string& bytes, const std::string& what);
+
+// How many buffers this process has handed to the codecs (DecodeColorBuffer and
+// DecodeDepthBuffer calls that got past the header): lets tests show a bad image was refused
+// without being decoded.
+int64_t ImageBuffersDecoded();
 
 // Encoded bytes: colour as 8-bit RGB in the format of `extension` (".png", ".jpg"), depth as a
 // 16-bit PNG of round(z * depth_scale).

@@ -23,11 +23,18 @@ struct TrainingRaysView {
   const uint32_t* ray_frame = nullptr;
   const uint32_t* ray_pixel = nullptr;
   int64_t num_rays = 0;
+  // Rays [recent_begin, num_rays) belong to the most recent keyframes (rays are stored in
+  // keyframe order): a local window that MappingBatchParams::recent_batch draws from.
+  int64_t recent_begin = 0;
 };
 
 struct MappingBatchParams {
   uint32_t seed = 0;           // draws this batch's rays (same seed, same rays on every backend)
   int64_t batch_size = 0;
+  // The first recent_batch rays of the batch are drawn from the recent keyframes only
+  // (TrainingRaysView::recent_begin), the rest from every keyframe: SLAM's local window keeps
+  // new geometry converging as the keyframe count grows. 0 = uniform over all rays.
+  int64_t recent_batch = 0;
   // L = mean( |C^ - C|^2 / 3 + depth_weight * color_sigma^2 * rho((D^ - D) / sigma(z)) ):
   // depth residuals count in units of the sensor's noise at that depth, relative to a colour
   // noise of color_sigma, so near, precise depth constrains geometry and far, noisy depth does

@@ -20,7 +20,11 @@ void MappingForwardBackward(const ExecContext& ctx, const GridView& grid, const 
   const MappingBatchParams p = params;
   const float inv_batch = 1.0f / static_cast<float>(p.batch_size);
   ParallelFor(ctx, p.batch_size, [=] PLX_HD_LAMBDA(int64_t i) {
-    const int64_t ray = static_cast<int64_t>(HashIndex(p.seed, i, set.num_rays));
+    const int64_t recent = set.num_rays - set.recent_begin;
+    const int64_t ray =
+        i < p.recent_batch && recent > 0
+            ? set.recent_begin + static_cast<int64_t>(HashIndex(p.seed, i, recent))
+            : static_cast<int64_t>(HashIndex(p.seed, i, set.num_rays));
     const TrainingFrameView& frame = set.frames[set.ray_frame[ray]];
     const uint32_t pixel = set.ray_pixel[ray];
     const int u = static_cast<int>(pixel % frame.camera.width);

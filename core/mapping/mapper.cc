@@ -70,6 +70,10 @@ absl::Status Mapper::ValidateOptions(const MapperOptions& o) {
   if (o.batch_size <= 0 || o.batch_size > (1 << 24)) {
     return absl::InvalidArgumentError(absl::StrCat("batch size out of range: ", o.batch_size));
   }
+  if (o.window_keyframes < 0 || !(o.window_fraction >= 0.0f && o.window_fraction <= 1.0f)) {
+    return absl::InvalidArgumentError(
+        "window_keyframes must not be negative and window_fraction must be in [0, 1]");
+  }
   if (o.coarse_to_fine && !(o.upsample_at > 0.0f && o.upsample_at < 1.0f)) {
     return absl::InvalidArgumentError("upsample_at must be inside (0, 1)");
   }
@@ -168,9 +172,13 @@ absl::StatusOr<MappingSummary> Mapper::Optimize(const MappingProgressCallback& p
   }
   const auto start = std::chrono::steady_clock::now();
   losses_.resize(options_.batch_size);
-  const TrainingRaysView rays = training_.rays_view();
+  const TrainingRaysView rays = training_.rays_view(options_.window_keyframes);
   MappingBatchParams batch;
   batch.batch_size = options_.batch_size;
+  if (rays.recent_begin > 0) {
+    batch.recent_batch =
+        static_cast<int64_t>(options_.window_fraction * static_cast<float>(options_.batch_size));
+  }
   batch.depth_weight = options_.depth_weight;
   batch.depth_huber = options_.depth_huber;
   batch.depth_noise = options_.fusion.noise;

@@ -58,6 +58,12 @@ struct MapperOptions {
   // single step pays for cloning most of the map (a mapping session sets this).
   int max_clones_per_iteration = 0;
 
+  // Local window (SLAM): with window_keyframes > 0, window_fraction of each batch is drawn from
+  // the rays of the last window_keyframes keyframes and the rest from every keyframe, so new
+  // geometry keeps converging while older keyframes still anchor what they saw.
+  int window_keyframes = 0;
+  float window_fraction = 0.5f;
+
   uint32_t seed = 20200823;
   RenderOptions render;
   int progress_every = 25;  // iterations between progress reports
@@ -128,6 +134,12 @@ class Mapper {
   // cell occupancy. Copy-on-write: it shares every brick with the mapper's map, which clones a
   // brick before its next change, so this costs the index, not the bricks.
   absl::StatusOr<std::shared_ptr<const PlenoxelMap>> Publish();
+
+  // Moves keyframe i to a refined pose (SLAM's keyframe pose refinement). Its bricks stay
+  // where its first pose put them: refinements are small against the allocation band.
+  absl::Status SetKeyframePose(int i, const SE3& world_T_camera) {
+    return training_.SetPose(i, world_T_camera);
+  }
 
   PlenoxelMap& map() { return *map_; }
   const PlenoxelMap& map() const { return *map_; }

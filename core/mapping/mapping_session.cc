@@ -174,6 +174,12 @@ absl::StatusOr<std::shared_ptr<const PlenoxelMap>> MappingSession::Publish() {
   return latest_;
 }
 
+absl::Status MappingSession::SetKeyframePose(int i, const SE3& world_T_camera) {
+  PLX_RETURN_IF_ERROR(mapper_->SetKeyframePose(i, world_T_camera));
+  changed_since_publish_ = true;
+  return absl::OkStatus();
+}
+
 MappingSessionProgress MappingSession::progress() const {
   MappingSessionProgress p;
   {

@@ -104,6 +104,12 @@ class MappingSession {
   // version, when it returns that one.
   absl::StatusOr<std::shared_ptr<const PlenoxelMap>> Publish();
 
+  // The keyframes integrated so far, in order (step-runner thread only).
+  const TrainingSet& keyframes() const { return mapper_->training_set(); }
+  // Moves integrated keyframe i to a refined pose; the next version publishes the change
+  // (step-runner thread only).
+  absl::Status SetKeyframePose(int i, const SE3& world_T_camera);
+
   MappingSessionProgress progress() const;
   // The latest published version (null before the first publish).
   const std::shared_ptr<const PlenoxelMap>& latest() const { return latest_; }

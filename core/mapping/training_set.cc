@@ -22,6 +22,7 @@ absl::Status TrainingSet::AddFrame(RgbdFrame frame, const SE3& world_T_camera,
   if (frames_.size() >= (1u << 20)) return absl::ResourceExhaustedError("too many keyframes");
   const uint32_t index = static_cast<uint32_t>(frames_.size());
   const float max_d = static_cast<float>(max_depth);
+  first_ray_.push_back(num_rays());
   const UnifiedVector<float>& depth = frame.depth.data;
   for (size_t p = 0; p < depth.size(); ++p) {
     if (depth[p] > 0.0f && depth[p] <= max_d) {
@@ -40,12 +41,27 @@ absl::Status TrainingSet::AddFrame(RgbdFrame frame, const SE3& world_T_camera,
   return absl::OkStatus();
 }
 
-TrainingRaysView TrainingSet::rays_view() const {
+absl::Status TrainingSet::SetPose(int i, const SE3& world_T_camera) {
+  if (i < 0 || i >= num_frames()) {
+    return absl::OutOfRangeError(absl::StrCat("no keyframe ", i, " (", num_frames(), " keyframes)"));
+  }
+  if (!world_T_camera.IsFinite()) {
+    return absl::InvalidArgumentError(absl::StrCat("keyframe ", i, ": pose is not finite"));
+  }
+  poses_[i] = world_T_camera;
+  views_[i].camera = ToKernelCamera(world_T_camera, intrinsics_[i]);
+  return absl::OkStatus();
+}
+
+TrainingRaysView TrainingSet::rays_view(int recent_frames) const {
   TrainingRaysView v;
   v.frames = views_.data();
   v.ray_frame = ray_frame_.data();
   v.ray_pixel = ray_pixel_.data();
   v.num_rays = num_rays();
+  if (recent_frames > 0 && recent_frames < num_frames()) {
+    v.recent_begin = first_ray_[num_frames() - recent_frames];
+  }
   return v;
 }
 

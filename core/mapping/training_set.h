@@ -28,8 +28,12 @@ class TrainingSet {
   const SE3& pose(int i) const { return poses_[i]; }
   const PinholeIntrinsics& intrinsics(int i) const { return intrinsics_[i]; }
 
-  // Valid until the next AddFrame.
-  TrainingRaysView rays_view() const;
+  // Moves keyframe i to a refined pose (SLAM's keyframe pose refinement); its rays follow.
+  absl::Status SetPose(int i, const SE3& world_T_camera);
+
+  // Valid until the next AddFrame. With recent_frames > 0, the view's recent range holds the
+  // rays of the last recent_frames keyframes (TrainingRaysView::recent_begin).
+  TrainingRaysView rays_view(int recent_frames = 0) const;
 
  private:
   std::deque<RgbdFrame> frames_;  // deque: image buffers never move when frames are added
@@ -39,6 +43,7 @@ class TrainingSet {
   UnifiedVector<TrainingFrameView> views_;
   UnifiedVector<uint32_t> ray_frame_;
   UnifiedVector<uint32_t> ray_pixel_;
+  std::vector<int64_t> first_ray_;  // per keyframe: the index of its first ray
 };
 
 }  // namespace plx

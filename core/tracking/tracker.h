@@ -102,8 +102,11 @@ class Tracker {
                                        const PinholeIntrinsics& intrinsics,
                                        const std::optional<SE3>& prior = std::nullopt);
 
- private:
+  // The constant-velocity prediction at `timestamp` from the last frame tracked (not LOST):
+  // the last pose when there is no motion model or the gap is over a second.
   SE3 Predict(double timestamp) const;
+
+ private:
   void SamplePixels(const RgbdFrame& frame, int count);
   // Computes the per-ray terms at `pose` and sums them with the noise stretched by `scale`
   // (colour, depth); when `estimate_scale` is set, first replaces `scale` by the robust spread.

@@ -656,6 +656,32 @@ TEST(PlenoxdDeviceFlagsTest, BadBackendOrGpusStopsTheDaemonAtStart) {
   }
 }
 
+// plenoxd's secret files are checked before it listens: a certificate or key that is not PEM,
+// or a token with a space inside, stops it with a usage error naming the file (a bad
+// certificate used to surface as "cannot listen ... address in use").
+TEST(PlenoxdSecretFlagsTest, BadTlsOrTokenFilesAreNamed) {
+  ScopedTempDir work("plenoxd_secrets");
+  WriteStringToFile(work / "cert.pem", "not a certificate\n");
+  WriteStringToFile(work / "key.pem", "not a key\n");
+  WriteStringToFile(work / "token", "two words\n");
+  const auto run = [&](const std::vector<std::string>& flags) {
+    std::vector<std::string> args = {"--listen", "127.0.0.1:0", "--data-dir",
+                                     work.path() + "/data"};
+    args.insert(args.end(), flags.begin(), flags.end());
+    return plx::testing::RunCommand(PLENOXD_BINARY, args, "", /*timeout_s=*/20.0);
+  };
+  const CommandResult tls = run({"--tls-cert", work / "cert.pem", "--tls-key", work / "key.pem"});
+  EXPECT_EQ(tls.exit_code, kExitUsage) << tls.Describe();
+  EXPECT_THAT(tls.err, AllOf(HasSubstr(work / "cert.pem"), HasSubstr("not a PEM certificate"),
+                             Not(HasSubstr("in use"))))
+      << tls.Describe();
+  const CommandResult token = run({"--auth-token-file", work / "token"});
+  EXPECT_EQ(token.exit_code, kExitUsage) << token.Describe();
+  EXPECT_THAT(token.err, AllOf(HasSubstr("--auth-token-file: " + work / "token"),
+                               HasSubstr("printable ASCII without spaces")))
+      << token.Describe();
+}
+
 // `plenox --server ... info`: the daemon's version and its one CPU worker (--backend cpu).
 TEST(RemoteCliInfoTest, InfoListsTheDevices) {
   ScopedTempDir work("plenox_remote_info");

@@ -6,7 +6,9 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
 
+#include "tests/image_bytes.h"
 #include "tests/server/daemon_fixture.h"
 
 namespace plx::server::testing {
@@ -181,6 +183,72 @@ TEST_F(BadInputTest, TrackImageSizesMustMatchTheIntrinsics) {
                         "frame.depth");
 }
 
+// Decompression bombs: a PNG of a few dozen bytes declaring 16384x16384 is refused from its
+// header, before any image of the call is decoded, whether it disagrees with the intrinsics
+// (INVALID_ARGUMENT) or agrees with intrinsics over the pixel limit (RESOURCE_EXHAUSTED).
+TEST_F(BadInputTest, ImageBombsAreRefusedBeforeDecoding) {
+  const std::string bomb = plx::testing::PngDeclaring(16384, 16384);
+  const std::string depth_bomb = plx::testing::PngDeclaring(16384, 16384, 0, 16);
+  const int64_t decoded_before = ImageBuffersDecoded();
+  const absl::Time start = absl::Now();
+
+  pb::Frame colour = EncodeFrame(0, false);
+  colour.set_color(bomb);
+  EXPECT_CODE_AND_FIELD(TrackStatus(stub(), {TrackStart("a", colour)}), INVALID_ARGUMENT,
+                        "frame.color: image is 16384x16384 (PNG header), the intrinsics say");
+  pb::Frame depth = EncodeFrame(0, false);
+  depth.set_depth(depth_bomb);
+  EXPECT_CODE_AND_FIELD(TrackStatus(stub(), {TrackStart("a", depth)}), INVALID_ARGUMENT,
+                        "frame.depth: image is 16384x16384");
+  pb::Frame keyframe = EncodeFrame(5, true);
+  keyframe.set_color(bomb);
+  EXPECT_CODE_AND_FIELD(IntegrateStatus(stub(), {IntegrateStart("a", &keyframe)}),
+                        INVALID_ARGUMENT, "frame[0].color: image is 16384x16384");
+  // The intrinsics agree with the bomb: 268 million pixels, over the default limit (4K UHD).
+  pb::Frame matching = EncodeFrame(0, false);
+  matching.mutable_intrinsics()->set_width(16384);
+  matching.mutable_intrinsics()->set_height(16384);
+  matching.set_color(bomb);
+  matching.set_depth(depth_bomb);
+  EXPECT_CODE_AND_FIELD(TrackStatus(stub(), {TrackStart("a", matching)}), RESOURCE_EXHAUSTED,
+                        "frame.intrinsics: a 16384x16384 frame is over the limit of 8294400");
+  pb::Frame matching_keyframe = matching;
+  *matching_keyframe.mutable_pose() = ToProto(GroundTruth(5));
+  EXPECT_CODE_AND_FIELD(IntegrateStatus(stub(), {IntegrateStart("a", &matching_keyframe)}),
+                        RESOURCE_EXHAUSTED, "--max-frame-pixels");
+
+  EXPECT_EQ(ImageBuffersDecoded(), decoded_before) << "an image of a refused frame was decoded";
+  EXPECT_LT(absl::Now() - start, absl::Seconds(10));
+}
+
+// Bytes that are no PNG or JPEG at all never reach a codec either (OpenCV would read a BMP).
+TEST_F(BadInputTest, OnlyPngAndJpegAreDecoded) {
+  pb::Frame f = EncodeFrame(0, false);
+  std::vector<uint8_t> bmp;
+  ASSERT_TRUE(cv::imencode(".bmp", cv::Mat(kHeight, kWidth, CV_8UC3, cv::Scalar(1, 2, 3)), bmp));
+  f.set_color(std::string(bmp.begin(), bmp.end()));
+  const int64_t decoded_before = ImageBuffersDecoded();
+  EXPECT_CODE_AND_FIELD(TrackStatus(stub(), {TrackStart("a", f)}), INVALID_ARGUMENT,
+                        "frame.color: not a PNG or JPEG");
+  EXPECT_EQ(ImageBuffersDecoded(), decoded_before);
+}
+
+// A good header over corrupt data passes the checks on arrival and fails where the frame is
+// decoded, in the stream's task: the stream still ends INVALID_ARGUMENT naming the field.
+TEST_F(BadInputTest, CorruptDataBehindAGoodHeaderFailsNamingTheField) {
+  const std::string truncated = plx::testing::PngDeclaring(kWidth, kHeight);
+  pb::Frame f = EncodeFrame(0, false);
+  f.set_color(truncated);
+  EXPECT_CODE_AND_FIELD(TrackStatus(stub(), {TrackStart("a", f)}), INVALID_ARGUMENT,
+                        "frame.color: cannot decode");
+  pb::Frame k = EncodeFrame(5, true);
+  k.set_depth(plx::testing::PngDeclaring(kWidth, kHeight, 0, 16));
+  const pb::Frame good = EncodeFrame(15, true);
+  EXPECT_CODE_AND_FIELD(
+      IntegrateStatus(stub(), {IntegrateStart("a", &good), IntegrateFrame(k)}), INVALID_ARGUMENT,
+      "frame[1].depth: cannot decode");
+}
+
 TEST_F(BadInputTest, TrackBadIntrinsicsAndEncodingsNameTheField) {
   pb::Frame none = EncodeFrame(0, false);
   none.clear_intrinsics();
@@ -236,6 +304,40 @@ TEST_F(BadInputTest, TrackBadOptionsNameOptions) {
   pb::TrackRequest r = TrackStart("a", EncodeFrame(0, false));
   r.mutable_options()->set_rays(3);
   EXPECT_CODE_AND_FIELD(TrackStatus(stub(), {r}), INVALID_ARGUMENT, "options");
+  // An enum number the daemon does not know is refused, not taken as the default mode.
+  pb::TrackRequest mode = TrackStart("a", EncodeFrame(0, false));
+  mode.mutable_options()->set_mode(static_cast<pb::TrackOptions::Mode>(99));
+  EXPECT_CODE_AND_FIELD(TrackStatus(stub(), {mode}), INVALID_ARGUMENT,
+                        "options.mode: unknown mode 99");
+}
+
+// Negative and non-finite options are refused, not replaced by the default (0 is the default).
+TEST_F(BadInputTest, IntegrateMaxDepthMustBeFiniteAndNotNegative) {
+  const pb::Frame f = EncodeFrame(5, true);
+  for (float bad : {-1.0f, std::nanf(""), INFINITY}) {
+    pb::IntegrateRequest r = IntegrateStart("a", &f);
+    r.mutable_options()->set_max_depth(bad);
+    SCOPED_TRACE(bad);
+    EXPECT_CODE_AND_FIELD(IntegrateStatus(stub(), {r}), INVALID_ARGUMENT, "options.max_depth");
+  }
+  pb::MapInfo a;
+  ASSERT_TRUE(GetMap(stub(), "a", &a).ok());
+  EXPECT_EQ(a.version(), a_before_.version());
+}
+
+TEST_F(BadInputTest, ExportMinDensityMustBeFiniteAndNotNegative) {
+  for (float bad : {-1.0f, std::nanf(""), INFINITY}) {
+    grpc::ClientContext context;
+    Prepare(&context, "", kBadCallTimeout);
+    pb::ExportRequest request;
+    request.set_map("a");
+    request.set_min_density(bad);
+    auto reader = stub().Export(&context, request);
+    pb::ExportChunk chunk;
+    EXPECT_FALSE(reader->Read(&chunk)) << bad;
+    SCOPED_TRACE(bad);
+    EXPECT_CODE_AND_FIELD(reader->Finish(), INVALID_ARGUMENT, "min_density");
+  }
 }
 
 TEST_F(BadInputTest, IntegrateUndecodableColourNamesTheKeyframe) {

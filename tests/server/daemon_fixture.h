@@ -511,22 +511,29 @@ inline double TranslationRmse(const std::vector<pb::PoseEstimate>& estimates,
 // ---------------------------------------------------------------------------------------------
 // HTTP and TCP.
 
-// GET `path` from 127.0.0.1:`port` over a raw socket; the whole response (headers and body),
-// or empty on a connection error.
-inline std::string HttpGet(int port, const std::string& path) {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0) return "";
+// A TCP connection to 127.0.0.1:`port` whose reads give up after `timeout`; -1 on failure.
+inline int ConnectLoopback(int port, absl::Duration timeout = absl::Seconds(5)) {
+  const int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) return -1;
   sockaddr_in addr{};
   addr.sin_family = AF_INET;
   addr.sin_port = htons(static_cast<uint16_t>(port));
   addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  timeval timeout{5, 0};
-  setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof(timeout));
+  const int64_t micros = absl::ToInt64Microseconds(timeout);
+  timeval tv{static_cast<time_t>(micros / 1000000), static_cast<suseconds_t>(micros % 1000000)};
+  setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
   if (connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
     close(fd);
-    return "";
+    return -1;
   }
-  const std::string request = absl::StrCat("GET ", path, " HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n");
+  return fd;
+}
+
+// Sends `request` verbatim to 127.0.0.1:`port` and reads until the server closes (or 5 s pass
+// without a byte): the whole response, headers and body, or empty on a connection error.
+inline std::string HttpExchange(int port, const std::string& request) {
+  const int fd = ConnectLoopback(port);
+  if (fd < 0) return "";
   if (send(fd, request.data(), request.size(), MSG_NOSIGNAL) != static_cast<ssize_t>(request.size())) {
     close(fd);
     return "";
@@ -540,6 +547,11 @@ inline std::string HttpGet(int port, const std::string& path) {
   }
   close(fd);
   return response;
+}
+
+// GET `path` over HTTP/1.0 (the server closes after answering).
+inline std::string HttpGet(int port, const std::string& path) {
+  return HttpExchange(port, absl::StrCat("GET ", path, " HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n"));
 }
 
 // A loopback TCP proxy to 127.0.0.1:`target_port`. CutAll() drops every connection at once

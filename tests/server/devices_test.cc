@@ -178,7 +178,7 @@ TEST(DaemonDevicesTest, TheCpuWorkerIsReportedByGetServerInfoAndMetrics) {
   EXPECT_EQ(info.maps(), 1u);
 
   const std::string body = HttpGet(d.daemon->metrics_port(), "/metrics");
-  ASSERT_EQ(body.rfind("HTTP/1.0 200", 0), 0u) << body.substr(0, 200);
+  ASSERT_EQ(body.rfind("HTTP/1.1 200", 0), 0u) << body.substr(0, 200);
   EXPECT_THAT(body, HasSubstr("# TYPE plenoxd_device_info gauge\n"));
   EXPECT_THAT(body, HasSubstr("plenoxd_device_info{device=\"cpu\",kind=\"cpu\","
                               "name=\"cpu (2 threads)\"} 1\n"));

@@ -174,6 +174,55 @@ TEST(LimitsTest, MessageOverTheSizeLimitIsResourceExhausted) {
   EXPECT_TRUE(WaitFor([&] { return d.daemon->state().metrics->active_streams.load() == 0; }));
 }
 
+// --max-frame-pixels: a frame of the room (128x96) is over a limit one pixel smaller, whatever
+// its encoding, on Track and Integrate alike: RESOURCE_EXHAUSTED naming the intrinsics and the
+// flag, with no image decoded. At exactly the limit it is tracked.
+TEST(LimitsTest, FrameOverThePixelLimitIsResourceExhaustedBeforeDecoding) {
+  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_pixels"));
+  o.max_frame_pixels = kWidth * kHeight - 1;
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartWithMaps({"room"}, o);
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+
+  pb::Frame raw = EncodeFrame(0, false);
+  raw.set_color(std::string(kWidth * kHeight * 3, '\x40'));
+  raw.set_color_encoding(pb::COLOR_ENCODING_RAW_RGB8);
+  raw.set_depth(std::string(kWidth * kHeight * 2, '\x10'));
+  raw.set_depth_encoding(pb::DEPTH_ENCODING_RAW_U16);
+  const int64_t decoded_before = ImageBuffersDecoded();
+  for (const pb::Frame& frame : {EncodeFrame(0, false), raw}) {
+    grpc::ClientContext c;
+    Prepare(&c);
+    auto stream = d.stub->Track(&c);
+    pb::TrackRequest r;
+    r.set_map("room");
+    *r.mutable_frame() = frame;
+    stream->Write(r);
+    const grpc::Status s = Close(*stream);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << Describe(s);
+    EXPECT_NE(s.error_message().find("frame.intrinsics: a 128x96 frame is over the limit of "
+                                     "12287 pixels per frame (--max-frame-pixels)"),
+              std::string::npos)
+        << s.error_message();
+  }
+  ASSERT_TRUE(CreateMap(*d.stub, "fresh").ok());
+  const IntegrateResult integrated = Integrate(*d.stub, "fresh", {0});
+  EXPECT_EQ(integrated.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
+      << Describe(integrated.status);
+  EXPECT_NE(integrated.status.error_message().find("frame[0].intrinsics"), std::string::npos)
+      << integrated.status.error_message();
+  EXPECT_EQ(ImageBuffersDecoded(), decoded_before);
+  EXPECT_TRUE(WaitFor([&] { return d.daemon->state().metrics->active_streams.load() == 0; }));
+
+  DaemonOptions at_limit = TestDaemonOptions(ScratchDir("plx_srv_pixels_ok"));
+  at_limit.max_frame_pixels = kWidth * kHeight;
+  absl::StatusOr<std::unique_ptr<TestDaemon>> ok = StartWithMaps({"room"}, at_limit);
+  ASSERT_TRUE(ok.ok()) << ok.status();
+  const TrackResult tracked = TrackLockStep(*(*ok)->stub, "room", {0, 1});
+  EXPECT_TRUE(tracked.status.ok()) << Describe(tracked.status);
+  EXPECT_EQ(tracked.estimates.size(), 2u);
+}
+
 // The value of the first sample of `name` (no labels) in a Prometheus text body; -1 if absent.
 int64_t Sample(const std::string& body, const std::string& name) {
   for (absl::string_view line : absl::StrSplit(body, '\n')) {
@@ -195,7 +244,7 @@ TEST(MetricsTest, FramesTrackedAndDroppedMatchTheStreams) {
   ASSERT_GT(port, 0);
 
   const std::string idle = HttpGet(port, "/metrics");
-  ASSERT_EQ(idle.rfind("HTTP/1.0 200", 0), 0u) << idle.substr(0, 200);
+  ASSERT_EQ(idle.rfind("HTTP/1.1 200", 0), 0u) << idle.substr(0, 200);
   EXPECT_EQ(Sample(idle, "plenoxd_frames_tracked_total"), 0);
   EXPECT_EQ(Sample(idle, "plenoxd_serving"), 1);
   EXPECT_EQ(Sample(idle, "plenoxd_maps"), 1);
@@ -233,7 +282,7 @@ TEST(MetricsTest, FramesTrackedAndDroppedMatchTheStreams) {
 
   ASSERT_TRUE(WaitFor([&] { return d.daemon->state().metrics->active_streams.load() == 0; }));
   const std::string body = HttpGet(port, "/metrics");
-  ASSERT_EQ(body.rfind("HTTP/1.0 200", 0), 0u) << body.substr(0, 200);
+  ASSERT_EQ(body.rfind("HTTP/1.1 200", 0), 0u) << body.substr(0, 200);
   EXPECT_NE(body.find("# TYPE plenoxd_frames_tracked_total counter"), std::string::npos);
   EXPECT_EQ(Sample(body, "plenoxd_frames_tracked_total"), 7 + burst_estimates) << body;
   EXPECT_EQ(Sample(body, "plenoxd_frames_dropped_total"), burst_dropped);
@@ -242,7 +291,7 @@ TEST(MetricsTest, FramesTrackedAndDroppedMatchTheStreams) {
   EXPECT_EQ(Sample(body, "plenoxd_track_latency_seconds_count"), 7 + burst_estimates);
 
   const std::string other = HttpGet(port, "/other");
-  EXPECT_EQ(other.rfind("HTTP/1.0 404", 0), 0u) << other.substr(0, 200);
+  EXPECT_EQ(other.rfind("HTTP/1.1 404", 0), 0u) << other.substr(0, 200);
 }
 
 }  // namespace

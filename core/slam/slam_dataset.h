@@ -1,0 +1,50 @@
+// The SLAM job over a dataset (`plenox slam`, the demo, the benchmark): every frame through a
+// SlamSession, no ground truth used except, when the dataset has it, frame 0's pose as the
+// starting pose (so the trajectory lands in the ground-truth frame, as `plenox track` does).
+//
+// Replay: by default every frame is processed in order, as fast as the engine goes. `realtime`
+// replays the frames at their timestamps (scaled by `speed`) as a live sensor would: after
+// each frame the next one processed is the newest one whose time has come, and the frames
+// skipped on the way are dropped (latest wins).
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/datasets/dataset.h"
+#include "core/geometry/stamped_pose.h"
+#include "core/slam/slam_session.h"
+
+namespace plx {
+
+struct SlamDatasetOptions {
+  SlamOptions slam = DefaultSlamOptions();
+  bool start_from_ground_truth = true;
+  bool realtime = false;
+  double speed = 1.0;  // realtime replay speed (2 = twice as fast as recorded)
+  int max_frames = 0;  // 0 = every frame
+};
+
+struct SlamDatasetResult {
+  std::vector<StampedPose> trajectory;     // one pose per processed frame
+  std::vector<SlamFrameResult> results;    // per processed frame
+  std::vector<StampedPose> keyframes;      // final (refined) keyframe poses
+  std::shared_ptr<const PlenoxelMap> map;  // the final version
+  SlamProgress progress;
+  bool started_from_ground_truth = false;
+  int frames = 0;   // in the dataset (up to max_frames)
+  int dropped = 0;  // realtime: skipped because the tracker was behind
+  double ms_per_frame_median = 0.0;  // ProcessFrame time, image decoding excluded
+  double ms_per_frame_p95 = 0.0;
+  double wall_s = 0.0;               // first frame to the final map, decoding included
+};
+
+// `progress(result)` after every processed frame; returning false cancels.
+absl::StatusOr<SlamDatasetResult> RunSlamOnDataset(
+    const RgbdDataset& dataset, Backend& tracking_backend,
+    const SlamSession::BackendFactory& make_mapping_backend, const SlamDatasetOptions& options,
+    const std::function<bool(const SlamFrameResult&)>& progress = nullptr);
+
+}  // namespace plx

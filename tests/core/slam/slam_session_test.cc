@@ -1,0 +1,305 @@
+// SLAM on the synthetic room: trajectories recovered without ground truth, lost stretches and
+// relocalisation, keyframe pose refinement, memory over a revisited path, bad input.
+// Deterministic mode (lock-step mapping) unless a test says otherwise, so these numbers are
+// the same run to run.
+#include "core/slam/slam_session.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <memory>
+#include <vector>
+
+#include "core/cpu/cpu_backend.h"
+#include "core/eval/map_metrics.h"
+#include "core/eval/trajectory_metrics.h"
+#include "core/slam/slam_dataset.h"
+#include "tests/synthetic_room.h"
+
+namespace plx {
+namespace {
+
+// Lock-step mapping is bit-identical run to run only on one thread: gradients are scattered
+// with atomic adds, whose order changes the float sums (SlamOptions::deterministic).
+SlamSession::BackendFactory CpuFactory(int threads = 1) {
+  return [threads]() -> absl::StatusOr<std::unique_ptr<Backend>> {
+    return MakeCpuBackend(threads);
+  };
+}
+
+// Small and quick: 2 cm voxels, 1024 tracking rays, 30 iterations per keyframe.
+SlamOptions TestOptions() {
+  SlamOptions o = DefaultSlamOptions();
+  o.deterministic = true;
+  o.tracker.rays = 1024;
+  o.mapping.mapper = MapperOptionsForVoxelSize(0.02f);
+  o.mapping.mapper.window_keyframes = 5;
+  o.mapping.mapper.batch_size = 2048;
+  o.mapping.iterations_per_keyframe = 30;
+  o.refinement.tracker.rays = o.tracker.rays;
+  return o;
+}
+
+std::vector<StampedPose> GroundTruth(const RgbdDataset& dataset) {
+  std::vector<StampedPose> gt;
+  for (int i = 0; i < dataset.size(); ++i) {
+    gt.push_back({dataset.timestamp(i), *dataset.ground_truth(i)});
+  }
+  return gt;
+}
+
+double AteRmse(const std::vector<StampedPose>& estimate, const std::vector<StampedPose>& gt) {
+  absl::StatusOr<TrajectoryEvalResult> eval = EvaluateTrajectory(estimate, gt);
+  EXPECT_TRUE(eval.ok()) << eval.status();
+  return eval.ok() ? eval->ate.translation_m.rmse : 1e9;
+}
+
+double Distance(const SE3& a, const SE3& b) { return (a.translation() - b.translation()).norm(); }
+
+class SlamSessionTest : public ::testing::Test {
+ protected:
+  // 160x120, 90 frames: 3 s of the circling path, ~1.5 cm and 1 degree per frame.
+  static void SetUpTestSuite() {
+    dataset_ = testing::MakeSyntheticRoom(160, 120, 90).release();
+    ASSERT_NE(dataset_, nullptr);
+  }
+  static void TearDownTestSuite() {
+    delete dataset_;
+    dataset_ = nullptr;
+  }
+  void SetUp() override { backend_ = MakeCpuBackend(2); }
+
+  static InMemoryDataset* dataset_;
+  std::unique_ptr<Backend> backend_;
+};
+InMemoryDataset* SlamSessionTest::dataset_ = nullptr;
+
+TEST_F(SlamSessionTest, DeterministicRecoversTheTrajectoryAndTheMap) {
+  SlamDatasetOptions options;
+  options.slam = TestOptions();
+  absl::StatusOr<SlamDatasetResult> result =
+      RunSlamOnDataset(*dataset_, *backend_, CpuFactory(), options);
+  ASSERT_TRUE(result.ok()) << result.status();
+  ASSERT_TRUE(result->started_from_ground_truth);
+  ASSERT_EQ(result->trajectory.size(), 90u);
+  const double ate = AteRmse(result->trajectory, GroundTruth(*dataset_));
+  std::printf("ATE %.2f mm over %d keyframes\n", 1000 * ate, result->progress.keyframes);
+  EXPECT_LE(ate, 0.005);  // measured 4.0 mm
+  EXPECT_EQ(result->progress.lost, 0);
+  EXPECT_GE(result->progress.keyframes, 3);
+  EXPECT_LE(result->progress.keyframes, 30);
+  EXPECT_EQ(result->progress.keyframes_integrated, result->progress.keyframes);
+  ASSERT_NE(result->map, nullptr);
+  // Frames between keyframes, rendered at their ground-truth poses (the trajectory started at
+  // frame 0's, so the map is in the ground-truth frame).
+  MapEvalOptions eval;
+  eval.pixels_per_frame = 0;
+  absl::StatusOr<MapEvalResult> held_out =
+      EvaluateMap(*backend_, *result->map, *dataset_, {5, 45, 85}, eval);
+  ASSERT_TRUE(held_out.ok()) << held_out.status();
+  std::printf("held-out PSNR %.2f dB, depth L1 %.2f mm, coverage %.3f\n", held_out->psnr,
+              1000 * held_out->depth_l1_m, held_out->coverage);
+  EXPECT_GT(held_out->psnr, 22.0);
+  EXPECT_LT(held_out->depth_l1_m, 0.02);
+  EXPECT_GT(held_out->coverage, 0.9);
+}
+
+TEST_F(SlamSessionTest, DeterministicRunsAreBitIdentical) {
+  SlamDatasetOptions options;
+  options.slam = TestOptions();
+  options.max_frames = 30;
+  absl::StatusOr<SlamDatasetResult> a = RunSlamOnDataset(*dataset_, *backend_, CpuFactory(), options);
+  absl::StatusOr<SlamDatasetResult> b = RunSlamOnDataset(*dataset_, *backend_, CpuFactory(), options);
+  ASSERT_TRUE(a.ok()) << a.status();
+  ASSERT_TRUE(b.ok()) << b.status();
+  ASSERT_EQ(a->trajectory.size(), b->trajectory.size());
+  for (size_t i = 0; i < a->trajectory.size(); ++i) {
+    EXPECT_EQ(a->trajectory[i].pose.matrix(), b->trajectory[i].pose.matrix()) << "frame " << i;
+  }
+  EXPECT_EQ(a->progress.keyframes, b->progress.keyframes);
+  // The same map, value for value (brick slots may be numbered in another order).
+  ASSERT_EQ(a->map->grid.num_bricks(), b->map->grid.num_bricks());
+  std::vector<float> da = a->map->grid.DensityValues(), db = b->map->grid.DensityValues();
+  std::sort(da.begin(), da.end());
+  std::sort(db.begin(), db.end());
+  EXPECT_TRUE(da == db);
+}
+
+TEST_F(SlamSessionTest, StartsAtTheGivenInitialPose) {
+  // Not the ground truth: the whole trajectory lands in the frame the initial pose sets.
+  const SE3 initial(Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitY())),
+                    Eigen::Vector3d(1.0, -0.5, 2.0));
+  SlamDatasetOptions options;
+  options.slam = TestOptions();
+  options.slam.initial_pose = initial;
+  options.start_from_ground_truth = false;
+  options.max_frames = 30;
+  absl::StatusOr<SlamDatasetResult> result =
+      RunSlamOnDataset(*dataset_, *backend_, CpuFactory(), options);
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_FALSE(result->started_from_ground_truth);
+  EXPECT_EQ(result->trajectory[0].pose.matrix(), initial.matrix());
+  const SE3 to_initial = initial * dataset_->ground_truth(0)->Inverse();
+  for (int i = 0; i < 30; ++i) {
+    const SE3 expected = to_initial * *dataset_->ground_truth(i);
+    EXPECT_LT(Distance(result->trajectory[i].pose, expected), 0.01) << "frame " << i;
+  }
+}
+
+TEST_F(SlamSessionTest, BlankStretchIsLostNeverIntegratedThenRelocalises) {
+  absl::StatusOr<std::unique_ptr<SlamSession>> session =
+      SlamSession::Create([] {
+        SlamOptions o = TestOptions();
+        o.initial_pose = SE3();
+        return o;
+      }(), backend_.get(), CpuFactory());
+  ASSERT_TRUE(session.ok()) << session.status();
+  const PinholeIntrinsics& k = dataset_->calibration().pinhole;
+  // Frames 0..39 normal, 40..45 blank (a covered lens), then normal again.
+  const SE3 to_estimate = dataset_->ground_truth(0)->Inverse();
+  int keyframes_before_blank = 0;
+  int relocalised_at = -1;
+  for (int i = 0; i < 70; ++i) {
+    RgbdFrame frame = dataset_->frames()[i];
+    const bool blank = i >= 40 && i < 46;
+    if (blank) {
+      for (float& v : frame.color.data) v = 0.0f;
+      for (float& v : frame.depth.data) v = 0.0f;
+    }
+    absl::StatusOr<SlamFrameResult> r = (*session)->ProcessFrame(std::move(frame), k);
+    ASSERT_TRUE(r.ok()) << r.status();
+    if (i == 39) keyframes_before_blank = r->keyframes;
+    if (blank) {
+      EXPECT_EQ(r->state, SlamState::kLost) << "frame " << i;
+      EXPECT_FALSE(r->keyframe);
+      EXPECT_EQ(r->keyframes, keyframes_before_blank) << "a lost frame was integrated";
+    }
+    if (i >= 46 && relocalised_at < 0 && r->state == SlamState::kRelocalised) relocalised_at = i;
+    if (relocalised_at >= 0 && i > relocalised_at) {
+      EXPECT_NE(r->state, SlamState::kLost) << "frame " << i;
+      EXPECT_LT(Distance(r->pose, to_estimate * *dataset_->ground_truth(i)), 0.02) << "frame " << i;
+    }
+  }
+  EXPECT_GE(relocalised_at, 46);
+  EXPECT_LE(relocalised_at, 50) << "relocalised too late";
+  const SlamProgress p = (*session)->progress();
+  EXPECT_EQ(p.lost, 6);
+  EXPECT_EQ(p.relocalised, 1);
+  ASSERT_TRUE((*session)->Finish().ok());
+}
+
+TEST_F(SlamSessionTest, RefinementReducesAnInjectedKeyframePoseError) {
+  SlamOptions o = TestOptions();
+  auto mapping = MappingSession::Create(o.mapping, backend_.get(), nullptr);
+  ASSERT_TRUE(mapping.ok()) << mapping.status();
+  const PinholeIntrinsics& k = dataset_->calibration().pinhole;
+  for (int i : {0, 15, 30, 45, 60}) {
+    ASSERT_TRUE((*mapping)->AddKeyframe(dataset_->frames()[i], *dataset_->ground_truth(i), k).ok());
+  }
+  while ((*mapping)->has_work()) ASSERT_TRUE((*mapping)->Step(true).ok());
+  absl::StatusOr<std::shared_ptr<const PlenoxelMap>> map = (*mapping)->Publish();
+  ASSERT_TRUE(map.ok()) << map.status();
+  // Keyframe 3 (frame 45) pushed 2 cm and 1 degree off its true pose.
+  const SE3 truth = *dataset_->ground_truth(45);
+  Vector6d error;
+  error << 0.015, -0.01, 0.008, 0.01, 0.012, -0.006;
+  ASSERT_TRUE((*mapping)->SetKeyframePose(3, truth * SE3::Exp(error)).ok());
+  const double before = Distance((*mapping)->keyframes().pose(3), truth);
+  o.refinement.window = 5;
+  absl::StatusOr<KeyframeRefinementResult> refined =
+      RefineKeyframePoses(**mapping, **map, *backend_, o.refinement);
+  ASSERT_TRUE(refined.ok()) << refined.status();
+  const double after = Distance((*mapping)->keyframes().pose(3), truth);
+  std::printf("keyframe 3: %.2f mm -> %.2f mm\n", 1000 * before, 1000 * after);
+  EXPECT_LT(after, 0.25 * before);
+  // Keyframe 0 fixes the gauge: never moved.
+  EXPECT_EQ((*mapping)->keyframes().pose(0).matrix(), dataset_->ground_truth(0)->matrix());
+}
+
+TEST_F(SlamSessionTest, BadInputIsRejected) {
+  SlamOptions bad = TestOptions();
+  bad.keyframes.max_translation_m = 0.0;
+  EXPECT_EQ(SlamSession::Create(bad, backend_.get(), CpuFactory()).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  bad = TestOptions();
+  bad.relocalisation_keyframes = -1;
+  EXPECT_EQ(SlamSession::Create(bad, backend_.get(), CpuFactory()).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(SlamSession::Create(TestOptions(), nullptr, CpuFactory()).status().code(),
+            absl::StatusCode::kInvalidArgument);
+
+  auto session = SlamSession::Create(TestOptions(), backend_.get(), CpuFactory());
+  ASSERT_TRUE(session.ok()) << session.status();
+  PinholeIntrinsics wrong = dataset_->calibration().pinhole;
+  wrong.width = 100;
+  absl::Status mismatch = (*session)->ProcessFrame(dataset_->frames()[0], wrong).status();
+  EXPECT_EQ(mismatch.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(mismatch.message().find("do not match the intrinsics"), std::string::npos) << mismatch;
+  SE3 nan_prior(Eigen::Quaterniond::Identity(), Eigen::Vector3d(NAN, 0, 0));
+  EXPECT_EQ((*session)->ProcessFrame(dataset_->frames()[0], dataset_->calibration().pinhole,
+                                     nan_prior).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  // Nothing was accepted: the next good frame bootstraps.
+  absl::StatusOr<SlamFrameResult> first =
+      (*session)->ProcessFrame(dataset_->frames()[0], dataset_->calibration().pinhole);
+  ASSERT_TRUE(first.ok()) << first.status();
+  EXPECT_EQ(first->frame, 0);
+  EXPECT_TRUE(first->keyframe);
+  ASSERT_TRUE((*session)->Finish().ok());
+  EXPECT_EQ((*session)->ProcessFrame(dataset_->frames()[1], dataset_->calibration().pinhole)
+                .status().code(),
+            absl::StatusCode::kFailedPrecondition);
+}
+
+TEST_F(SlamSessionTest, ConcurrentMappingTracksTheSequence) {
+  SlamDatasetOptions options;
+  options.slam = TestOptions();
+  options.slam.deterministic = false;
+  options.max_frames = 60;
+  absl::StatusOr<SlamDatasetResult> result =
+      RunSlamOnDataset(*dataset_, *backend_, CpuFactory(2), options);
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_EQ(result->progress.lost, 0);
+  // Timing decides which version each frame meets, so the bound is looser than lock-step's.
+  EXPECT_LE(AteRmse(result->trajectory, GroundTruth(*dataset_)), 0.02);
+  // Finish integrated every accepted keyframe and published the end of the budget.
+  EXPECT_EQ(result->progress.keyframes_integrated, result->progress.keyframes);
+  EXPECT_EQ(result->progress.pending_keyframes, 0);
+  EXPECT_GE(result->progress.mapping_iterations,
+            options.slam.mapping.iterations_per_keyframe * result->progress.keyframes);
+}
+
+// Two laps of the circling path: the second lap sees only mapped space, so it adds (almost) no
+// keyframes and the map does not grow: memory follows the space covered, not the frame count.
+TEST(SlamMemoryTest, RevisitedPlacesAddNoKeyframes) {
+  SyntheticOptions s;
+  s.width = 96;
+  s.height = 72;
+  s.fps = 10.0;         // one lap (12 s) in 120 frames
+  s.num_frames = 240;
+  absl::StatusOr<InMemoryDataset> dataset = GenerateSyntheticSequence(s);
+  ASSERT_TRUE(dataset.ok()) << dataset.status();
+  std::unique_ptr<Backend> backend = MakeCpuBackend(2);
+  SlamOptions o = TestOptions();
+  o.initial_pose = *dataset->ground_truth(0);
+  auto session = SlamSession::Create(o, backend.get(), CpuFactory());
+  ASSERT_TRUE(session.ok()) << session.status();
+  SlamProgress after_first_lap;
+  for (int i = 0; i < dataset->size(); ++i) {
+    absl::StatusOr<SlamFrameResult> r =
+        (*session)->ProcessFrame(dataset->frames()[i], dataset->calibration().pinhole);
+    ASSERT_TRUE(r.ok()) << r.status();
+    ASSERT_NE(r->state, SlamState::kLost) << "frame " << i << ": " << r->reason;
+    if (i == 119) after_first_lap = (*session)->progress();
+  }
+  const SlamProgress end = (*session)->progress();
+  std::printf("keyframes %d -> %d, map %.1f -> %.1f MB, keyframes %.1f -> %.1f MB\n",
+              after_first_lap.keyframes, end.keyframes, after_first_lap.map_bytes / 1e6,
+              end.map_bytes / 1e6, after_first_lap.keyframe_bytes / 1e6, end.keyframe_bytes / 1e6);
+  EXPECT_LE(end.keyframes - after_first_lap.keyframes, 2);
+  EXPECT_LE(end.map_bytes, after_first_lap.map_bytes * 11 / 10);
+}
+
+}  // namespace
+}  // namespace plx
