@@ -27,9 +27,9 @@ compute_odometry_result_point_to_plane) rather than o3d.t.pipelines.registration
   - levels are made by keeping every 2nd or 4th pixel of the depth and of the ray-cast maps,
     with the intrinsics scaled to match, instead of Gaussian pyramids;
   - the depth is not bilateral-filtered;
-  - Open3D's per-level criteria apply: at most N iterations per level (default 10, 5, 3, fine
-    to coarse, as in rgbd_odometry_multi_scale's default), stopping early when the fitness
-    and the inlier RMSE change by less than 1e-6;
+  - Open3D's per-level criteria apply: at most N iterations per level (default 10, 5, 3,
+    coarse to fine, rgbd_odometry_multi_scale's default), stopping early when the fitness
+    and the inlier RMSE change by less than 1e-6 (relative);
   - Open3D's default OdometryLossParams apply: depth_outlier_trunc 0.07 m and
     depth_huber_delta 0.05 m.
   Each call returns an increment, which is applied on the left of the running
@@ -52,8 +52,8 @@ On random planes seen from random poses (1 cm voxels, noise-free depth), the mea
 distance of the ray-cast surface from the true plane is -9 to +9 mm as shipped and under
 1 mm with both corrections. The per-pixel scatter, about 4 mm, comes from the
 nearest-voxel look-ups and stays. On `plenox synth`'s 60 frames the peer's ATE goes from
-8.9 cm to 1.7-2.0 cm (depth_max 10 m). On tum_fr3_teddy (depth_max 3 m) it goes from 11.2 cm
-(2.3 cm after SE(3) alignment) to 4.2 cm (1.4 cm).
+8.9 cm to 1.7 cm (depth_max 10 m). On tum_fr3_teddy (depth_max 3 m) it goes from 11.2 cm
+(2.3 cm after SE(3) alignment) to 4.9 cm (1.5 cm).
 
 A frame is lost when the final fitness (the share of the frame's pixels with an inlier
 match) is below --min-fitness. It is then given the previous frame's relative motion and
