@@ -208,6 +208,13 @@ def write_tum(path, stamps, poses):
     os.replace(tmp, path)
 
 
+def peak_rss_mb():
+    """This process's peak resident set size in MB (ru_maxrss KiB / 1024, as plenox reports
+    it)."""
+    import resource  # Unix only; imported here so the module still imports elsewhere
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
 def percentile(values, p):
     """Linear-interpolation percentile (numpy's default), without numpy."""
     v = sorted(values)
@@ -328,10 +335,12 @@ def check_keys(label, obj, keys):
     return ["%s: JSON lacks %s" % (label, ", ".join(missing))] if missing else []
 
 
-def make_synthetic(plenox, synth_dir, timeout):
-    """`plenox synth --out synth_dir`; raises CommandError when it fails or writes no
-    intrinsics.txt."""
+def make_synthetic(plenox, synth_dir, timeout, frames=None):
+    """`plenox synth --out synth_dir [--frames N]`; raises CommandError when it fails or
+    writes no intrinsics.txt."""
     cmd = [plenox, "synth", "--out", synth_dir]
+    if frames:
+        cmd += ["--frames", str(frames)]
     if not os.access(plenox, os.X_OK):
         raise CommandError("plenox binary not found or not executable: %s" % plenox)
     stdout, _ = run_cmd("synthetic synth", cmd, timeout)
