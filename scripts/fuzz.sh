@@ -59,11 +59,15 @@ for h in "${harnesses[@]}"; do
   mkdir -p "$work" "$artifacts" "$tmp" "$(dirname "$log")"
   echo "fuzz: $h for ${seconds}s (log: $log)"
   # The first corpus folder receives new inputs; the repository's seeds are only read.
-  # -timeout: one input may take 10 s; -rss_limit_mb: what a decoder may hold for one input.
+  # -timeout: one input may take 10 s; -rss_limit_mb: what a decoder may hold for one input;
+  # -close_fd_mask=2: the harnesses' own stderr is dropped (libpng prints a line for every
+  # corrupt image, gigabytes in ten minutes); libFuzzer's output and sanitizer reports, which
+  # PLX_FUZZ_CHECK messages also use, still reach the log.
   status=0
   [[ "$tmp" == /* ]] || tmp=$PWD/$tmp
   TMPDIR=$tmp "./build-fuzz/fuzz/$h" "$work" "fuzz/corpus/$h" -max_total_time="$seconds" \
-    -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 -artifact_prefix="$artifacts" \
+    -timeout=10 -rss_limit_mb=2048 -close_fd_mask=2 -print_final_stats=1 \
+    -artifact_prefix="$artifacts" \
     > "$log" 2>&1 || status=$?
   rm -rf "$tmp"
   # The last status line: "#N DONE cov: C ft: F corp: U/S lim: L exec/s: E rss: R".
