@@ -1,6 +1,7 @@
 #include "proto/pose_codec.h"
 
 #include <cmath>
+#include <optional>
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
@@ -30,11 +31,10 @@ absl::StatusOr<SE3> PoseFromProto(const ::plenoxd::v1::Pose& p, const std::strin
       return absl::InvalidArgumentError(absl::StrCat(field, ".", names[i], ": not finite"));
     }
   }
-  const Eigen::Quaterniond q(p.qw(), p.qx(), p.qy(), p.qz());
-  if (q.norm() < 1e-6) {
-    return absl::InvalidArgumentError(absl::StrCat(field, ": the quaternion is zero"));
-  }
-  return SE3(q.normalized(), Eigen::Vector3d(p.tx(), p.ty(), p.tz()));
+  const std::optional<Eigen::Quaterniond> q =
+      UnitQuaternion(Eigen::Quaterniond(p.qw(), p.qx(), p.qy(), p.qz()), 1e-6);
+  if (!q) return absl::InvalidArgumentError(absl::StrCat(field, ": the quaternion is zero"));
+  return SE3(*q, Eigen::Vector3d(p.tx(), p.ty(), p.tz()));
 }
 
 }  // namespace plx

@@ -2,6 +2,8 @@
 # Installs the Debian 12 packages plenoxd builds and tests with (run as root).
 #   scripts/install_deps.sh          build + test dependencies
 #   scripts/install_deps.sh --bench  also the benchmark's peer (Open3D) and Python packages
+#   scripts/install_deps.sh --fuzz   also clang, its sanitizer and libFuzzer runtimes and
+#                                    llvm-symbolizer (scripts/fuzz.sh, scripts/test.sh --asan)
 # Packages already present are not fetched again, so a second run takes seconds.
 set -euo pipefail
 
@@ -14,6 +16,11 @@ packages=(cmake ninja-build g++ pkg-config ccache
           libcpp-httplib-dev libssl-dev)
 if [[ "${1:-}" == "--bench" ]]; then
   packages+=(python3-open3d python3-numpy python3-opencv)
+fi
+if [[ "${1:-}" == "--fuzz" ]]; then
+  # libclang-rt-14-dev holds libFuzzer and the ASan/UBSan runtimes; llvm, llvm-symbolizer,
+  # which turns sanitizer reports' addresses into file:line.
+  packages+=(clang libclang-rt-14-dev llvm)
 fi
 
 missing=()

@@ -91,14 +91,7 @@ absl::StatusOr<DepthImage> DecodeDepth(const pb::Frame& frame, const std::string
                                        int height, double depth_scale) {
   const std::string name = field + ".depth";
   if (frame.depth_encoding() == pb::DEPTH_ENCODING_RAW_U16) {
-    DepthImage image(width, height, 1);
-    const uint8_t* src = reinterpret_cast<const uint8_t*>(frame.depth().data());
-    const double inv = 1.0 / depth_scale;
-    for (size_t i = 0; i < image.data.size(); ++i) {
-      const uint16_t raw = static_cast<uint16_t>(src[2 * i] | (src[2 * i + 1] << 8));
-      image.data[i] = static_cast<float>(raw * inv);
-    }
-    return image;
+    return DepthImageFromU16Bytes(frame.depth(), width, height, depth_scale);  // size checked
   }
   PLX_ASSIGN_OR_RETURN(cv::Mat raw, DecodeDepthBuffer(frame.depth(), name));
   PLX_RETURN_IF_ERROR(CheckDecodedSize(raw, name, width, height));

@@ -1,6 +1,7 @@
 #include "core/formats/pose_text.h"
 
 #include <cmath>
+#include <optional>
 #include <vector>
 
 #include "absl/strings/numbers.h"
@@ -23,9 +24,10 @@ absl::StatusOr<SE3> ParsePoseText(const std::string& text) {
           absl::StrCat("pose: \"", parts[i], "\" is not a finite number"));
     }
   }
-  const Eigen::Quaterniond q(v[6], v[3], v[4], v[5]);
-  if (q.norm() < 1e-6) return absl::InvalidArgumentError("pose: the quaternion is zero");
-  return SE3(q.normalized(), Eigen::Vector3d(v[0], v[1], v[2]));
+  const std::optional<Eigen::Quaterniond> q =
+      UnitQuaternion(Eigen::Quaterniond(v[6], v[3], v[4], v[5]), 1e-6);
+  if (!q) return absl::InvalidArgumentError("pose: the quaternion is zero");
+  return SE3(*q, Eigen::Vector3d(v[0], v[1], v[2]));
 }
 
 std::string FormatPoseText(const SE3& pose) {

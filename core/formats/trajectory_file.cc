@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -45,13 +46,14 @@ absl::StatusOr<std::vector<StampedPose>> ReadTumTrajectory(const std::string& pa
         ExpectFieldCount(table, row, 8, "numbers (timestamp tx ty tz qx qy qz qw)"));
     PLX_ASSIGN_OR_RETURN(const std::vector<double> v, ParseDoubleFields(table, row, 0, 8));
     const Eigen::Quaterniond q(v[7], v[4], v[5], v[6]);  // file order: qx qy qz qw
-    if (q.norm() < kMinQuaternionNorm) {
+    const std::optional<Eigen::Quaterniond> unit = UnitQuaternion(q, kMinQuaternionNorm);
+    if (!unit) {
       return LineError(table.path, row.line_number,
                        absl::StrCat("the quaternion qx qy qz qw is zero (norm ", q.norm(), ")"));
     }
     ParsedPose p;
     p.stamped.timestamp = v[0];
-    p.stamped.pose = SE3(q.normalized(), Eigen::Vector3d(v[1], v[2], v[3]));
+    p.stamped.pose = SE3(*unit, Eigen::Vector3d(v[1], v[2], v[3]));
     p.line_number = row.line_number;
     parsed.push_back(p);
   }

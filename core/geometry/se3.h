@@ -2,6 +2,10 @@
 // [translation; rotation] and perturb on the right: T * Exp(xi). See DESIGN.md §4.
 #pragma once
 
+#include <cmath>
+#include <limits>
+#include <optional>
+
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
@@ -41,6 +45,32 @@ class SE3 {
   Eigen::Quaterniond rotation_;
   Eigen::Vector3d translation_;
 };
+
+// `q` scaled to unit length, or nullopt when a component is not finite or the norm is below
+// `min_norm` (no usable direction). Poses from clients and files are read through this:
+// Eigen's normalized() squares the components, so (1e200, 0, 0, 0) came out as a zero
+// quaternion (its squared norm overflows to inf) and passed a "norm >= min" check as a pose
+// with no rotation at all.
+inline std::optional<Eigen::Quaterniond> UnitQuaternion(const Eigen::Quaterniond& q,
+                                                        double min_norm) {
+  const Eigen::Vector4d& c = q.coeffs();
+  if (!c.allFinite()) return std::nullopt;
+  const double squared = c.squaredNorm();
+  if (std::isfinite(squared) && squared >= std::numeric_limits<double>::min()) {
+    // The usual case, computed exactly as normalized() does (same bits as before).
+    const double norm = std::sqrt(squared);
+    if (norm < min_norm) return std::nullopt;
+    return Eigen::Quaterniond(Eigen::Vector4d(c / norm));
+  }
+  // The squares overflowed or underflowed: divide by the largest component first, which puts
+  // the norm in [1, 2].
+  const double largest = c.cwiseAbs().maxCoeff();
+  if (largest == 0.0) return std::nullopt;
+  const Eigen::Vector4d scaled = c / largest;
+  const double scaled_norm = scaled.norm();
+  if (largest * scaled_norm < min_norm) return std::nullopt;
+  return Eigen::Quaterniond(Eigen::Vector4d(scaled / scaled_norm));
+}
 
 // Skew-symmetric matrix such that Hat(a) * b = a x b.
 Eigen::Matrix3d Hat(const Eigen::Vector3d& v);

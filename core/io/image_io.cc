@@ -157,6 +157,14 @@ uint16_t ToDepthUnits(float z, double depth_scale) {
              : 0;
 }
 
+// Depth units -> metres. 0 is "no measurement" at any scale: with a depth_scale so small that
+// its inverse overflows (a client may send 1e-310), 0 * inf would be NaN, and NaN passes the
+// "z <= 0 || z > max_depth" tests that drop invalid samples (depth fusion has one). Other
+// values may become +inf, which every consumer drops as beyond its max_depth.
+float DepthFromUnits(uint16_t units, double inv_scale) {
+  return units == 0 ? 0.0f : static_cast<float>(units * inv_scale);
+}
+
 cv::Mat ColorImageToBgr8(const ColorImage& image) {
   cv::Mat bgr(image.height, image.width, CV_8UC3);
   for (int v = 0; v < image.height; ++v) {
@@ -245,6 +253,18 @@ std::string DepthImageToU16Bytes(const DepthImage& image, double depth_scale) {
   return bytes;
 }
 
+DepthImage DepthImageFromU16Bytes(const std::string& bytes, int width, int height,
+                                  double depth_scale) {
+  DepthImage image(width, height, 1);
+  const auto* src = reinterpret_cast<const uint8_t*>(bytes.data());
+  const double inv_scale = 1.0 / depth_scale;
+  for (size_t i = 0; i < image.data.size(); ++i) {
+    image.data[i] = DepthFromUnits(static_cast<uint16_t>(src[2 * i] | (src[2 * i + 1] << 8)),
+                                   inv_scale);
+  }
+  return image;
+}
+
 ColorImage ColorImageFromMat(const cv::Mat& rgb8) {
   ColorImage image(rgb8.cols, rgb8.rows, 3);
   constexpr float kInv255 = 1.0f / 255.0f;
@@ -262,7 +282,7 @@ DepthImage DepthImageFromMat(const cv::Mat& depth16, double depth_scale) {
   for (int v = 0; v < depth16.rows; ++v) {
     const uint16_t* src = depth16.ptr<uint16_t>(v);
     float* dst = image.pixel(0, v);
-    for (int u = 0; u < depth16.cols; ++u) dst[u] = static_cast<float>(src[u] * inv_scale);
+    for (int u = 0; u < depth16.cols; ++u) dst[u] = DepthFromUnits(src[u], inv_scale);
   }
   return image;
 }

@@ -43,8 +43,12 @@ absl::StatusOr<std::string> EncodeDepthImage(const DepthImage& image, double dep
 // little-endian uint16 of round(z * depth_scale) (0 where there is no depth).
 std::string ColorImageToRgb8Bytes(const ColorImage& image);
 std::string DepthImageToU16Bytes(const DepthImage& image, double depth_scale);
+// The inverse of DepthImageToU16Bytes: `bytes` must hold width * height * 2 bytes (callers check
+// the count first). A 0 stays 0 (no measurement) whatever depth_scale is.
+DepthImage DepthImageFromU16Bytes(const std::string& bytes, int width, int height,
+                                  double depth_scale);
 
-// CV_8UC3 RGB -> RGB in [0, 1]; CV_16UC1 -> metres.
+// CV_8UC3 RGB -> RGB in [0, 1]; CV_16UC1 -> metres (0 stays 0, as above).
 ColorImage ColorImageFromMat(const cv::Mat& rgb8);
 DepthImage DepthImageFromMat(const cv::Mat& depth16, double depth_scale);
 

@@ -2,6 +2,7 @@
 // round trip, and the errors that name the offending field.
 #include "proto/pose_codec.h"
 
+#include <cmath>
 #include <limits>
 
 #include <gmock/gmock.h>
@@ -60,6 +61,19 @@ TEST(PoseCodecTest, NormalisesOnReceipt) {
   pb::Pose out;
   PoseToProto(*pose, &out);
   EXPECT_EQ(out.qw(), 1.0);
+}
+
+// Found by fuzz_frame_proto: a quaternion of 1e200s (finite, so accepted) was normalised into
+// a zero quaternion, a client pose with no rotation at all.
+TEST(PoseCodecTest, NormalisesHugeQuaternions) {
+  pb::Pose message;
+  message.set_qw(1e200);
+  message.set_qz(1e200);
+  const absl::StatusOr<SE3> pose = PoseFromProto(message, "pose");
+  ASSERT_TRUE(pose.ok()) << pose.status();
+  EXPECT_NEAR(pose->rotation().norm(), 1.0, 1e-12);
+  const Eigen::Quaterniond expected(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ()));
+  EXPECT_LT(pose->rotation().angularDistance(expected), 1e-12);
 }
 
 TEST(PoseCodecTest, RejectsNonFiniteAndZeroQuaternions) {

@@ -166,6 +166,19 @@ TEST(TrajectoryFileTest, MalformedLinesNameFileAndLine) {
   }
 }
 
+// Found by fuzz_text_files: qx..qw of 1e200 read as a zero quaternion, not a unit one.
+TEST(TrajectoryFileTest, HugeQuaternionComponentsNormalise) {
+  const std::string path = testing::MakeTempDir("traj_huge_q") + "/t.txt";
+  testing::WriteTextFile(path, "1.0 0 0 0 1e200 0 0 1e200\n");
+  const absl::StatusOr<std::vector<StampedPose>> poses = ReadTumTrajectory(path);
+  ASSERT_TRUE(poses.ok()) << poses.status();
+  ASSERT_EQ(poses->size(), 1u);
+  const Eigen::Quaterniond& q = (*poses)[0].pose.rotation();
+  EXPECT_NEAR(q.norm(), 1.0, 1e-12);
+  const Eigen::Quaterniond expected(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitX()));
+  EXPECT_LT(q.angularDistance(expected), 1e-12);
+}
+
 TEST(TrajectoryFileTest, HeaderCommentLinesArePrefixed) {
   const std::string dir = testing::MakeTempDir("traj_header");
   const std::string path = dir + "/t.txt";

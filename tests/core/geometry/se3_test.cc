@@ -1,5 +1,6 @@
 #include "core/geometry/se3.h"
 
+#include <limits>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -12,6 +13,42 @@ Vector6d RandomTangent(std::mt19937& rng, double scale) {
   Vector6d xi;
   for (int i = 0; i < 6; ++i) xi[i] = n(rng);
   return xi;
+}
+
+// Found by fuzz_text_files and fuzz_frame_proto: Eigen's normalized() squares the components,
+// so a quaternion of 1e200s became a zero rotation instead of a unit one.
+TEST(SE3Test, UnitQuaternionNormalisesHugeAndTinyComponents) {
+  for (const double scale : {1.0, 1e200, 1e-200, 1.7e308, 4.9e-324}) {
+    SCOPED_TRACE(scale);
+    const std::optional<Eigen::Quaterniond> q =
+        UnitQuaternion(Eigen::Quaterniond(scale, scale, 0.0, 0.0), /*min_norm=*/0.0);
+    ASSERT_TRUE(q.has_value());
+    EXPECT_NEAR(q->norm(), 1.0, 1e-15);
+    EXPECT_NEAR(q->w(), std::sqrt(0.5), 1e-15);
+    EXPECT_NEAR(q->x(), std::sqrt(0.5), 1e-15);
+  }
+}
+
+TEST(SE3Test, UnitQuaternionMatchesNormalizedBitForBitInRange) {
+  std::mt19937 rng(7);
+  std::normal_distribution<double> n(0.0, 3.0);
+  for (int i = 0; i < 100; ++i) {
+    const Eigen::Quaterniond q(n(rng), n(rng), n(rng), n(rng));
+    const std::optional<Eigen::Quaterniond> unit = UnitQuaternion(q, 1e-6);
+    ASSERT_TRUE(unit.has_value());
+    EXPECT_EQ(unit->coeffs(), q.normalized().coeffs());
+  }
+}
+
+TEST(SE3Test, UnitQuaternionRefusesZeroShortAndNonFinite) {
+  const double inf = std::numeric_limits<double>::infinity();
+  EXPECT_FALSE(UnitQuaternion(Eigen::Quaterniond(0, 0, 0, 0), 1e-6).has_value());
+  EXPECT_FALSE(UnitQuaternion(Eigen::Quaterniond(1e-7, 0, 0, 0), 1e-6).has_value());
+  EXPECT_FALSE(UnitQuaternion(Eigen::Quaterniond(1e-200, 0, 0, 0), 1e-6).has_value());
+  EXPECT_FALSE(UnitQuaternion(Eigen::Quaterniond(inf, 0, 0, 0), 1e-6).has_value());
+  EXPECT_FALSE(
+      UnitQuaternion(Eigen::Quaterniond(1, std::nan(""), 0, 0), 1e-6).has_value());
+  EXPECT_TRUE(UnitQuaternion(Eigen::Quaterniond(2e-6, 0, 0, 0), 1e-6).has_value());
 }
 
 TEST(SE3Test, ExpLogRoundTrip) {

@@ -5,6 +5,7 @@
 #include <functional>
 #include <limits>
 #include <string>
+#include <vector>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -112,6 +113,39 @@ TEST(ImageIoTest, DepthIsScaledToMetres) {
   EXPECT_EQ(depth->data[1], 1.0f);
   EXPECT_FLOAT_EQ(depth->data[2], 13.107f);
   EXPECT_FALSE(ReadDepthImage(path, 0).ok());
+}
+
+// Found by fuzz_frame_proto: a denormal depth_scale (a positive, finite 1e-310 from a client)
+// has an infinite inverse, and 0 * inf turned every "no measurement" pixel into NaN, which
+// slips through "z <= 0 || z > max_depth" (depth fusion). Zero must stay zero at any scale.
+TEST(ImageIoTest, ZeroDepthStaysZeroAtAnyScale) {
+  cv::Mat raw(1, 2, CV_16UC1);
+  raw.at<uint16_t>(0, 0) = 0;
+  raw.at<uint16_t>(0, 1) = 7;
+  const std::string bytes("\x00\x00\x07\x00", 4);  // the same two samples, little-endian
+  for (const double scale : {5000.0, 1e-300, 1e-310, 4.9e-324}) {
+    SCOPED_TRACE(scale);
+    for (const DepthImage& depth :
+         {DepthImageFromMat(raw, scale), DepthImageFromU16Bytes(bytes, 2, 1, scale)}) {
+      ASSERT_EQ(depth.data.size(), 2u);
+      EXPECT_EQ(depth.data[0], 0.0f);
+      EXPECT_FALSE(std::isnan(depth.data[1]));
+      EXPECT_GT(depth.data[1], 0.0f);
+    }
+  }
+}
+
+TEST(ImageIoTest, U16BytesRoundTrip) {
+  DepthImage depth(3, 1, 1);
+  depth.data[0] = 0.0f;
+  depth.data[1] = 1.0f;
+  depth.data[2] = 2.5f;
+  const DepthImage back =
+      DepthImageFromU16Bytes(DepthImageToU16Bytes(depth, 1000.0), 3, 1, 1000.0);
+  EXPECT_EQ(back.width, 3);
+  EXPECT_EQ(back.height, 1);
+  EXPECT_EQ(std::vector<float>(back.data.begin(), back.data.end()),
+            (std::vector<float>{0.0f, 1.0f, 2.5f}));
 }
 
 TEST(ImageIoTest, WriteThenReadRoundTrips) {
