@@ -4,13 +4,10 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
-#include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
-#include "absl/strings/str_format.h"
 #include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
 
@@ -22,34 +19,7 @@ double MillisecondsSince(std::chrono::steady_clock::time_point start) {
       .count();
 }
 
-SlamState FromTracking(TrackingState state) {
-  switch (state) {
-    case TrackingState::kOk: return SlamState::kOk;
-    case TrackingState::kDegraded: return SlamState::kDegraded;
-    case TrackingState::kLost: return SlamState::kLost;
-  }
-  return SlamState::kLost;
-}
-
-// Bytes a keyframe keeps for mapping: float RGB + float depth per pixel, and two 32-bit ray
-// indices per pixel with valid depth (core/mapping/training_set.h).
-int64_t KeyframeBytes(const RgbdFrame& frame) {
-  int64_t valid = 0;
-  for (float d : frame.depth.data) valid += d > 0.0f;
-  return static_cast<int64_t>(frame.color.data.size() + frame.depth.data.size()) * 4 + valid * 8;
-}
-
 }  // namespace
-
-const char* SlamStateName(SlamState state) {
-  switch (state) {
-    case SlamState::kOk: return "OK";
-    case SlamState::kDegraded: return "DEGRADED";
-    case SlamState::kLost: return "LOST";
-    case SlamState::kRelocalised: return "RELOCALISED";
-  }
-  return "?";
-}
 
 SlamOptions DefaultSlamOptions() {
   SlamOptions o;
@@ -67,18 +37,8 @@ SlamOptions DefaultSlamOptions() {
 }
 
 absl::Status ValidateSlamOptions(const SlamOptions& o) {
-  PLX_RETURN_IF_ERROR(Tracker::ValidateOptions(o.tracker));
-  PLX_RETURN_IF_ERROR(ValidateMappingSessionOptions(o.mapping));
-  PLX_RETURN_IF_ERROR(ValidateKeyframePolicy(o.keyframes));
-  PLX_RETURN_IF_ERROR(ValidateKeyframeRefinementOptions(o.refinement));
-  if (o.relocalisation_keyframes < 0 || o.relocalisation_keyframes > 64) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "relocalisation_keyframes must be in [0, 64], got ", o.relocalisation_keyframes));
-  }
-  if (!(o.relocalisation_radius_m > 0.0) || !std::isfinite(o.relocalisation_radius_m)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "relocalisation_radius_m must be positive, got ", o.relocalisation_radius_m));
-  }
+  PLX_RETURN_IF_ERROR(ValidateSlamTrackerOptions(SlamTrackerOptionsOf(o)));
+  PLX_RETURN_IF_ERROR(ValidateSlamMapperOptions(SlamMapperOptionsOf(o)));
   if (o.max_pending_keyframes < 0) {
     return absl::InvalidArgumentError("max_pending_keyframes must not be negative");
   }
@@ -86,30 +46,36 @@ absl::Status ValidateSlamOptions(const SlamOptions& o) {
     return absl::InvalidArgumentError(
         absl::StrCat("mapping_nice must be in [0, 19], got ", o.mapping_nice));
   }
-  if (o.initial_pose && !o.initial_pose->IsFinite()) {
-    return absl::InvalidArgumentError("initial pose is not finite");
-  }
   return absl::OkStatus();
 }
 
-namespace {
-
-// Lock-step mapping publishes only when the caller's frame waits for it, and clones every
-// brick it needs: neither may depend on the clock, or runs would differ.
-SlamOptions EffectiveOptions(SlamOptions o) {
-  if (o.deterministic) {
-    o.mapping.min_publish_interval_s = 1e9;
-    o.mapping.max_clones_per_iteration = 0;
-  }
-  return o;
+SlamTrackerOptions SlamTrackerOptionsOf(const SlamOptions& o) {
+  SlamTrackerOptions t;
+  t.tracker = o.tracker;
+  t.keyframes = o.keyframes;
+  t.relocalisation_keyframes = o.relocalisation_keyframes;
+  t.relocalisation_radius_m = o.relocalisation_radius_m;
+  t.initial_pose = o.initial_pose;
+  return t;
 }
 
-}  // namespace
+SlamMapperOptions SlamMapperOptionsOf(const SlamOptions& o) {
+  SlamMapperOptions m;
+  m.mapping = o.mapping;
+  m.refinement = o.refinement;
+  if (o.deterministic) {
+    // Lock-step mapping publishes only when the caller's frame waits for it, and clones every
+    // brick it needs: neither may depend on the clock, or runs would differ.
+    m.mapping.min_publish_interval_s = 1e9;
+    m.mapping.max_clones_per_iteration = 0;
+  }
+  return m;
+}
 
-SlamSession::SlamSession(const SlamOptions& options, Backend* tracking_backend)
-    : options_(EffectiveOptions(options)),
-      tracking_backend_(tracking_backend),
-      tracker_(nullptr, tracking_backend, options.tracker) {}
+SlamSession::SlamSession(const SlamOptions& options, Backend* tracking_backend,
+                         bool extends_map)
+    : options_(options),
+      tracker_(SlamTrackerOptionsOf(options), tracking_backend, extends_map) {}
 
 absl::StatusOr<std::unique_ptr<SlamSession>> SlamSession::Create(
     const SlamOptions& options, Backend* tracking_backend,
@@ -119,7 +85,9 @@ absl::StatusOr<std::unique_ptr<SlamSession>> SlamSession::Create(
     return absl::InvalidArgumentError("SLAM needs a tracking backend and a mapping backend");
   }
   if (base != nullptr && base->grid.num_bricks() == 0) base = nullptr;  // nothing to extend
-  std::unique_ptr<SlamSession> session(new SlamSession(options, tracking_backend));
+  // A session that extends a map starts lost: its first frame has to find itself in it.
+  std::unique_ptr<SlamSession> session(
+      new SlamSession(options, tracking_backend, /*extends_map=*/base != nullptr));
   PLX_RETURN_IF_ERROR(session->StartMapping(make_mapping_backend, std::move(base)));
   return session;
 }
@@ -133,18 +101,18 @@ SlamSession::~SlamSession() {
   if (mapping_thread_.joinable()) mapping_thread_.join();
 }
 
+void SlamSession::NotifyChanged() {
+  // Under the lock, so a waiter between its predicate check and its wait cannot miss it.
+  std::lock_guard<std::mutex> lock(mutex_);
+  changed_.notify_all();
+}
+
 absl::Status SlamSession::StartMapping(const BackendFactory& make_backend,
                                        std::shared_ptr<const PlenoxelMap> base) {
-  if (base != nullptr) {
-    latest_ = base;
-    version_ = 1;
-    progress_.map_version = 1;
-    lost_ = true;  // the first frame has to find itself in the map: a relocalisation
-  }
   if (options_.deterministic) {
     PLX_ASSIGN_OR_RETURN(mapping_backend_, make_backend());
-    PLX_ASSIGN_OR_RETURN(mapping_, MappingSession::Create(options_.mapping,
-                                                          mapping_backend_.get(), base));
+    PLX_ASSIGN_OR_RETURN(mapper_, SlamMapper::Create(SlamMapperOptionsOf(options_),
+                                                     mapping_backend_.get(), std::move(base)));
     return absl::OkStatus();
   }
   std::promise<absl::Status> started;
@@ -175,13 +143,13 @@ void SlamSession::MappingLoop(const BackendFactory& make_backend,
       return;
     }
     mapping_backend_ = *std::move(backend);
-    absl::StatusOr<std::unique_ptr<MappingSession>> session =
-        MappingSession::Create(options_.mapping, mapping_backend_.get(), base);
-    if (!session.ok()) {
-      started->set_value(session.status());
+    absl::StatusOr<std::unique_ptr<SlamMapper>> mapper =
+        SlamMapper::Create(SlamMapperOptionsOf(options_), mapping_backend_.get(), base);
+    if (!mapper.ok()) {
+      started->set_value(mapper.status());
       return;
     }
-    mapping_ = *std::move(session);
+    mapper_ = *std::move(mapper);
     started->set_value(absl::OkStatus());  // `started` dies with Create's frame after this
   }
   uint64_t seen_wakeups = 0;
@@ -191,7 +159,7 @@ void SlamSession::MappingLoop(const BackendFactory& make_backend,
     {
       std::unique_lock<std::mutex> lock(mutex_);
       changed_.wait(lock, [&] {
-        return stop_ || finishing_ || wakeups_ != seen_wakeups || mapping_->has_work();
+        return stop_ || finishing_ || wakeups_ != seen_wakeups || mapper_->has_work();
       });
       if (stop_) break;
       seen_wakeups = wakeups_;
@@ -201,11 +169,11 @@ void SlamSession::MappingLoop(const BackendFactory& make_backend,
       status = RunMappingToEnd(true);
       break;
     }
-    if (!mapping_->has_work()) continue;
-    absl::StatusOr<MappingStepResult> step = mapping_->Step();
-    status = step.ok() ? AfterStep(*step) : step.status();
+    if (!mapper_->has_work()) continue;
+    status = mapper_->Step().status();
     // Out of work: the last iterations are published now, not when the next keyframe comes.
-    if (status.ok() && !mapping_->has_work()) status = PublishIfChanged();
+    if (status.ok() && !mapper_->has_work()) status = mapper_->PublishIfChanged();
+    NotifyChanged();
     if (!status.ok()) break;
   }
   std::lock_guard<std::mutex> lock(mutex_);
@@ -215,56 +183,16 @@ void SlamSession::MappingLoop(const BackendFactory& make_backend,
 }
 
 absl::Status SlamSession::RunMappingToEnd(bool finish) {
-  while (mapping_->has_work()) {
+  while (mapper_->has_work()) {
     {
       std::lock_guard<std::mutex> lock(mutex_);
       if (stop_) return absl::OkStatus();
     }
-    PLX_ASSIGN_OR_RETURN(MappingStepResult step, mapping_->Step(finish));
-    PLX_RETURN_IF_ERROR(AfterStep(step));
+    PLX_RETURN_IF_ERROR(mapper_->Step(finish).status());
+    NotifyChanged();
   }
-  return PublishIfChanged();
-}
-
-absl::Status SlamSession::PublishIfChanged() {
-  PLX_ASSIGN_OR_RETURN(std::shared_ptr<const PlenoxelMap> version, mapping_->Publish());
-  MappingStepResult published;
-  if (version != latest_map()) published.published = std::move(version);
-  return AfterStep(published);
-}
-
-absl::Status SlamSession::AfterStep(const MappingStepResult& step) {
-  const MappingSessionProgress p = mapping_->progress();
-  std::vector<StampedPose> poses;
-  const bool new_version = step.published != nullptr;
-  if (new_version && options_.refinement.window > 0 &&
-      p.keyframes_integrated > refined_upto_keyframes_ && !mapping_->has_work()) {
-    // The new keyframes have had their iterations: align the window to what they built, and let
-    // the next steps fit the map to the refined poses.
-    refined_upto_keyframes_ = p.keyframes_integrated;
-    PLX_ASSIGN_OR_RETURN(KeyframeRefinementResult refined,
-                         RefineKeyframePoses(*mapping_, *step.published, *mapping_backend_,
-                                             options_.refinement));
-    std::lock_guard<std::mutex> lock(mutex_);
-    progress_.refined_keyframes += refined.refined;
-  }
-  const TrainingSet& keyframes = mapping_->keyframes();
-  poses.reserve(keyframes.num_frames());
-  for (int i = 0; i < keyframes.num_frames(); ++i) {
-    poses.push_back({keyframes.frame(i).timestamp, keyframes.pose(i)});
-  }
-  std::lock_guard<std::mutex> lock(mutex_);
-  if (new_version) {
-    latest_ = step.published;
-    ++version_;
-  }
-  progress_.keyframes_integrated = p.keyframes_integrated;
-  progress_.pending_keyframes = p.keyframes_added - p.keyframes_integrated;
-  progress_.mapping_iterations = p.iterations;
-  progress_.map_version = version_;
-  progress_.map_bytes = p.map_bytes;
-  keyframe_poses_ = std::move(poses);
-  changed_.notify_all();
+  PLX_RETURN_IF_ERROR(mapper_->PublishIfChanged());
+  NotifyChanged();
   return absl::OkStatus();
 }
 
@@ -277,24 +205,16 @@ absl::Status SlamSession::MappingError() const {
 
 absl::Status SlamSession::AddKeyframe(const RgbdFrame& frame, const SE3& pose,
                                       const PinholeIntrinsics& k) {
-  RgbdFrame keyframe = frame;
-  keyframe.ground_truth.reset();  // SLAM never reads it; keep it out of the map's inputs
-  const int64_t bytes = KeyframeBytes(keyframe);
-  PLX_RETURN_IF_ERROR(mapping_->AddKeyframe(std::move(keyframe), pose, k));
-  ++keyframes_;
-  accepted_keyframes_.push_back({frame.timestamp, pose});
+  PLX_RETURN_IF_ERROR(mapper_->AddKeyframe(frame, pose, k));
   {
     std::lock_guard<std::mutex> lock(mutex_);
     ++wakeups_;
-    progress_.keyframes = keyframes_;
-    progress_.keyframe_bytes += bytes;
-    ++progress_.pending_keyframes;
   }
   changed_.notify_all();
   if (options_.deterministic) return RunMappingToEnd(false);
   std::unique_lock<std::mutex> lock(mutex_);
   changed_.wait(lock, [&] {
-    return keyframes_ - progress_.keyframes_integrated <= options_.max_pending_keyframes ||
+    return mapper_->progress().pending_keyframes <= options_.max_pending_keyframes ||
            mapping_done_ || !mapping_error_.ok();
   });
   return mapping_error_;
@@ -302,60 +222,14 @@ absl::Status SlamSession::AddKeyframe(const RgbdFrame& frame, const SE3& pose,
 
 absl::Status SlamSession::WaitForFirstVersion() {
   std::unique_lock<std::mutex> lock(mutex_);
-  changed_.wait(lock, [&] { return version_ > 0 || mapping_done_ || !mapping_error_.ok(); });
+  changed_.wait(lock, [&] {
+    return mapper_->latest().version > 0 || mapping_done_ || !mapping_error_.ok();
+  });
   if (!mapping_error_.ok()) return mapping_error_;
-  if (version_ == 0) return absl::InternalError("mapping stopped before the first map version");
+  if (mapper_->latest().version == 0) {
+    return absl::InternalError("mapping stopped before the first map version");
+  }
   return absl::OkStatus();
-}
-
-absl::StatusOr<std::optional<TrackingResult>> SlamSession::Relocalise(
-    const RgbdFrame& frame, const PinholeIntrinsics& k, const std::optional<SE3>& prior) {
-  std::vector<SE3> candidates;
-  if (prior) candidates.push_back(*prior);
-  // Where the motion before the loss would have carried the camera (a covered lens, a blur),
-  // then where it was last seen.
-  candidates.push_back(tracker_.Predict(frame.timestamp));
-  if (last_good_pose_) candidates.push_back(*last_good_pose_);
-  std::vector<StampedPose> keyframes = keyframe_poses();
-  if (last_good_pose_) {
-    const Eigen::Vector3d here = last_good_pose_->translation();
-    std::sort(keyframes.begin(), keyframes.end(), [&](const StampedPose& a, const StampedPose& b) {
-      return (a.pose.translation() - here).squaredNorm() <
-             (b.pose.translation() - here).squaredNorm();
-    });
-  }
-  const int tries = std::min<int>(options_.relocalisation_keyframes,
-                                  static_cast<int>(keyframes.size()));
-  for (int i = 0; i < tries; ++i) candidates.push_back(keyframes[i].pose);
-
-  // Candidates in order of how likely they are (the prior, the motion model's prediction, where
-  // tracking was last good, the keyframes nearest to it); the first that tracks OK without wandering far from where it
-  // started wins. The adaptive noise scale makes a residual test weak evidence on its own (it
-  // stretches to whatever spread it finds), so a start that slid half a metre along a wall is
-  // a false match, not a relocalisation.
-  TrackerOptions attempt_options = options_.tracker;
-  attempt_options.iterations = std::max(attempt_options.iterations, 20);
-  attempt_options.constant_velocity = false;
-  TrackerOptions verify_options = attempt_options;
-  verify_options.adaptive_scale = false;
-  verify_options.iterations = 2;
-  for (const SE3& start : candidates) {
-    Tracker attempt(tracked_map_.get(), tracking_backend_, attempt_options);
-    attempt.Reset(start, frame.timestamp);
-    PLX_ASSIGN_OR_RETURN(TrackingResult r, attempt.Track(frame, k, start));
-    if (r.state != TrackingState::kOk) continue;
-    if ((r.pose.translation() - start.translation()).norm() > options_.relocalisation_radius_m) {
-      continue;
-    }
-    // Verify at the sensor's own noise: a true match explains the frame within it, a pose that
-    // slid along a surface leaves residuals far above it.
-    Tracker verify(tracked_map_.get(), tracking_backend_, verify_options);
-    verify.Reset(r.pose, frame.timestamp);
-    PLX_ASSIGN_OR_RETURN(TrackingResult check, verify.Track(frame, k, r.pose));
-    if (check.state != TrackingState::kOk) continue;
-    return std::optional<TrackingResult>(r);
-  }
-  return std::optional<TrackingResult>();
 }
 
 absl::StatusOr<SlamFrameResult> SlamSession::ProcessFrame(RgbdFrame frame,
@@ -363,109 +237,25 @@ absl::StatusOr<SlamFrameResult> SlamSession::ProcessFrame(RgbdFrame frame,
                                                           const std::optional<SE3>& prior) {
   const auto start = std::chrono::steady_clock::now();
   if (finished_) return absl::FailedPreconditionError("the SLAM session has finished");
-  if (frame.color.width != k.width || frame.color.height != k.height ||
-      frame.depth.width != k.width || frame.depth.height != k.height ||
-      frame.color.channels != 3 || frame.depth.channels != 1) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "frame ", frames_, ": colour ", frame.color.width, "x", frame.color.height, " and depth ",
-        frame.depth.width, "x", frame.depth.height, " do not match the intrinsics ", k.width,
-        "x", k.height));
-  }
-  if (prior && !prior->IsFinite()) {
-    return absl::InvalidArgumentError(absl::StrCat("frame ", frames_, ": prior is not finite"));
-  }
+  PLX_RETURN_IF_ERROR(tracker_.CheckFrame(frame, k, prior));
   PLX_RETURN_IF_ERROR(MappingError());
   frame.ground_truth.reset();
-  SlamFrameResult out;
-  out.frame = frames_;
-  out.timestamp = frame.timestamp;
-
   return CatchAllocationFailure("SLAM frame", [&]() -> absl::StatusOr<SlamFrameResult> {
-    const bool first = frames_ == 0;
-    ++frames_;
-    if (first && latest_map() == nullptr) {
-      // Bootstrap: the first frame is keyframe 0 and builds the first version.
-      const SE3 pose = prior.value_or(options_.initial_pose.value_or(SE3::Identity()));
-      PLX_RETURN_IF_ERROR(AddKeyframe(frame, pose, k));
-      PLX_RETURN_IF_ERROR(WaitForFirstVersion());
-      tracker_.Reset(pose, frame.timestamp);
-      last_good_pose_ = pose;
-      out.pose = pose;
-      out.state = SlamState::kOk;
-      out.reason = "first keyframe";
-      out.keyframe = true;
-      out.tracking.pose = pose;
-      out.tracking.state = TrackingState::kOk;
-    } else {
-      if (first) {
-        const SE3 pose = prior.value_or(options_.initial_pose.value_or(SE3::Identity()));
-        tracker_.Reset(pose, frame.timestamp);
-        last_good_pose_ = pose;
-      }
-      {
-        std::lock_guard<std::mutex> lock(mutex_);
-        tracked_map_ = latest_;
-        tracked_version_ = version_;
-      }
-      tracker_.set_map(tracked_map_.get());
-      std::optional<TrackingResult> result;
-      if (lost_) {
-        PLX_ASSIGN_OR_RETURN(result, Relocalise(frame, k, prior));
-        if (result) {
-          tracker_.Reset(result->pose, frame.timestamp);
-          out.state = SlamState::kRelocalised;
-          out.reason = "relocalised";
-          lost_ = false;
-        } else {
-          // Still lost: the prediction (the prior, else where tracking was last good).
-          result.emplace();
-          result->pose = prior.value_or(tracker_.Predict(frame.timestamp));
-          result->state = TrackingState::kLost;
-          result->rays = options_.tracker.rays;
-          result->reason = "lost: no relocalisation candidate tracked OK";
-          out.state = SlamState::kLost;
-          out.reason = result->reason;
-        }
-      } else {
-        PLX_ASSIGN_OR_RETURN(TrackingResult tracked, tracker_.Track(frame, k, prior));
-        out.state = FromTracking(tracked.state);
-        out.reason = tracked.reason;
-        result = tracked;
-      }
-      out.tracking = *result;
-      out.pose = result->pose;
-      if (out.state == SlamState::kLost) {
-        lost_ = true;
-      } else {
-        last_good_pose_ = out.pose;
-      }
-      if (out.state == SlamState::kOk) {
-        // While keyframes wait for mapping, the part of the view the map does not render yet
-        // is mostly what they will fill in: counting it again would take a keyframe per frame
-        // exactly when mapping is behind, and feed the lag it comes from.
-        const bool mapping_behind = mapping_->pending_keyframes() > 0;
-        const double unmapped =
-            mapping_behind || result->rays == 0
-                ? 0.0
-                : 1.0 - static_cast<double>(result->valid_rays) / result->rays;
-        const KeyframeDecision decision = DecideKeyframe(
-            options_.keyframes, accepted_keyframes_, out.pose, frame.timestamp, unmapped);
-        if (decision.keyframe) {
-          PLX_RETURN_IF_ERROR(AddKeyframe(frame, out.pose, k));
-          out.keyframe = true;
-          out.reason = decision.reason;
-        }
-      }
+    const SlamMapVersion latest = mapper_->latest();
+    SlamMapView view;
+    view.map = latest.map;
+    view.version = latest.version;
+    view.accepted_keyframes = mapper_->accepted_keyframes();
+    view.keyframe_poses = mapper_->keyframe_poses();
+    view.mapping_behind = mapper_->progress().pending_keyframes > 0;
+    PLX_ASSIGN_OR_RETURN(SlamFrameResult out, tracker_.Track(frame, k, prior, view));
+    if (out.keyframe) {
+      PLX_RETURN_IF_ERROR(AddKeyframe(frame, out.pose, k));
+      if (view.map == nullptr) PLX_RETURN_IF_ERROR(WaitForFirstVersion());
     }
-    out.keyframes = keyframes_;
-    out.map_version = tracked_version_;
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      progress_.frames = frames_;
-      progress_.ok += out.state == SlamState::kOk;
-      progress_.degraded += out.state == SlamState::kDegraded;
-      progress_.lost += out.state == SlamState::kLost;
-      progress_.relocalised += out.state == SlamState::kRelocalised;
+      counts_ = tracker_.counts();
     }
     out.milliseconds = MillisecondsSince(start);
     return out;
@@ -487,18 +277,29 @@ absl::Status SlamSession::Finish() {
 }
 
 std::shared_ptr<const PlenoxelMap> SlamSession::latest_map() const {
-  std::lock_guard<std::mutex> lock(mutex_);
-  return latest_;
+  return mapper_->latest().map;
 }
 
-std::vector<StampedPose> SlamSession::keyframe_poses() const {
-  std::lock_guard<std::mutex> lock(mutex_);
-  return keyframe_poses_;
-}
+std::vector<StampedPose> SlamSession::keyframe_poses() const { return mapper_->keyframe_poses(); }
 
 SlamProgress SlamSession::progress() const {
+  const SlamMapperProgress m = mapper_->progress();
+  SlamProgress p;
+  p.keyframes = m.keyframes;
+  p.keyframes_integrated = m.keyframes_integrated;
+  p.pending_keyframes = m.pending_keyframes;
+  p.mapping_iterations = m.mapping_iterations;
+  p.refined_keyframes = m.refined_keyframes;
+  p.map_version = m.map_version;
+  p.map_bytes = m.map_bytes;
+  p.keyframe_bytes = m.keyframe_bytes;
   std::lock_guard<std::mutex> lock(mutex_);
-  return progress_;
+  p.frames = counts_.frames;
+  p.ok = counts_.ok;
+  p.degraded = counts_.degraded;
+  p.lost = counts_.lost;
+  p.relocalised = counts_.relocalised;
+  return p;
 }
 
 }  // namespace plx

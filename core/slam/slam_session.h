@@ -1,27 +1,15 @@
-// Online RGB-D SLAM (DESIGN.md §9): unposed frames in, one pose per frame out while the map
-// grows behind the tracker.
-//
-//   - Bootstrap: the first frame becomes keyframe 0 at the initial pose (the caller's, its prior,
-//     or the identity) and the first map version is built from its depth. A session that
-//     continues an existing map instead tracks its first frame in that map from the initial pose.
-//   - Tracking: every frame against the latest published map version with the frame-to-model
-//     tracker (constant-velocity prediction, or the caller's prior, e.g. a headset's VIO pose).
-//   - Keyframes: by motion and by how much of the view the map does not render yet
-//     (core/slam/keyframe_policy.h). Only frames tracked OK become keyframes; LOST frames are
-//     never integrated.
-//   - Mapping: a MappingSession over the keyframes, with a local window (half of each batch from
-//     the last keyframes, half from all of them). By default it runs on its own thread with its
-//     own backend (optionally at a lower CPU priority, mapping_nice); a frame that adds a
-//     keyframe waits until mapping has integrated it (max_pending_keyframes), never for the
-//     optimisation. Deterministic mode runs mapping in lock-step on the caller's thread after
-//     each keyframe instead (bit-identical results run to run, for tests).
-//   - Keyframe pose refinement: after each new keyframe's mapping, the keyframes of the window
-//     (never keyframe 0, which fixes the gauge) are re-aligned to the published map with the
-//     tracking equations, alternating with the map optimisation (core/slam/keyframe_refinement.h).
-//   - Relocalisation: after a LOST frame each new frame is tried from the motion model's
-//     prediction, the last good pose and the nearest keyframe poses; the first that tracks OK,
-//     stays near its start and passes a check at the sensor's noise is reported RELOCALISED. Until then
-//     frames report LOST with the prediction, never an unconverged estimate.
+// Online RGB-D SLAM in-process (DESIGN.md §9): unposed frames from one camera in, one pose
+// per frame out while the map grows behind the tracker. A session is the two halves wired
+// together with a threading mode:
+//   - SlamTracker (core/slam/slam_tracker.h): bootstrap, tracking against the latest published
+//     version, keyframe decisions, relocalisation after LOST;
+//   - SlamMapper (core/slam/slam_mapper.h): the keyframes' MappingSession with its local window,
+//     keyframe pose refinement, published versions.
+// By default mapping runs on its own thread with its own backend (optionally at a lower CPU
+// priority, mapping_nice); a frame that adds a keyframe waits until mapping has integrated it
+// (max_pending_keyframes), never for the optimisation. Deterministic mode runs mapping in
+// lock-step on the caller's thread after each keyframe instead (bit-identical results run to
+// run, for tests). The daemon wires the same halves to its workers instead (server/).
 //
 // Memory grows with the number of keyframes (their images and rays: ~16 B per pixel plus 8 B
 // per pixel with valid depth, 7.4 MB for a 640x480 keyframe) and with the mapped volume (the
@@ -53,12 +41,11 @@
 #include "core/mapping/mapping_session.h"
 #include "core/slam/keyframe_policy.h"
 #include "core/slam/keyframe_refinement.h"
+#include "core/slam/slam_mapper.h"
+#include "core/slam/slam_tracker.h"
 #include "core/tracking/tracker.h"
 
 namespace plx {
-
-enum class SlamState { kOk, kDegraded, kLost, kRelocalised };
-const char* SlamStateName(SlamState state);
 
 struct SlamOptions {
   TrackerOptions tracker;
@@ -90,24 +77,17 @@ struct SlamOptions {
   std::optional<SE3> initial_pose;
 };
 
-// The defaults SLAM uses: the mapping window on, publishing every 0.25 s at most.
+// The defaults SLAM uses: the mapping window on, publishing as soon as a keyframe is in.
 SlamOptions DefaultSlamOptions();
 
 // InvalidArgument naming the field.
 absl::Status ValidateSlamOptions(const SlamOptions& options);
 
-struct SlamFrameResult {
-  int frame = 0;  // 0-based count of frames given to the session
-  double timestamp = 0.0;
-  SE3 pose;       // world_T_camera; for LOST frames the prediction
-  SlamState state = SlamState::kLost;
-  std::string reason;  // why DEGRADED / LOST, how it relocalised, or what made a keyframe
-  bool keyframe = false;
-  int keyframes = 0;            // keyframes accepted so far, this one included
-  int64_t map_version = 0;      // the published version the frame was tracked against
-  TrackingResult tracking;      // rays, iterations, residual of the accepted estimate
-  double milliseconds = 0.0;    // ProcessFrame's time (deterministic mode: mapping included)
-};
+// The halves' options (every caller that splits tracking from mapping, e.g. the daemon, takes
+// them from the same SlamOptions). Deterministic mode's publishing and cloning rules are in
+// the mapper's options.
+SlamTrackerOptions SlamTrackerOptionsOf(const SlamOptions& options);
+SlamMapperOptions SlamMapperOptionsOf(const SlamOptions& options);
 
 struct SlamProgress {
   int frames = 0;
@@ -154,56 +134,40 @@ class SlamSession {
   SlamProgress progress() const;
 
  private:
-  SlamSession(const SlamOptions& options, Backend* tracking_backend);
+  SlamSession(const SlamOptions& options, Backend* tracking_backend, bool extends_map);
 
   absl::Status StartMapping(const BackendFactory& make_backend,
                             std::shared_ptr<const PlenoxelMap> base);
   void MappingLoop(const BackendFactory& make_backend, std::shared_ptr<const PlenoxelMap> base,
                    std::promise<absl::Status>* started);
-  // Runs steps until the session has no work, then publishes (deterministic mode, Finish).
+  // Steps until the mapper has no work (or the session stops), then publishes (lock-step
+  // mode, Finish).
   absl::Status RunMappingToEnd(bool finish);
-  // Publishes what the last steps changed and records it (AfterStep).
-  absl::Status PublishIfChanged();
-  // Records a step's result: a new version, progress, refinement. Mapping thread / lock-step.
-  absl::Status AfterStep(const MappingStepResult& step);
+  // Hands a keyframe to the mapper and waits as the mode says (lock-step: its mapping;
+  // concurrent: its integration, max_pending_keyframes).
   absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k);
-  absl::StatusOr<std::optional<TrackingResult>> Relocalise(const RgbdFrame& frame,
-                                                            const PinholeIntrinsics& k,
-                                                            const std::optional<SE3>& prior);
   absl::Status WaitForFirstVersion();
   absl::Status MappingError() const;
+  void NotifyChanged();
 
   const SlamOptions options_;
-  Backend* tracking_backend_;
-  Tracker tracker_;
-  std::shared_ptr<const PlenoxelMap> tracked_map_;  // keeps the tracker's version alive
-  int64_t tracked_version_ = 0;
-
-  // Tracking thread state.
-  int frames_ = 0;
-  bool lost_ = false;
-  std::optional<SE3> last_good_pose_;
-  std::vector<StampedPose> accepted_keyframes_;  // poses as accepted (the policy's view)
-  int keyframes_ = 0;
+  SlamTracker tracker_;  // the caller's thread
   bool finished_ = false;
 
-  // Mapping: owned by the mapping thread in concurrent mode, by the caller in lock-step mode.
+  // Created on the mapping thread (concurrent mode; its nice value applies to the backend's
+  // workers) or in Create (lock-step); stepped only by that thread.
   std::unique_ptr<Backend> mapping_backend_;
-  std::unique_ptr<MappingSession> mapping_;
-  int refined_upto_keyframes_ = 0;  // integrated keyframes the last refinement saw
+  std::unique_ptr<SlamMapper> mapper_;
   std::thread mapping_thread_;
 
   mutable std::mutex mutex_;  // guards what follows
   std::condition_variable changed_;
-  std::shared_ptr<const PlenoxelMap> latest_;
-  int64_t version_ = 0;
   bool stop_ = false;        // leave now
   bool finishing_ = false;   // leave once the work is done
   bool mapping_done_ = false;
   uint64_t wakeups_ = 0;     // bumped when a keyframe is queued
   absl::Status mapping_error_;
-  std::vector<StampedPose> keyframe_poses_;
-  SlamProgress progress_;    // mapping-side fields
+  SlamTrackerCounts counts_;  // the tracker's, copied after each frame for progress()
 };
 
 }  // namespace plx

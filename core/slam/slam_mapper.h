@@ -1,0 +1,110 @@
+// The mapping half of SLAM for one map (DESIGN.md §9): keyframes from one or more cameras in,
+// published copy-on-write versions out. It owns the map's MappingSession (allocation, fusion,
+// the windowed optimisation) and the keyframe pose refinement that alternates with it, and it
+// keeps what every camera tracking in this map needs to see: the latest version and its
+// number, the keyframes as accepted (for the keyframe policy, so a camera revisiting a place
+// another camera mapped adds no keyframe) and as refined (for relocalisation).
+//
+// Work is cut into bounded steps (Step) so a caller can run them on a thread of its own
+// (SlamSession), in lock-step after each keyframe (deterministic mode), or as short tasks on a
+// device worker between tracking frames (the daemon).
+//
+// Threads: AddKeyframe and the accessors from any thread; Step, RunToEnd and PublishIfChanged
+// from one step-runner thread at a time.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/geometry/intrinsics.h"
+#include "core/geometry/rgbd_frame.h"
+#include "core/geometry/se3.h"
+#include "core/geometry/stamped_pose.h"
+#include "core/grid/plenoxel_map.h"
+#include "core/kernels/backend.h"
+#include "core/mapping/mapping_session.h"
+#include "core/slam/keyframe_refinement.h"
+
+namespace plx {
+
+struct SlamMapperOptions {
+  MappingSessionOptions mapping;
+  KeyframeRefinementOptions refinement;  // refinement.window = 0 turns it off
+};
+
+absl::Status ValidateSlamMapperOptions(const SlamMapperOptions& options);
+
+// A published version and its number (1, 2, ...; 0 with a null map before the first).
+struct SlamMapVersion {
+  std::shared_ptr<const PlenoxelMap> map;
+  int64_t version = 0;
+};
+
+struct SlamMapperProgress {
+  int keyframes = 0;              // accepted (AddKeyframe calls that succeeded)
+  int keyframes_integrated = 0;   // allocated and initialised in the map
+  int pending_keyframes = 0;      // accepted, not yet integrated (mapping lag)
+  int mapping_iterations = 0;
+  int refined_keyframes = 0;      // pose updates applied by refinement
+  int64_t map_version = 0;
+  int64_t map_bytes = 0;
+  int64_t keyframe_bytes = 0;     // images and ray lists kept for mapping
+  double last_publish_s = 0.0;    // how long the last publish took
+};
+
+// Bytes a keyframe keeps for mapping: float RGB + float depth per pixel, and two 32-bit ray
+// indices per pixel with valid depth (core/mapping/training_set.h).
+int64_t SlamKeyframeBytes(const RgbdFrame& frame);
+
+class SlamMapper {
+ public:
+  // `backend` must outlive the mapper. `base`: an existing map to extend (shared, never
+  // written; it is version 1), or null for a new map whose first keyframe builds version 1.
+  static absl::StatusOr<std::unique_ptr<SlamMapper>> Create(
+      const SlamMapperOptions& options, Backend* backend,
+      std::shared_ptr<const PlenoxelMap> base = nullptr);
+
+  // Queues a keyframe at `pose` (any thread): it is checked now and integrated by a later step.
+  absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k);
+
+  // One bounded step (MappingSession::Step): integrates at most one keyframe, runs one chunk of
+  // iterations, publishes a version when one is due and, once the new keyframes have had their
+  // iterations, refines the window's poses. With `finish`, publishes whatever is left once no
+  // work remains. Returns whether a new version was published. Step-runner thread.
+  absl::StatusOr<bool> Step(bool finish = false);
+  // Steps until no work is left, then publishes what changed. Step-runner thread.
+  absl::Status RunToEnd(bool finish);
+  // Publishes the current map if anything changed since the last version. Step-runner thread.
+  absl::Status PublishIfChanged();
+  // True while a step would do something (keyframes queued or iteration budget left).
+  // Step-runner thread.
+  bool has_work() const;
+
+  // Any thread.
+  SlamMapVersion latest() const;
+  std::vector<StampedPose> accepted_keyframes() const;  // poses as accepted, in order
+  std::vector<StampedPose> keyframe_poses() const;      // as refined so far, in order
+  SlamMapperProgress progress() const;
+
+ private:
+  SlamMapper(const SlamMapperOptions& options, Backend* backend,
+             std::unique_ptr<MappingSession> mapping, std::shared_ptr<const PlenoxelMap> base);
+  // Records a step: a new version, progress, refinement.
+  absl::Status AfterStep(std::shared_ptr<const PlenoxelMap> published);
+
+  const SlamMapperOptions options_;
+  Backend* const backend_;
+  const std::unique_ptr<MappingSession> mapping_;
+  int refined_upto_keyframes_ = 0;  // integrated keyframes the last refinement saw (runner)
+
+  mutable std::mutex mutex_;  // guards what follows
+  SlamMapVersion latest_;
+  std::vector<StampedPose> accepted_;
+  std::vector<StampedPose> refined_;
+  SlamMapperProgress progress_;
+};
+
+}  // namespace plx
