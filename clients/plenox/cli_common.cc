@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/match.h"
 #include "absl/strings/str_format.h"
 #include "app/make_backend.h"
 #include "clients/plenox/map_flags.h"
@@ -38,6 +39,20 @@ bool ParseFlagsOrExit(FlagSet& flags, const std::vector<std::string>& args, int*
     return false;
   }
   return true;
+}
+
+absl::Status RefuseUnavailableFlags(const std::vector<std::string>& args,
+                                    const std::vector<UnavailableFlag>& flags) {
+  for (const std::string& arg : args) {
+    for (const UnavailableFlag& flag : flags) {
+      const std::string dashed = "--" + flag.name;
+      if (arg == dashed || absl::StartsWith(arg, dashed + "=")) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(dashed, " is not available with --server: ", flag.instead));
+      }
+    }
+  }
+  return absl::OkStatus();
 }
 
 ProgressLine::ProgressLine(bool enabled)

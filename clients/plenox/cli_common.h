@@ -32,6 +32,18 @@ int ReportError(const std::string& command, const absl::Status& status, bool usa
 // Returns true when the command should run.
 bool ParseFlagsOrExit(FlagSet& flags, const std::vector<std::string>& args, int* exit_code);
 
+// A flag of a command's in-process form that its --server form cannot honour, and what to do
+// instead ("the map stays on the daemon: --save writes it to the daemon's data directory").
+struct UnavailableFlag {
+  std::string name;  // without the dashes
+  std::string instead;
+};
+// InvalidArgument "--NAME is not available with --server: INSTEAD" for the first of `flags`
+// found in `args` (as "--NAME" or "--NAME=value"). Called before parsing, so that such a flag
+// is refused with the reason rather than as an unknown flag, and never silently ignored.
+absl::Status RefuseUnavailableFlags(const std::vector<std::string>& args,
+                                    const std::vector<UnavailableFlag>& flags);
+
 // One-line progress on stderr: rewritten in place on a terminal, a new line every few seconds
 // otherwise (logs, CI).
 class ProgressLine {

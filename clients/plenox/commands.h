@@ -29,6 +29,7 @@ struct RemoteOptions {
 // print their --help without --server and otherwise say that they need it.
 int RunRemoteMap(const RemoteOptions& remote, const std::vector<std::string>& args);
 int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& args);
+int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& args);
 int RunRemoteRender(const RemoteOptions& remote, const std::vector<std::string>& args);
 int RunRemoteExport(const RemoteOptions& remote, const std::vector<std::string>& args);
 int RunRemoteMaps(const RemoteOptions& remote, const std::vector<std::string>& args);

@@ -27,8 +27,8 @@ constexpr char kUsage[] =
     "  render     render colour and depth images of a map from a pose\n"
     "  synth      write the synthetic RGB-D sequence to a folder (TUM layout)\n"
     "\n"
-    "with --server, on the daemon's maps (map --name N, track/render --map N):\n"
-    "  map, track, render   as above, the work done by the daemon\n"
+    "with --server, on the daemon's maps (map/slam --name N, track/render --map N):\n"
+    "  map, track, slam, render   as above, the work done by the daemon\n"
     "  export     write a map as a PLY point cloud\n"
     "  maps       list the daemon's maps\n"
     "  save       write a map to the daemon's data directory\n"
@@ -42,7 +42,7 @@ constexpr char kUsage[] =
 
 // Commands that only exist against a daemon, and commands that only run in-process.
 const std::set<std::string> kDaemonOnly = {"export", "maps", "save", "load", "info"};
-const std::set<std::string> kInProcessOnly = {"demo", "eval-map", "eval-traj", "slam", "synth"};
+const std::set<std::string> kInProcessOnly = {"demo", "eval-map", "eval-traj", "synth"};
 
 int UsageError(const std::string& message) {
   std::cerr << "plenox: " << message << "\n(plenox --help for usage)\n";
@@ -145,6 +145,7 @@ int main(int argc, char** argv) {
 #else
   if (command == "map" && use_server) return plx::cli::RunRemoteMap(remote, args);
   if (command == "track" && use_server) return plx::cli::RunRemoteTrack(remote, args);
+  if (command == "slam" && use_server) return plx::cli::RunRemoteSlam(remote, args);
   if (command == "render" && use_server) return plx::cli::RunRemoteRender(remote, args);
   if (command == "export") return plx::cli::RunRemoteExport(remote, args);
   if (command == "maps") return plx::cli::RunRemoteMaps(remote, args);

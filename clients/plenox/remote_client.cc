@@ -17,7 +17,9 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "clients/plenox/cli_common.h"
+#include "core/common/status_macros.h"
 #include "core/io/image_io.h"
+#include "core/slam/slam_tracker.h"
 #include "core/tracking/tracker.h"
 
 namespace plx::cli {
@@ -293,6 +295,12 @@ absl::StatusOr<pb::Frame> FrameToProto(const RgbdFrame& frame, const CameraCalib
   return out;
 }
 
+absl::StatusOr<pb::Frame> LoadFrameToProto(const RgbdDataset& dataset, int index, bool with_pose,
+                                           WireEncoding encoding) {
+  PLX_ASSIGN_OR_RETURN(const RgbdFrame frame, dataset.LoadFrame(index));
+  return FrameToProto(frame, dataset.calibration(), with_pose, encoding);
+}
+
 const char* TrackingStateText(pb::TrackingState state) {
   switch (state) {
     case pb::TRACKING_STATE_OK: return TrackingStateName(TrackingState::kOk);
@@ -300,6 +308,25 @@ const char* TrackingStateText(pb::TrackingState state) {
     case pb::TRACKING_STATE_LOST: return TrackingStateName(TrackingState::kLost);
     default: return "?";
   }
+}
+
+const char* SlamStateText(pb::SlamState state) {
+  switch (state) {
+    case pb::SLAM_STATE_OK: return SlamStateName(SlamState::kOk);
+    case pb::SLAM_STATE_DEGRADED: return SlamStateName(SlamState::kDegraded);
+    case pb::SLAM_STATE_LOST: return SlamStateName(SlamState::kLost);
+    case pb::SLAM_STATE_RELOCALISED: return SlamStateName(SlamState::kRelocalised);
+    default: return "?";
+  }
+}
+
+pb::TrackOptions TrackOptionsToProto(const FlagSet& flags, const TrackerOptions& options) {
+  pb::TrackOptions wire;
+  wire.set_mode(options.mode == TrackingMode::kAdam ? pb::TrackOptions::MODE_ADAM
+                                                    : pb::TrackOptions::MODE_GAUSS_NEWTON);
+  if (flags.IsSet("rays")) wire.set_rays(static_cast<uint32_t>(options.rays));
+  if (flags.IsSet("iterations")) wire.set_iterations(static_cast<uint32_t>(options.iterations));
+  return wire;
 }
 
 }  // namespace plx::cli

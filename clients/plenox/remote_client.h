@@ -19,10 +19,13 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
+#include "app/flags.h"
 #include "clients/plenox/commands.h"
+#include "core/datasets/dataset.h"
 #include "core/geometry/intrinsics.h"
 #include "core/geometry/rgbd_frame.h"
 #include "core/geometry/se3.h"
+#include "core/tracking/tracker.h"
 #include "plenoxd/v1/plenoxd.grpc.pb.h"
 #include "proto/pose_codec.h"
 
@@ -104,8 +107,20 @@ absl::StatusOr<WireEncoding> ParseWireEncoding(const std::string& text);
 // `with_pose` (InvalidArgument when it has none).
 absl::StatusOr<pb::Frame> FrameToProto(const RgbdFrame& frame, const CameraCalibration& calibration,
                                        bool with_pose, WireEncoding encoding = WireEncoding::kPng);
+// Frame `index` of `dataset`, loaded and encoded as FrameToProto does with the dataset's
+// calibration; a frame that does not load is its error.
+absl::StatusOr<pb::Frame> LoadFrameToProto(const RgbdDataset& dataset, int index, bool with_pose,
+                                           WireEncoding encoding = WireEncoding::kPng);
 
 // The name of a TrackingState for progress lines ("OK", "DEGRADED", "LOST").
 const char* TrackingStateText(pb::TrackingState state);
+// The same for a SlamState ("OK", "DEGRADED", "LOST", "RELOCALISED"), as in-process SLAM names
+// them.
+const char* SlamStateText(pb::SlamState state);
+
+// The tracker settings of the --mode/--rays/--iterations flags (AddTrackerFlags) as the wire's
+// TrackOptions: the mode always, rays and iterations only when the flags were given (0 = the
+// daemon's defaults for the mode, which are TrackerOptionsForMode's too).
+pb::TrackOptions TrackOptionsToProto(const FlagSet& flags, const TrackerOptions& options);
 
 }  // namespace plx::cli

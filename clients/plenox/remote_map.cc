@@ -150,10 +150,8 @@ int RunRemoteMap(const RemoteOptions& remote, const std::vector<std::string>& ar
   absl::Status local = absl::OkStatus();
   bool stream_open = true;
   for (size_t i = 0; i < keyframes.size() && stream_open; ++i) {
-    absl::StatusOr<RgbdFrame> frame = dataset->LoadFrame(keyframes[i]);
     absl::StatusOr<pb::Frame> encoded =
-        frame.ok() ? FrameToProto(*frame, dataset->calibration(), /*with_pose=*/true)
-                   : absl::StatusOr<pb::Frame>(frame.status());
+        LoadFrameToProto(*dataset, keyframes[i], /*with_pose=*/true);
     if (!encoded.ok()) {
       local = encoded.status();
       break;

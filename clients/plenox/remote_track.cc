@@ -41,11 +41,7 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
   absl::StatusOr<TrackerOptions> tracker_options = TrackerOptionsFromFlags(flags);
   if (!tracker_options.ok()) return ReportError(kCommand, tracker_options.status(), true);
   const TrackerOptions& options = *tracker_options;
-  pb::TrackOptions wire;
-  wire.set_mode(options.mode == TrackingMode::kAdam ? pb::TrackOptions::MODE_ADAM
-                                                    : pb::TrackOptions::MODE_GAUSS_NEWTON);
-  if (flags.IsSet("rays")) wire.set_rays(static_cast<uint32_t>(options.rays));
-  if (flags.IsSet("iterations")) wire.set_iterations(static_cast<uint32_t>(options.iterations));
+  const pb::TrackOptions wire = TrackOptionsToProto(flags, options);
   absl::StatusOr<WireEncoding> encoding = ParseWireEncoding(flags.GetString("encoding"));
   if (!encoding.ok()) return ReportError(kCommand, encoding.status(), true);
   absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);

@@ -1,10 +1,128 @@
 #include "clients/plenox/slam_output.h"
 
+#include <algorithm>
+#include <cmath>
 #include <iostream>
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "clients/plenox/map_flags.h"
+#include "core/common/status_macros.h"
+#include "core/eval/trajectory_metrics.h"
+#include "core/mapping/mapping_session.h"
 
 namespace plx::cli {
+
+void AddSlamFlags(FlagSet& flags, const std::string& voxel_help) {
+  const SlamOptions d = DefaultSlamOptions();
+  flags.Add("out", "TRAJ.txt", "trajectory to write (TUM format, one pose per processed frame)",
+            std::nullopt, true)
+      .AddSwitch("realtime",
+                 "replay at the frames' timestamps; frames the tracker cannot keep up with are "
+                 "dropped (latest wins), as from a live sensor")
+      .Add("speed", "X", "realtime replay speed (2 = twice as fast as recorded)", "1")
+      .AddSwitch("deterministic",
+                 "map in lock-step after each keyframe (CPU mapping on one thread): "
+                 "bit-identical results run to run")
+      .Add("max-frames", "N", "only the first N frames (0 = all)", "0")
+      .Add("iterations-per-keyframe", "N", "mapping iterations each keyframe adds to the budget",
+           absl::StrCat(d.mapping.iterations_per_keyframe))
+      .Add("kf-translation", "M", "keyframe when no keyframe is this close (metres)",
+           absl::StrCat(d.keyframes.max_translation_m))
+      .Add("kf-rotation", "DEG", "keyframe when no keyframe is turned less than this (degrees)",
+           absl::StrCat(std::round(d.keyframes.max_rotation_rad * 180.0 / M_PI)))
+      .Add("kf-unmapped", "F", "keyframe when this fraction of the view is not mapped",
+           absl::StrCat(d.keyframes.max_unmapped_fraction))
+      .Add("kf-interval", "S", "keyframe when this long passed since the last one (0 = never)",
+           absl::StrCat(d.keyframes.max_interval_s))
+      .Add("rpe-delta", "M", "RPE pair distance in metres of path (as eval-traj --delta)", "1");
+  AddTrackerFlags(flags);
+  AddVoxelSizeFlag(flags, voxel_help);
+}
+
+absl::StatusOr<SlamDatasetOptions> SlamOptionsFromFlags(const FlagSet& flags) {
+  SlamDatasetOptions o;
+  SlamOptions& s = o.slam;
+  PLX_ASSIGN_OR_RETURN(s.tracker, TrackerOptionsFromFlags(flags));
+  double voxel = 0.0;
+  PLX_ASSIGN_OR_RETURN(voxel, VoxelSizeFromFlags(flags));
+  // The voxel size scales the allocation band and the fusion ramps; SLAM's mapping window
+  // stays as DefaultSlamOptions sets it.
+  const MapperOptions defaults = s.mapping.mapper;
+  s.mapping.mapper = MapperOptionsForVoxelSize(static_cast<float>(voxel));
+  s.mapping.mapper.window_keyframes = defaults.window_keyframes;
+  s.mapping.mapper.window_fraction = defaults.window_fraction;
+  PLX_ASSIGN_OR_RETURN(s.mapping.iterations_per_keyframe,
+                       flags.GetInt("iterations-per-keyframe", 1, kMaxIterationsPerKeyframe));
+  PLX_ASSIGN_OR_RETURN(s.keyframes.max_translation_m, flags.GetDouble("kf-translation", 1e-4, 100));
+  double degrees = 0.0;
+  PLX_ASSIGN_OR_RETURN(degrees, flags.GetDouble("kf-rotation", 0.01, 180));
+  s.keyframes.max_rotation_rad = degrees * M_PI / 180.0;
+  PLX_ASSIGN_OR_RETURN(s.keyframes.max_unmapped_fraction, flags.GetDouble("kf-unmapped", 0.001, 1));
+  PLX_ASSIGN_OR_RETURN(s.keyframes.max_interval_s, flags.GetDouble("kf-interval", 0, 3600));
+  const int refine_iterations = s.refinement.tracker.iterations;
+  s.refinement.tracker = s.tracker;
+  s.refinement.tracker.iterations = std::max(refine_iterations, s.tracker.iterations);
+  s.deterministic = flags.GetSwitch("deterministic");
+  o.realtime = flags.GetSwitch("realtime");
+  PLX_ASSIGN_OR_RETURN(o.speed, flags.GetDouble("speed", 0.01, 100));
+  PLX_ASSIGN_OR_RETURN(o.max_frames, flags.GetInt("max-frames", 0, 1 << 30));
+  if (o.realtime && s.deterministic) {
+    return absl::InvalidArgumentError("--realtime and --deterministic exclude each other");
+  }
+  PLX_RETURN_IF_ERROR(ValidateSlamOptions(s));
+  return o;
+}
+
+absl::StatusOr<double> RpeDeltaFromFlags(const FlagSet& flags) {
+  return flags.GetDouble("rpe-delta", 1e-3, 1e6);
+}
+
+absl::Status CheckSlamDataset(const RgbdDataset& dataset) {
+  if (dataset.size() == 0) {
+    return absl::InvalidArgumentError(absl::StrCat(dataset.name(), " has no frames"));
+  }
+  PLX_ASSIGN_OR_RETURN(const RgbdFrame first, dataset.LoadFrame(0));
+  const bool any_depth = std::any_of(first.depth.data.begin(), first.depth.data.end(),
+                                     [](float d) { return d > 0.0f; });
+  if (!any_depth) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "frame 0 of ", dataset.name(), " has no valid depth: SLAM needs RGB-D frames"));
+  }
+  return absl::OkStatus();
+}
+
+int SlamFrameCount(const RgbdDataset& dataset, const SlamDatasetOptions& options) {
+  return options.max_frames > 0 ? std::min(options.max_frames, dataset.size()) : dataset.size();
+}
+
+void ScoreSlamTrajectory(const RgbdDataset& dataset, const std::vector<StampedPose>& trajectory,
+                         double rpe_delta_m, SlamReport* report) {
+  std::vector<StampedPose> gt;
+  for (int i = 0; i < dataset.size(); ++i) {
+    if (std::optional<SE3> pose = dataset.ground_truth(i)) gt.push_back({dataset.timestamp(i), *pose});
+  }
+  if (gt.size() < 3) return;
+  TrajectoryEvalOptions options;
+  options.rpe_delta_m = rpe_delta_m;
+  absl::StatusOr<TrajectoryEvalResult> none = EvaluateTrajectory(trajectory, gt, options);
+  options.alignment = TrajectoryAlignment::kSE3;
+  absl::StatusOr<TrajectoryEvalResult> se3 = EvaluateTrajectory(trajectory, gt, options);
+  if (!none.ok() || !se3.ok()) return;
+  report->ate_none_m = none->ate.translation_m.rmse;
+  report->ate_se3_m = se3->ate.translation_m.rmse;
+  if (!se3->rpe.pairs.empty()) {
+    report->rpe_m = se3->rpe.translation_m.rmse;
+    report->rpe_deg = se3->rpe.rotation_deg.rmse;
+  }
+}
+
+std::string SlamTrajectoryHeader(const std::string& dataset, const std::string& where,
+                                 bool started_from_ground_truth) {
+  return absl::StrCat("plenox slam: ", dataset, where,
+                      started_from_ground_truth ? " (started at frame 0's ground truth)"
+                                                : " (started at the identity)");
+}
 
 std::string SlamProgressText(int frame, int frames, const char* state, double milliseconds,
                              int keyframes, int lost, const std::string& reason) {
@@ -13,13 +131,15 @@ std::string SlamProgressText(int frame, int frames, const char* state, double mi
 }
 
 std::string SlamSummaryText(const SlamReport& r, const std::string& tag) {
+  std::string memory = absl::StrFormat("map %.1f MB", r.map_mb);
+  if (r.keyframe_mb) absl::StrAppendFormat(&memory, ", keyframes %.1f MB", *r.keyframe_mb);
+  if (r.peak_rss_mb) absl::StrAppendFormat(&memory, ", peak RSS %.0f MB", *r.peak_rss_mb);
   std::string text = absl::StrFormat(
       "slam: %d frames (%d dropped), %d keyframes, %d OK, %d degraded, %d lost, %d relocalised; "
       "tracking median %.1f ms, p95 %.1f ms; %.2f frames/s wall-clock; %d mapping iterations; "
-      "map %.1f MB, keyframes %.1f MB, peak RSS %.0f MB%s",
+      "%s%s",
       r.processed, r.dropped, r.keyframes, r.ok, r.degraded, r.lost, r.relocalised,
-      r.ms_per_frame_median, r.ms_per_frame_p95, r.fps(), r.mapping_iterations, r.map_mb,
-      r.keyframe_mb, r.peak_rss_mb, tag);
+      r.ms_per_frame_median, r.ms_per_frame_p95, r.fps(), r.mapping_iterations, memory, tag);
   if (r.ate_none_m && r.ate_se3_m) {
     text += absl::StrFormat("\nslam: ATE %.2f cm (no alignment), %.2f cm (SE(3))",
                             100.0 * *r.ate_none_m, 100.0 * *r.ate_se3_m);
@@ -38,6 +158,7 @@ void PrintSlamResult(const SlamReport& r, bool json, const JsonObject& more) {
     std::cout << absl::StrFormat("wrote %s (%d poses)\n", r.trajectory, r.processed);
     return;
   }
+  const double unknown = std::nan("");  // written as null
   JsonObject out;
   out.Add("frames", r.frames)
       .Add("processed", r.processed)
@@ -53,8 +174,8 @@ void PrintSlamResult(const SlamReport& r, bool json, const JsonObject& more) {
       .Add("wall_s", r.wall_s)
       .Add("mapping_iterations", r.mapping_iterations)
       .Add("map_mb", r.map_mb)
-      .Add("keyframe_mb", r.keyframe_mb)
-      .Add("peak_rss_mb", r.peak_rss_mb)
+      .Add("keyframe_mb", r.keyframe_mb.value_or(unknown))
+      .Add("peak_rss_mb", r.peak_rss_mb.value_or(unknown))
       .AddBool("started_from_ground_truth", r.started_from_ground_truth)
       .Add("trajectory", r.trajectory);
   if (r.ate_none_m) out.Add("ate_none_m", *r.ate_none_m);

@@ -1,13 +1,40 @@
-// What `plenox slam` reports: the progress line, the summary line and the JSON keys, written
-// once for the in-process command (cmd_slam.cc) and the daemon's form to come.
+// What `plenox slam` takes and reports, in-process (cmd_slam.cc) and on a daemon
+// (remote_slam.cc): the shared flags, the check of the dataset, the scoring against ground
+// truth, the progress line, the summary line and the JSON keys, written once so that the two
+// forms cannot drift apart.
 #pragma once
 
 #include <optional>
 #include <string>
+#include <vector>
 
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
 #include "clients/plenox/cli_common.h"
+#include "core/datasets/dataset.h"
+#include "core/geometry/stamped_pose.h"
+#include "core/slam/slam_dataset.h"
 
 namespace plx::cli {
+
+// The flags both forms take, in this order: --out; the replay (--realtime, --speed,
+// --deterministic, --max-frames); the mapping budget (--iterations-per-keyframe); the keyframe
+// thresholds (--kf-translation, --kf-rotation, --kf-unmapped, --kf-interval); --rpe-delta; the
+// tracker flags (--mode, --rays, --iterations) and --voxel-size (`voxel_help`).
+void AddSlamFlags(FlagSet& flags, const std::string& voxel_help);
+
+// The options those flags ask for, on top of DefaultSlamOptions (the flags the in-process form
+// alone has are the caller's). Errors are usage errors: a value out of range, --realtime with
+// --deterministic, options SLAM refuses (ValidateSlamOptions).
+absl::StatusOr<SlamDatasetOptions> SlamOptionsFromFlags(const FlagSet& flags);
+absl::StatusOr<double> RpeDeltaFromFlags(const FlagSet& flags);
+
+// What SLAM cannot run on, found before any frame is processed or sent: a dataset without
+// frames, or one whose frame 0 has no valid depth (InvalidArgument naming it).
+absl::Status CheckSlamDataset(const RgbdDataset& dataset);
+
+// The number of frames a run goes through: the dataset's, or --max-frames when fewer.
+int SlamFrameCount(const RgbdDataset& dataset, const SlamDatasetOptions& options);
 
 struct SlamReport {
   std::string trajectory;  // --out
@@ -21,14 +48,26 @@ struct SlamReport {
   double wall_s = 0.0;
   int mapping_iterations = 0;
   double map_mb = 0.0;
-  double keyframe_mb = 0.0;
-  double peak_rss_mb = 0.0;
+  // Known in-process only (the daemon reports neither): null in the JSON, left out of the
+  // summary otherwise.
+  std::optional<double> keyframe_mb;
+  std::optional<double> peak_rss_mb;
   bool started_from_ground_truth = false;
   // With ground truth (eval-traj's definitions).
   std::optional<double> ate_none_m, ate_se3_m, rpe_m, rpe_deg;
 
   double fps() const { return wall_s > 0.0 ? processed / wall_s : 0.0; }
 };
+
+// ATE (no alignment and SE(3)) and RPE (pairs `rpe_delta_m` of path apart) of `trajectory`
+// against the dataset's ground truth, as eval-traj computes them, into `report`; nothing when
+// the dataset has fewer than 3 ground-truth poses.
+void ScoreSlamTrajectory(const RgbdDataset& dataset, const std::vector<StampedPose>& trajectory,
+                         double rpe_delta_m, SlamReport* report);
+
+// The trajectory file's header: "plenox slam: DATASET<where> (started at ...)".
+std::string SlamTrajectoryHeader(const std::string& dataset, const std::string& where,
+                                 bool started_from_ground_truth);
 
 // "slam 41/120  OK  23 ms  keyframes 5  lost 0".
 std::string SlamProgressText(int frame, int frames, const char* state, double milliseconds,

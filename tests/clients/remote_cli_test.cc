@@ -2,14 +2,6 @@
 // a subprocess on a free port with a scratch data directory: map -> maps -> track -> render ->
 // export -> save/load on a small synthetic sequence, the error paths (unknown map, unreachable
 // daemon, malformed --server, token files), bearer-token authentication, and a clean SIGTERM.
-#include <arpa/inet.h>
-#include <fcntl.h>
-#include <netinet/in.h>
-#include <signal.h>
-#include <sys/socket.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -19,6 +11,7 @@
 #include <sstream>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include <gmock/gmock.h>
@@ -28,6 +21,7 @@
 
 #include "app/make_backend.h"
 #include "tests/clients/cli_runner.h"
+#include "tests/clients/remote_daemon.h"
 #include "tests/test_util.h"
 
 namespace plx {
@@ -35,6 +29,10 @@ namespace {
 
 namespace fs = std::filesystem;
 using plx::testing::CommandResult;
+#ifdef PLENOXD_BINARY
+using plx::testing::DaemonProcess;
+using plx::testing::RemoteSuite;
+#endif
 using plx::testing::FlatJson;
 using plx::testing::JsonNumber;
 using plx::testing::LastLine;
@@ -46,6 +44,7 @@ using plx::testing::ParseFlatJson;
 using plx::testing::ReadFileToString;
 using plx::testing::RunPlenox;
 using plx::testing::ScopedTempDir;
+using plx::testing::UnusedPort;
 using plx::testing::WriteStringToFile;
 using ::testing::AllOf;
 using ::testing::HasSubstr;
@@ -57,25 +56,6 @@ constexpr int kExitOk = 0;
 constexpr int kExitFailure = 1;
 constexpr int kExitUsage = 2;
 
-#ifdef PLX_WITH_SERVER
-// A port nothing listens on: bound and released again (nothing else takes it in the meantime
-// on a test machine, and if something did the test would still see no plenoxd there).
-int UnusedPort() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  address.sin_port = 0;
-  socklen_t length = sizeof(address);
-  int port = -1;
-  if (fd >= 0 && ::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof(address)) == 0 &&
-      ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &length) == 0) {
-    port = ntohs(address.sin_port);
-  }
-  if (fd >= 0) ::close(fd);
-  return port;
-}
-#endif  // PLX_WITH_SERVER
 
 TEST(RemoteCliBadInputTest, ServerWithoutPortIsUsageError) {
   for (const std::vector<std::string>& args :
@@ -159,96 +139,6 @@ TEST(RemoteCliBadInputTest, CommandsThatNeedOrRefuseADaemonSaySo) {
 
 #ifdef PLENOXD_BINARY
 
-// plenoxd as a subprocess: --listen 127.0.0.1:0 and a data directory under `dir`; stdout and
-// stderr go to files there (no pipe to keep drained), and the port comes from the
-// "plenoxd listening on port N" line.
-class DaemonProcess {
- public:
-  DaemonProcess(const std::string& dir, const std::vector<std::string>& extra_flags)
-      : dir_(dir) {
-    std::vector<std::string> storage = {PLENOXD_BINARY, "--listen", "127.0.0.1:0", "--data-dir",
-                                        dir + "/data", "--threads", "2"};
-    storage.insert(storage.end(), extra_flags.begin(), extra_flags.end());
-    std::vector<char*> argv;
-    for (std::string& s : storage) argv.push_back(s.data());
-    argv.push_back(nullptr);
-    const std::string out_path = dir + "/plenoxd.out", err_path = dir + "/plenoxd.err";
-    pid_ = ::fork();
-    if (pid_ == 0) {
-      ::setpgid(0, 0);  // keeps a terminal's Ctrl-C for the test runner away from it
-      const int in = ::open("/dev/null", O_RDONLY);
-      const int out = ::open(out_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-      const int err = ::open(err_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-      if (in < 0 || out < 0 || err < 0 || ::dup2(in, 0) < 0 || ::dup2(out, 1) < 0 ||
-          ::dup2(err, 2) < 0) {
-        ::_exit(127);
-      }
-      ::execv(argv[0], argv.data());
-      ::_exit(127);
-    }
-    if (pid_ < 0) return;
-    const std::string marker = "plenoxd listening on port ";
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
-    while (std::chrono::steady_clock::now() < deadline) {
-      const std::string out = ReadFileToString(out_path);
-      const size_t at = out.find(marker);
-      if (at != std::string::npos && out.find('\n', at) != std::string::npos) {
-        port_ = std::atoi(out.c_str() + at + marker.size());
-        return;
-      }
-      int status = 0;
-      if (::waitpid(pid_, &status, WNOHANG) == pid_) {  // it died instead
-        pid_ = -1;
-        return;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
-  }
-  ~DaemonProcess() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGKILL);
-      ::waitpid(pid_, nullptr, 0);
-    }
-  }
-  DaemonProcess(const DaemonProcess&) = delete;
-  DaemonProcess& operator=(const DaemonProcess&) = delete;
-
-  bool running() const { return pid_ > 0 && port_ > 0; }
-  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
-  std::string data_dir() const { return dir_ + "/data"; }
-  std::string Log() const {
-    return "--- plenoxd stdout ---\n" + ReadFileToString(dir_ + "/plenoxd.out") +
-           "--- plenoxd stderr ---\n" + ReadFileToString(dir_ + "/plenoxd.err");
-  }
-
-  // SIGTERM (drain, save dirty maps, exit) and the exit code; -1 when it had to be killed after
-  // `timeout_s`, 128 + signal when a signal ended it.
-  int Stop(double timeout_s = 20.0) {
-    if (pid_ <= 0) return -1;
-    ::kill(pid_, SIGTERM);
-    const auto deadline =
-        std::chrono::steady_clock::now() + std::chrono::milliseconds(int64_t(timeout_s * 1000));
-    int status = 0;
-    while (::waitpid(pid_, &status, WNOHANG) == 0) {
-      if (std::chrono::steady_clock::now() > deadline) {
-        ::kill(pid_, SIGKILL);
-        ::waitpid(pid_, &status, 0);
-        pid_ = -1;
-        return -1;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
-    pid_ = -1;
-    if (WIFEXITED(status)) return WEXITSTATUS(status);
-    return WIFSIGNALED(status) ? 128 + WTERMSIG(status) : -1;
-  }
-
- private:
-  std::string dir_;
-  pid_t pid_ = -1;
-  int port_ = -1;
-};
-
 // `maps --json` prints one object per map and line.
 std::optional<FlatJson> MapJson(const CommandResult& r, const std::string& name) {
   std::istringstream lines(r.out);
@@ -268,63 +158,41 @@ constexpr char kMap[] = "seq";
 class RemoteCliTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    root_ = new std::string(plx::testing::MakeTempDir("plenox_remote"));
-    dataset_ = new std::string(*root_ + "/sequence");
-    synth_ = new CommandResult(
-        RunPlenox({"synth", "--out", *dataset_, "--frames", std::to_string(kFrames), "--width",
-                   std::to_string(kWidth), "--height", std::to_string(kHeight)}));
-    daemon_ = new DaemonProcess(*root_, {});
+    suite_ = new RemoteSuite("plenox_remote", kFrames, kWidth, kHeight, {});
     map_run_ = new CommandResult();
-    if (synth_->exit_code == kExitOk && daemon_->running()) {
+    if (suite_->Ready()) {
       // Keyframes 0, 10, 20 and 60 iterations, as the in-process end-to-end test.
-      *map_run_ = RunPlenox({"--server", daemon_->address(), "map", "--dataset", *dataset_,
-                             "--name", kMap, "--every", "10", "--voxel-size", "0.04",
-                             "--iterations-per-keyframe", "20", "--json"},
-                            "", /*timeout_s=*/120.0);
+      *map_run_ = Remote({"map", "--dataset", suite_->dataset(), "--name", kMap, "--every", "10",
+                          "--voxel-size", "0.04", "--iterations-per-keyframe", "20", "--json"},
+                         "", /*timeout_s=*/120.0);
     }
+    dataset_ = &suite_->dataset();
+    daemon_ = &suite_->daemon();
   }
   static void TearDownTestSuite() {
-    // SIGTERM drains and saves; a clean exit is part of the contract.
-    const bool was_running = daemon_->running();
-    const int stopped = daemon_->Stop();
-    if (was_running && stopped != 0) {
-      ADD_FAILURE() << "plenoxd exited with " << stopped << " on SIGTERM\n" << daemon_->Log();
-    }
-    const ::testing::TestSuite* suite = ::testing::UnitTest::GetInstance()->current_test_suite();
-    if ((suite == nullptr || !suite->Failed()) && stopped == 0) {
-      std::error_code ec;
-      fs::remove_all(*root_, ec);
-    }
-    delete daemon_;
     delete map_run_;
-    delete synth_;
-    delete dataset_;
-    delete root_;
+    delete suite_;  // SIGTERM drains and saves; a clean exit is part of the contract
   }
 
   void SetUp() override {
-    ASSERT_EQ(synth_->exit_code, kExitOk) << synth_->Describe();
-    ASSERT_TRUE(daemon_->running()) << daemon_->Log();
+    ASSERT_TRUE(suite_->Ready());
     ASSERT_EQ(map_run_->exit_code, kExitOk) << map_run_->Describe() << "\n" << daemon_->Log();
   }
 
   static CommandResult Remote(std::vector<std::string> args, const std::string& cwd = "",
                               double timeout_s = 60.0) {
-    args.insert(args.begin(), {"--server", daemon_->address()});
-    return RunPlenox(args, cwd, timeout_s);
+    return suite_->Remote(std::move(args), cwd, timeout_s);
   }
 
-  static std::string* root_;
-  static std::string* dataset_;
-  static CommandResult* synth_;
-  static DaemonProcess* daemon_;
+  static RemoteSuite* suite_;
+  static const std::string* dataset_;
+  static const DaemonProcess* daemon_;
   static CommandResult* map_run_;
 };
 
-std::string* RemoteCliTest::root_ = nullptr;
-std::string* RemoteCliTest::dataset_ = nullptr;
-CommandResult* RemoteCliTest::synth_ = nullptr;
-DaemonProcess* RemoteCliTest::daemon_ = nullptr;
+RemoteSuite* RemoteCliTest::suite_ = nullptr;
+const std::string* RemoteCliTest::dataset_ = nullptr;
+const DaemonProcess* RemoteCliTest::daemon_ = nullptr;
 CommandResult* RemoteCliTest::map_run_ = nullptr;
 
 TEST_F(RemoteCliTest, MapReportsTheDaemonsSummary) {
