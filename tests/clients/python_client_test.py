@@ -5,9 +5,9 @@
       /usr/bin/python3 tests/clients/python_client_test.py --plenoxd <plenoxd> --plenox <plenox>
 
 Runs `plenox synth` for a small sequence, starts plenoxd on a free port with a temporary data
-directory, and checks health, maps, Integrate, lock-step and streaming Track (ATE < 1 cm), Render,
-Export, save/load, error codes, bearer-token authentication (a second daemon) and a clean exit on
-SIGTERM. Exits 0 when everything passed, 1 with a list of failures otherwise, 77 (skip) when
+directory, and checks health, maps, Integrate, lock-step and streaming Track (ATE < 1 cm), online
+SLAM (lock-step, streaming, realtime; ATE < 1 cm), Render, Export, save/load, error codes, the
+example scripts, bearer-token authentication (a second daemon) and a clean exit on SIGTERM. Exits 0 when everything passed, 1 with a list of failures otherwise, 77 (skip) when
 this interpreter has no grpc/numpy.
 """
 
@@ -32,7 +32,8 @@ except ImportError as missing:
           "install Debian's python3-grpcio and python3-numpy")
     sys.exit(77)
 
-from plenoxd_client import Client, PlenoxdError, TumDataset, convert, pb, state_name
+from plenoxd_client import (Client, PlenoxdError, TumDataset, convert, pb, slam_pose,
+                            slam_state_name, state_name)
 
 FRAMES, WIDTH, HEIGHT, EVERY = 30, 96, 72, 10
 VOXEL_SIZE = 0.04         # what the plenox CLI end-to-end test maps this sequence with
@@ -247,6 +248,82 @@ def main():
                            and estimates[-1].timestamp == frames[-1].timestamp,
                            "streaming: the first and the newest frame are always served")
 
+        def slam_lockstep():
+            # Deterministic: the daemon maps each keyframe before the next frame, so the run is
+            # repeatable (in-process at this size and voxel size: 0.68 cm ATE, no alignment).
+            stream = client.slam("slam_room", frames, initial_pose=frames[0].pose,
+                                 options={"voxel_size": VOXEL_SIZE, "deterministic": True})
+            updates = list(stream)
+            done = stream.done
+            failures.check(len(updates) == FRAMES and stream.sent == FRAMES
+                           and stream.received == FRAMES,
+                           f"lock-step slam: {FRAMES} frames, {FRAMES} updates (got "
+                           f"{len(updates)})")
+            failures.check([u.frame for u in updates] == list(range(FRAMES))
+                           and [u.timestamp for u in updates] == [f.timestamp for f in frames],
+                           "updates come in frame order with the frames' index and timestamp")
+            failures.check(done is not None and done.done and not any(u.done for u in updates),
+                           "the done message ends the stream and is not yielded")
+            if done is None:
+                return
+            print(f"    done: {done.mapping.keyframes} keyframes, {done.mapping.iterations} "
+                  f"iterations, version {done.mapping.map_version}")
+            failures.check(done.mapping.finished, "the last stream's done message comes after "
+                           "the mapping job finished")
+            failures.check(2 <= stream.keyframes < FRAMES
+                           and done.mapping.keyframes == stream.keyframes
+                           and sum(u.keyframe for u in updates) == stream.keyframes,
+                           f"keyframes: {stream.keyframes} marked, {done.mapping.keyframes} "
+                           "in the map")
+            states = [slam_state_name(u) for u in updates]
+            failures.check(all(s == "OK" for s in states) and stream.lost == 0,
+                           f"every state OK (got {sorted(set(states))})")
+            t0, q0 = slam_pose(updates[0])
+            failures.check(np.allclose(t0, frames[0].pose[0], atol=1e-6)
+                           and abs(abs(np.dot(q0, frames[0].pose[1])) - 1) < 1e-6,
+                           "the first frame sits at the initial pose")
+            rmse, matched = ate_rmse([(u.timestamp, slam_pose(u)[0]) for u in updates],
+                                     groundtruth)
+            failures.check(matched == FRAMES and rmse < 0.01,
+                           f"slam ATE {100 * rmse:.2f} cm < 1 cm over {matched} frames")
+            saved = client.save_map("slam_room")
+            failures.check(saved.keyframes == stream.keyframes and saved.bricks > 0
+                           and os.path.exists(os.path.join(daemon.data_dir, "slam_room.plx")),
+                           f"save_map after done saves every keyframe ({saved.keyframes})")
+
+        def slam_streaming():
+            # Not realtime: the daemon reads the next frame only when it is ready for it
+            # (backpressure), so a sender that runs ahead loses nothing.
+            stream = client.slam("slam_stream", frames, initial_pose=frames[0].pose,
+                                 lockstep=False, options={"voxel_size": VOXEL_SIZE})
+            updates = list(stream)
+            failures.check(stream.sent == FRAMES and len(updates) == FRAMES
+                           and stream.dropped == 0,
+                           f"streaming slam: every frame processed (got {len(updates)}, dropped "
+                           f"{stream.dropped})")
+            failures.check(stream.done is not None and stream.done.mapping.finished,
+                           "streaming slam: the done message after mapping finished")
+            rmse, matched = ate_rmse([(u.timestamp, slam_pose(u)[0]) for u in updates],
+                                     groundtruth)
+            # Concurrent mapping: in-process 0.96 cm here, so a looser bound than lock-step's.
+            failures.check(matched == FRAMES and rmse < 0.02 and stream.lost == 0,
+                           f"streaming slam ATE {100 * rmse:.2f} cm < 2 cm, none lost")
+
+        def slam_realtime():
+            # 300 frames/s against tens of ms per frame: the daemon keeps the newest.
+            stream = client.slam("slam_live", frames, initial_pose=frames[0].pose,
+                                 lockstep=False, fps=300,
+                                 options={"voxel_size": VOXEL_SIZE, "realtime": True})
+            updates = list(stream)
+            print(f"    realtime: sent {stream.sent}, updates {stream.received}, dropped "
+                  f"{stream.dropped}")
+            failures.check(stream.sent == FRAMES and stream.received + stream.dropped == FRAMES,
+                           "realtime slam: updates + dropped == frames sent")
+            failures.check(stream.dropped > 0 and len(updates) >= 2,
+                           "realtime slam: the daemon dropped frames it could not keep up with")
+            failures.check(bool(updates) and updates[-1].timestamp == frames[-1].timestamp,
+                           "realtime slam: the newest frame is always processed")
+
         def render_and_export():
             pose = frames[15].pose
             color, depth = client.render("room", pose, k)
@@ -335,6 +412,21 @@ def main():
                                   "NOT_FOUND", "track in an unknown map")
             failures.expect_error(lambda: client.create_map("bad name!"), "INVALID_ARGUMENT",
                                   "create_map with a bad name")
+            failures.expect_error(
+                lambda: list(client.slam("slam_bad", [frames[0], bad],
+                                         initial_pose=frames[0].pose,
+                                         options={"voxel_size": VOXEL_SIZE})),
+                "INVALID_ARGUMENT", "slam with a corrupt PNG", "color")
+            failures.expect_error(
+                lambda: list(client.slam("room", frames[:2], initial_pose=frames[0].pose,
+                                         options={"voxel_size": 2 * VOXEL_SIZE})),
+                "INVALID_ARGUMENT", "slam into a map with another voxel size", "voxel_size")
+            try:
+                client.slam("room", frames[:2], options={"voxel": VOXEL_SIZE})
+                failures.check(False, "slam with an unknown option raises ValueError")
+            except ValueError as e:
+                failures.check("voxel" in str(e), "slam with an unknown option raises "
+                               "ValueError naming it, before any call")
 
         def example():
             env = dict(os.environ)
@@ -355,15 +447,40 @@ def main():
             failures.check(len(rows) == FRAMES and all(len(r.split()) == 8 for r in rows),
                            f"the example writes a {FRAMES}-line TUM trajectory")
 
+        def slam_example():
+            out = os.path.join(work, "slam_example_traj.txt")
+            r = subprocess.run(
+                [sys.executable, os.path.join(REPO, "clients/python/examples/slam_sequence.py"),
+                 "--server", daemon.target, "--dataset", sequence_dir, "--map", "slam_example",
+                 "--voxel-size", str(VOXEL_SIZE), "--deterministic", "--save", "--out", out],
+                capture_output=True, text=True, timeout=300, env=dict(os.environ))
+            print("    " + "\n    ".join(r.stdout.strip().splitlines()[-4:]))
+            failures.check(r.returncode == 0, "examples/slam_sequence.py exits 0"
+                           + ("" if r.returncode == 0 else f"\n{r.stdout}\n{r.stderr}"))
+            m = re.search(r"ATE \(no alignment, (\d+) frames\): rmse ([0-9.]+) cm", r.stdout)
+            failures.check(m is not None and int(m.group(1)) == FRAMES
+                           and float(m.group(2)) < 1.0, "the slam example reports ATE < 1 cm")
+            failures.check("saved slam_example" in r.stdout and os.path.exists(
+                os.path.join(daemon.data_dir, "slam_example.plx")),
+                "the slam example saves the map with --save")
+            rows = [line for line in open(out, encoding="utf-8") if not line.startswith("#")] \
+                if os.path.exists(out) else []
+            failures.check(len(rows) == FRAMES and all(len(r.split()) == 8 for r in rows),
+                           f"the slam example writes a {FRAMES}-line TUM trajectory")
+
         run_step(failures, "health and map lifecycle", health_and_maps)
         run_step(failures, "integrate every 10th frame", integrate)
         run_step(failures, "track lock-step", track_lockstep)
         run_step(failures, "track streaming (latest wins)", track_streaming)
+        run_step(failures, "slam lock-step (deterministic)", slam_lockstep)
+        run_step(failures, "slam streaming (backpressure)", slam_streaming)
+        run_step(failures, "slam realtime (latest wins)", slam_realtime)
         run_step(failures, "render and export", render_and_export)
         run_step(failures, "raw frames from numpy", raw_frames)
         run_step(failures, "save, delete, load", save_load)
         run_step(failures, "errors", errors)
         run_step(failures, "example script", example)
+        run_step(failures, "slam example script", slam_example)
         client.close()
 
         def auth():
@@ -378,6 +495,8 @@ def main():
                                       "auth: list_maps without a token")
                 failures.expect_error(lambda: list(anonymous.track("room", frames[:1])),
                                       "UNAUTHENTICATED", "auth: track without a token")
+                failures.expect_error(lambda: list(anonymous.slam("room", frames[:1])),
+                                      "UNAUTHENTICATED", "auth: slam without a token")
             with Client(secured.target, token="wrong", timeout=30.0) as wrong:
                 failures.expect_error(lambda: wrong.create_map("room"), "UNAUTHENTICATED",
                                       "auth: a wrong token")

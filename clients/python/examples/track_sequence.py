@@ -17,56 +17,26 @@ import os
 import sys
 import time
 
-import numpy as np
-
-from plenoxd_client import Client, PlenoxdError, TumDataset, convert, state_name
+from example_common import add_common_arguments, make_client, print_ate
+from plenoxd_client import PlenoxdError, TumDataset, convert, state_name
+from plenoxd_client.trajectory import write_tum_trajectory
 
 
 def parse_args(argv):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--server", required=True, help="HOST:PORT of plenoxd")
-    p.add_argument("--dataset", required=True, help="sequence folder in the TUM layout")
-    p.add_argument("--map", required=True, help="map name ([A-Za-z0-9_.-], 1-64 characters)")
-    p.add_argument("--token-file", help="file with the daemon's bearer token")
-    p.add_argument("--root-cert", help="PEM of the CA that signed the daemon's TLS certificate")
+    add_common_arguments(p)
     p.add_argument("--every", type=int, default=10, help="integrate every N'th frame (10)")
-    p.add_argument("--voxel-size", type=float, default=0.0,
-                   help="voxel size in metres for a new map (0 = the server default)")
     p.add_argument("--iterations", type=int, default=0,
                    help="optimisation iterations per keyframe (0 = the server default)")
     p.add_argument("--rays", type=int, default=0, help="tracking rays per frame (0 = default)")
-    p.add_argument("--max-frames", type=int, default=0, help="use only the first N frames")
     p.add_argument("--reintegrate", action="store_true",
                    help="integrate keyframes even when the map already has some")
     p.add_argument("--out", help="trajectory file to write (default: <map>_trajectory.txt)")
     return p.parse_args(argv)
 
 
-def ate(estimates, groundtruth):
-    """RMSE, mean and max position error (metres) over the timestamps both have."""
-    errors = [np.linalg.norm(t - groundtruth[ts][0]) for ts, (t, _) in estimates.items()
-              if ts in groundtruth]
-    if not errors:
-        return None
-    e = np.array(errors)
-    return {"rmse": float(np.sqrt(np.mean(e ** 2))), "mean": float(e.mean()),
-            "max": float(e.max()), "matched": len(e)}
-
-
-def write_tum_trajectory(path, estimates):
-    with open(path, "w", encoding="utf-8") as f:
-        f.write("# timestamp tx ty tz qx qy qz qw\n")
-        for ts in sorted(estimates):
-            t, q = estimates[ts]
-            f.write(f"{ts:.6f} " + " ".join(f"{v:.9f}" for v in (*t, *q)) + "\n")
-
-
 def main(argv=None):
     args = parse_args(sys.argv[1:] if argv is None else argv)
-    token = None
-    if args.token_file:
-        with open(args.token_file, "r", encoding="utf-8") as f:
-            token = f.read().strip()
     sequence = TumDataset(args.dataset)
     frames = sequence[:args.max_frames] if args.max_frames > 0 else sequence[:]
     if not sequence.has_groundtruth or frames[0].pose is None:
@@ -77,7 +47,7 @@ def main(argv=None):
     print(f"{sequence.name}: {len(frames)} frames {k.width}x{k.height}, "
           f"keyframes every {args.every}")
 
-    with Client(args.server, token=token, root_certificates=args.root_cert) as client:
+    with make_client(args) as client:
         try:
             client.wait_ready(timeout=10.0)
             try:
@@ -125,12 +95,7 @@ def main(argv=None):
           f"({1000.0 * seconds / max(1, len(estimates)):.0f} ms/frame), states "
           + ", ".join(f"{k}={v}" for k, v in sorted(states.items())))
     print(f"trajectory: {os.path.abspath(out)}")
-    error = ate(estimates, sequence.groundtruth())
-    if error is None:
-        print("ATE: no ground truth to compare with")
-    else:
-        print(f"ATE (no alignment, {error['matched']} frames): rmse {100 * error['rmse']:.2f} cm, "
-              f"mean {100 * error['mean']:.2f} cm, max {100 * error['max']:.2f} cm")
+    print_ate(estimates, sequence.groundtruth())
     return 0
 
 

@@ -17,15 +17,15 @@ except ImportError as _e:  # pragma: no cover - depends on the environment
         "health_pb2.py): build the project (target plx_python_stubs) and put "
         "<build>/clients/python/gen on PYTHONPATH") from _e
 
-from . import convert, dataset
-from .client import (DEFAULT_MAX_MESSAGE_BYTES, Client, PlenoxdError, Rendering, TrackStream,
-                     as_dict, estimate_pose, state_name)
+from . import convert, dataset, trajectory
+from .client import (DEFAULT_MAX_MESSAGE_BYTES, Client, PlenoxdError, Rendering, SlamStream,
+                     TrackStream, as_dict, estimate_pose, slam_pose, slam_state_name, state_name)
 from .convert import pb
 from .dataset import Frame, Intrinsics, TumDataset
 
 __all__ = [
-    "Client", "PlenoxdError", "TrackStream", "Rendering", "DEFAULT_MAX_MESSAGE_BYTES",
-    "as_dict", "estimate_pose", "state_name", "convert", "dataset", "pb", "Frame", "Intrinsics",
-    "TumDataset",
+    "Client", "PlenoxdError", "TrackStream", "SlamStream", "Rendering",
+    "DEFAULT_MAX_MESSAGE_BYTES", "as_dict", "estimate_pose", "state_name", "slam_pose",
+    "slam_state_name", "convert", "dataset", "trajectory", "pb", "Frame", "Intrinsics", "TumDataset",
 ]
 __version__ = "0.1.0"

@@ -7,6 +7,8 @@
             print(progress.keyframes_integrated, progress.done)
         for estimate in c.track("room", frames, initial_pose=first_pose):
             print(estimate.state, estimate.pose)
+        for update in c.slam("hall", unposed_frames, initial_pose=first_pose):   # online SLAM
+            print(slam_state_name(update), slam_pose(update), update.keyframe)
         color, depth = c.render("room", pose, intrinsics)
 
 Every failed call raises PlenoxdError with the gRPC status code and the server's message.
@@ -25,8 +27,9 @@ from plenoxd.v1 import plenoxd_pb2_grpc as pb_grpc
 
 from . import convert
 
-__all__ = ["Client", "PlenoxdError", "TrackStream", "Rendering", "DEFAULT_MAX_MESSAGE_BYTES",
-           "estimate_pose", "state_name", "as_dict"]
+__all__ = ["Client", "PlenoxdError", "TrackStream", "SlamStream", "Rendering",
+           "DEFAULT_MAX_MESSAGE_BYTES", "estimate_pose", "state_name", "slam_pose",
+           "slam_state_name", "as_dict"]
 
 DEFAULT_MAX_MESSAGE_BYTES = 64 << 20
 _END = object()
@@ -87,19 +90,23 @@ class _RequestFeed:
             raise
 
 
-class TrackStream:
-    """The estimates of one Track call, as an iterator of plenoxd.v1.PoseEstimate.
+class _FrameStream:
+    """One bidirectional frames-in call (Track, Slam) as an iterator of its per-frame replies,
+    in lock-step or streamed from a sender thread. Subclasses name the call, its request
+    message and options conversion, and count the replies; `sent` and `received` count frames
+    and per-frame replies."""
 
-    Counters while and after iterating: sent (frames sent), received (estimates), dropped
-    (frames the server skipped because newer ones arrived, the sum of PoseEstimate.dropped),
-    lost / degraded (estimates in those states). cancel() ends the call early."""
+    _method = ""
+    _request_type = None      # the request message: map, options, frame, initial_pose
+
+    @staticmethod
+    def _options_to_proto(options):
+        """options (a message or a dict) as the request's options message."""
+        raise NotImplementedError
 
     def __init__(self, client, map_name, frames, initial_pose, lockstep, options, priors, fps):
         self.sent = 0
         self.received = 0
-        self.dropped = 0
-        self.lost = 0
-        self.degraded = 0
         self._client = client
         self._map = map_name
         self._frames = frames
@@ -118,33 +125,37 @@ class TrackStream:
             self._call.cancel()
 
     def _request(self, frame, first):
-        request = pb.TrackRequest(frame=convert.frame_to_proto(frame, with_pose=self._priors))
+        request = self._request_type(frame=convert.frame_to_proto(frame, with_pose=self._priors))
         if first:
             request.map = self._map
             if self._options is not None:
-                request.options.CopyFrom(_track_options(self._options))
+                request.options.CopyFrom(self._options_to_proto(self._options))
             if self._initial_pose is not None:
                 convert.pose_to_proto(self._initial_pose, request.initial_pose)
         return request
 
-    def _count(self, estimate):
-        self.received += 1
-        self.dropped += estimate.dropped
-        if estimate.state == pb.TRACKING_STATE_LOST:
-            self.lost += 1
-        elif estimate.state == pb.TRACKING_STATE_DEGRADED:
-            self.degraded += 1
+    def _accept(self, reply):
+        """Counts a reply; True when it is a frame's (and is yielded)."""
+        raise NotImplementedError
+
+    def _ended(self):
+        """Called when the server ended the call without an error."""
+
+    def _open(self, feed):
+        self._call = getattr(self._client._stub, self._method)(
+            iter(feed), metadata=self._client.metadata_for(self._map))
+        return self._call
 
     def __iter__(self):
         if self._started:
-            raise RuntimeError("a TrackStream can be iterated once")
+            raise RuntimeError(f"a {type(self).__name__} can be iterated once")
         self._started = True
         if self._lockstep:
             return self._run_lockstep()
         return self._run_streaming()
 
     def _run_lockstep(self):
-        # One frame out, its estimate back, then the next frame. The feed blocks on a queue the
+        # One frame out, its reply back, then the next frame. The feed blocks on a queue the
         # response loop fills, so the server never has more than one frame waiting.
         outbox = queue.Queue()
         frames = iter(self._frames)
@@ -163,21 +174,22 @@ class TrackStream:
         try:
             if not send_next(True):
                 return
-            self._call = self._client._stub.Track(
-                iter(feed), metadata=self._client.metadata_for(self._map))
-            for estimate in self._call:
-                self._count(estimate)
-                yield estimate
+            for reply in self._open(feed):
+                if not self._accept(reply):
+                    continue
+                yield reply
                 if self._stop.is_set():
                     break
                 if self.received >= self.sent:
                     send_next(False)
+            else:
+                self._ended()
         except grpc.RpcError as e:
             if feed.error is not None:
                 raise feed.error from None
             if self._stop.is_set() and e.code() == grpc.StatusCode.CANCELLED:
                 return
-            raise PlenoxdError.from_rpc_error(e, "Track") from None
+            raise PlenoxdError.from_rpc_error(e, self._method) from None
         finally:
             outbox.put(_END)
             if self._call is not None and self._call.running():
@@ -185,8 +197,8 @@ class TrackStream:
 
     def _run_streaming(self):
         # A sender thread pushes frames as they come (paced to fps when given) into a queue that
-        # gRPC drains as fast as the network takes them; when frames arrive faster than the
-        # server tracks, the server keeps the newest (latest wins) and reports the rest dropped.
+        # gRPC drains as fast as the network takes them; how the server treats frames that wait
+        # is the call's (Track, realtime Slam: latest wins; Slam: backpressure).
         outbox = queue.Queue()
         feed = _RequestFeed(_drain(outbox))
         period = 1.0 / self._fps if self._fps else 0.0
@@ -211,22 +223,26 @@ class TrackStream:
             finally:
                 outbox.put(_END)
 
-        thread = threading.Thread(target=sender, name="plenoxd-track-sender", daemon=True)
+        thread = threading.Thread(target=sender, name=f"plenoxd-{self._method.lower()}-sender",
+                                  daemon=True)
         try:
-            self._call = self._client._stub.Track(
-                iter(feed), metadata=self._client.metadata_for(self._map))
+            call = self._open(feed)
             thread.start()
-            for estimate in self._call:
-                self._count(estimate)
-                yield estimate
+            for reply in call:
+                if not self._accept(reply):
+                    continue
+                yield reply
                 if self._stop.is_set():
                     break
+            else:
+                if not sender_error:
+                    self._ended()
         except grpc.RpcError as e:
             if sender_error:
                 raise sender_error[0] from None
             if self._stop.is_set() and e.code() == grpc.StatusCode.CANCELLED:
                 return
-            raise PlenoxdError.from_rpc_error(e, "Track") from None
+            raise PlenoxdError.from_rpc_error(e, self._method) from None
         finally:
             self._stop.set()
             if self._call is not None and self._call.running():
@@ -235,6 +251,87 @@ class TrackStream:
                 thread.join(timeout=5.0)
         if sender_error:
             raise sender_error[0]
+
+
+class TrackStream(_FrameStream):
+    """The estimates of one Track call, as an iterator of plenoxd.v1.PoseEstimate.
+
+    Counters while and after iterating: sent (frames sent), received (estimates), dropped
+    (frames the server skipped because newer ones arrived, the sum of PoseEstimate.dropped),
+    lost / degraded (estimates in those states). cancel() ends the call early."""
+
+    _method = "Track"
+    _request_type = pb.TrackRequest
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.dropped = 0
+        self.lost = 0
+        self.degraded = 0
+
+    @staticmethod
+    def _options_to_proto(options):
+        return _track_options(options)
+
+    def _accept(self, estimate):
+        self.received += 1
+        self.dropped += estimate.dropped
+        if estimate.state == pb.TRACKING_STATE_LOST:
+            self.lost += 1
+        elif estimate.state == pb.TRACKING_STATE_DEGRADED:
+            self.degraded += 1
+        return True
+
+
+class SlamStream(_FrameStream):
+    """The updates of one Slam call, as an iterator of plenoxd.v1.SlamUpdate, one per frame the
+    server processed. The call's last message (done=True, no frame) is not yielded: it is kept
+    as `done`, and the iteration ends only once it came, which for the last stream on a map is
+    after the mapping job finished (done.mapping.finished), so a save_map() then saves every
+    keyframe. A call the server ends without it raises PlenoxdError(INTERNAL).
+
+    Counters while and after iterating: sent (frames sent), received (updates), dropped (frames
+    the server skipped with options realtime=True, the sum of SlamUpdate.dropped), keyframes
+    (frames handed to the mapping job), lost / degraded / relocalised (updates in those
+    states); mapping: the SlamMapping of the latest message. cancel() ends the call early."""
+
+    _method = "Slam"
+    _request_type = pb.SlamRequest
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.dropped = 0
+        self.keyframes = 0
+        self.lost = 0
+        self.degraded = 0
+        self.relocalised = 0
+        self.mapping = None
+        self.done = None
+
+    @staticmethod
+    def _options_to_proto(options):
+        return _slam_options(options)
+
+    def _accept(self, update):
+        self.mapping = update.mapping
+        if update.done:
+            self.done = update
+            return False
+        self.received += 1
+        self.dropped += update.dropped
+        self.keyframes += int(update.keyframe)
+        if update.state == pb.SLAM_STATE_LOST:
+            self.lost += 1
+        elif update.state == pb.SLAM_STATE_DEGRADED:
+            self.degraded += 1
+        elif update.state == pb.SLAM_STATE_RELOCALISED:
+            self.relocalised += 1
+        return True
+
+    def _ended(self):
+        if self.done is None:
+            raise PlenoxdError(grpc.StatusCode.INTERNAL,
+                               "the server ended the stream without its done message", "Slam")
 
 
 def _track_options(options):
@@ -249,6 +346,36 @@ def _track_options(options):
         o.mode = int(mode)
     o.rays = int(options.get("rays", 0))
     o.iterations = int(options.get("iterations", 0))
+    return o
+
+
+# SlamOptions' fields by type: a dict may give any of them, nothing else (a misspelt key is an
+# error, not an option silently left at its default).
+_SLAM_FLOAT_OPTIONS = ("voxel_size", "kf_translation_m", "kf_rotation_deg", "kf_unmapped_fraction",
+                       "kf_interval_s", "max_depth")
+_SLAM_INT_OPTIONS = ("iterations_per_keyframe", "rays_per_iteration")
+_SLAM_BOOL_OPTIONS = ("realtime", "deterministic")
+
+
+def _slam_options(options):
+    """SlamOptions from a SlamOptions or a dict of its fields (0 / absent = the server's
+    default); "tracking" is a TrackOptions or a dict as track() takes (mode, rays,
+    iterations)."""
+    if isinstance(options, pb.SlamOptions):
+        return options
+    known = set(_SLAM_FLOAT_OPTIONS + _SLAM_INT_OPTIONS + _SLAM_BOOL_OPTIONS + ("tracking",))
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise ValueError(f"unknown SlamOptions field(s) {unknown}; known: {sorted(known)}")
+    o = pb.SlamOptions()
+    for name in _SLAM_FLOAT_OPTIONS:
+        setattr(o, name, float(options.get(name, 0.0)))
+    for name in _SLAM_INT_OPTIONS:
+        setattr(o, name, int(options.get(name, 0)))
+    for name in _SLAM_BOOL_OPTIONS:
+        setattr(o, name, bool(options.get(name, False)))
+    if options.get("tracking") is not None:
+        o.tracking.CopyFrom(_track_options(options["tracking"]))
     return o
 
 
@@ -439,6 +566,31 @@ class Client:
         options: TrackOptions or a dict (mode "gauss_newton"/"adam", rays, iterations)."""
         return TrackStream(self, map_name, frames, initial_pose, lockstep, options, priors, fps)
 
+    # --- SLAM ---
+
+    def slam(self, map_name, frames, initial_pose=None, options=None, lockstep=True,
+             priors=False, fps=None):
+        """Online SLAM into map_name (created when it does not exist, bootstrapped when empty,
+        extended when it has content): unposed frames in; returns a SlamStream yielding one
+        plenoxd.v1.SlamUpdate per frame the server processed (slam_pose(u) for its pose), and
+        ending once the server's done message came (SlamStream.done).
+
+        initial_pose: where the camera starts ((t, q), 4x4 or Pose): a new map's first keyframe
+        sits there; in a map with content the first frame relocalises from it.
+        lockstep=True sends a frame only after the previous one's update came back.
+        lockstep=False streams from a sender thread (at fps frames per second when given); the
+        server then processes every frame in order (it stops reading while frames wait) unless
+        options has realtime=True, where it keeps only the newest waiting frame and each
+        update's `dropped` (and SlamStream.dropped) counts the skipped ones.
+        priors=True also sends dataset frames' poses as priors (e.g. VIO poses); leave it
+        False when the poses are ground truth.
+        options: SlamOptions or a dict of its fields (voxel_size, tracking={mode, rays,
+        iterations}, kf_translation_m, kf_rotation_deg, kf_unmapped_fraction, kf_interval_s,
+        iterations_per_keyframe, rays_per_iteration, max_depth, realtime, deterministic)."""
+        if options is not None:
+            _slam_options(options)  # a bad option raises here, before the call starts
+        return SlamStream(self, map_name, frames, initial_pose, lockstep, options, priors, fps)
+
     # --- views ---
 
     def render(self, map_name, pose, intrinsics, with_info=False, timeout=None):
@@ -489,6 +641,19 @@ def estimate_pose(estimate):
 def state_name(estimate):
     """"OK", "DEGRADED", "LOST" (or "UNSPECIFIED") of a PoseEstimate."""
     return pb.TrackingState.Name(estimate.state).replace("TRACKING_STATE_", "")
+
+
+def slam_pose(update):
+    """(t, q) of a SlamUpdate's frame (for LOST: the prediction); convert.pose_to_matrix(*...)
+    for a 4x4. A done message has no frame: ValueError."""
+    if update.done:
+        raise ValueError("a done SlamUpdate carries no frame and no pose")
+    return convert.pose_from_proto(update.pose)
+
+
+def slam_state_name(update):
+    """"OK", "DEGRADED", "LOST", "RELOCALISED" (or "UNSPECIFIED") of a SlamUpdate."""
+    return pb.SlamState.Name(update.state).replace("SLAM_STATE_", "")
 
 
 def as_dict(message):
