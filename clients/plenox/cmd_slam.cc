@@ -56,12 +56,10 @@ void AddSlamFlags(FlagSet& flags) {
 absl::StatusOr<SlamDatasetOptions> OptionsFromFlags(const FlagSet& flags) {
   SlamDatasetOptions o;
   SlamOptions& s = o.slam;
-  PLX_ASSIGN_OR_RETURN(s.tracker, TrackerOptionsFromFlags(flags));
+  PLX_ASSIGN_OR_RETURN(const TrackerOptions tracker, TrackerOptionsFromFlags(flags));
   double voxel = 0.0;
   PLX_ASSIGN_OR_RETURN(voxel, VoxelSizeFromFlags(flags));
-  const MapperOptions defaults = s.mapping.mapper;
-  s.mapping.mapper = MapperOptionsForVoxelSize(static_cast<float>(voxel));
-  s.mapping.mapper.window_fraction = defaults.window_fraction;
+  s = SlamOptionsFor(static_cast<float>(voxel), tracker);
   PLX_ASSIGN_OR_RETURN(s.mapping.mapper.window_keyframes, flags.GetInt("window", 0, 1000));
   PLX_ASSIGN_OR_RETURN(s.mapping.iterations_per_keyframe,
                        flags.GetInt("iterations-per-keyframe", 1, kMaxIterationsPerKeyframe));
@@ -72,9 +70,6 @@ absl::StatusOr<SlamDatasetOptions> OptionsFromFlags(const FlagSet& flags) {
   PLX_ASSIGN_OR_RETURN(s.keyframes.max_unmapped_fraction, flags.GetDouble("kf-unmapped", 0.001, 1));
   PLX_ASSIGN_OR_RETURN(s.keyframes.max_interval_s, flags.GetDouble("kf-interval", 0, 3600));
   PLX_ASSIGN_OR_RETURN(s.refinement.window, flags.GetInt("refine-window", 0, 1000));
-  const int refine_iterations = s.refinement.tracker.iterations;
-  s.refinement.tracker = s.tracker;
-  s.refinement.tracker.iterations = std::max(refine_iterations, s.tracker.iterations);
   s.deterministic = flags.GetSwitch("deterministic");
   PLX_ASSIGN_OR_RETURN(s.mapping_nice, flags.GetInt("mapping-nice", 0, 19));
   o.realtime = flags.GetSwitch("realtime");
