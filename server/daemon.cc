@@ -228,6 +228,13 @@ absl::Status Daemon::Drain(absl::Duration grace) {
   // server is down, so queued frames and mapping chunks complete or see their stream cancelled.
   server_->Shutdown(std::chrono::system_clock::now() +
                     std::chrono::milliseconds(absl::ToInt64Milliseconds(grace)));
+  // SLAM jobs integrate the keyframes their streams handed them (not the rest of their
+  // optimisation budget) and publish, so the save below has every one; the workers must still
+  // run for that.
+  if (!slam_jobs_->WaitForAll(grace)) {
+    LogEvent("warning", "slam_jobs_not_finished",
+             {{"jobs", absl::StrCat(slam_jobs_->Running().size())}});
+  }
   workers_->StopAll();
   io_->Stop();
   // Every dirty map is tried; each one that could not be saved gets its own line.

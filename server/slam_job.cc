@@ -5,6 +5,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/time/clock.h"
 #include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
 #include "server/log.h"
@@ -145,7 +146,7 @@ absl::Status SlamJob::PublishToStore() {
   return absl::OkStatus();
 }
 
-absl::Status SlamJob::StepMapper(Backend* backend, bool finishing) {
+absl::Status SlamJob::StepMapper(Backend* backend, bool finishing, bool draining) {
   if (mapper_ == nullptr) {
     PLX_ASSIGN_OR_RETURN(std::unique_ptr<SlamMapper> mapper,
                          SlamMapper::Create(options_, backend, base_));
@@ -166,18 +167,24 @@ absl::Status SlamJob::StepMapper(Backend* backend, bool finishing) {
     }
     early_.clear();
   }
-  if (mapper_->has_work()) {
+  // Draining: only the keyframes already accepted are integrated; the rest of the iteration
+  // budget is not spent, so the map is saved before the daemon's grace runs out.
+  const bool integrate = mapper_->progress().pending_keyframes > 0;
+  if (draining ? integrate : mapper_->has_work()) {
     PLX_RETURN_IF_ERROR(mapper_->Step(finishing).status());
   }
   // Out of work: what the last iterations changed is published now, not at the next keyframe
   // (a lock-step stream waits for exactly this).
-  if (!mapper_->has_work()) PLX_RETURN_IF_ERROR(mapper_->PublishIfChanged());
+  if (!mapper_->has_work() || (draining && mapper_->progress().pending_keyframes == 0)) {
+    PLX_RETURN_IF_ERROR(mapper_->PublishIfChanged());
+  }
   return PublishToStore();
 }
 
 void SlamJob::RunStep(Backend* backend, bool cancelled) {
   bool finishing = false;
   bool finished = false;
+  const bool draining = state_->draining.load();
   {
     std::lock_guard<std::mutex> lock(mutex_);
     scheduled_ = false;
@@ -185,7 +192,7 @@ void SlamJob::RunStep(Backend* backend, bool cancelled) {
     if (cancelled) {
       FinishLocked(absl::UnavailableError("plenoxd is shutting down"));
     }
-    finishing = members_.empty();
+    finishing = members_.empty() || draining;
   }
   if (cancelled) {
     state_->slam_jobs->Remove(this);
@@ -193,7 +200,8 @@ void SlamJob::RunStep(Backend* backend, bool cancelled) {
     return;
   }
   const absl::Status status =
-      CatchAllocationFailure("SLAM mapping", [&] { return StepMapper(backend, finishing); });
+      CatchAllocationFailure("SLAM mapping",
+                             [&] { return StepMapper(backend, finishing, draining); });
   {
     std::lock_guard<std::mutex> lock(mutex_);
     if (mapper_ != nullptr) {
@@ -206,14 +214,16 @@ void SlamJob::RunStep(Backend* backend, bool cancelled) {
       has_work_ = mapper_->has_work();
     }
     status_.idle = !has_work_ && early_.empty() && status_.pending_keyframes == 0;
+    // Draining, every keyframe accepted is in the map: nothing more to do before the save.
+    const bool drained = draining && early_.empty() && status_.pending_keyframes == 0;
     if (!status.ok()) {
       LogEvent("error", "slam_mapping_failed",
                {{"map", map_}, {"job", job_id_}, {"error", status.ToString()}});
       FinishLocked(status);
-    } else if (members_.empty() && status_.idle) {
+    } else if (members_.empty() && (status_.idle || drained)) {
       FinishLocked(absl::OkStatus());
     } else {
-      if (has_work_ || !early_.empty()) ScheduleLocked();
+      if ((has_work_ && !drained) || !early_.empty()) ScheduleLocked();
       state_->jobs->Update(job_id_, JobState::kRunning, 0.0,
                            absl::StrFormat("%d keyframes integrated, map version %d",
                                            status_.keyframes_integrated, status_.map_version));
@@ -299,6 +309,15 @@ std::vector<std::shared_ptr<SlamJob>> SlamJobs::Running() const {
   std::vector<std::shared_ptr<SlamJob>> out;
   for (const auto& [name, job] : jobs_) out.push_back(job);
   return out;
+}
+
+bool SlamJobs::WaitForAll(absl::Duration timeout) const {
+  const absl::Time end = absl::Now() + timeout;
+  while (!Running().empty()) {
+    if (absl::Now() >= end) return false;
+    absl::SleepFor(absl::Milliseconds(10));
+  }
+  return true;
 }
 
 void SlamJobs::Remove(const SlamJob* job) {

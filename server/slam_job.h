@@ -7,7 +7,8 @@
 //
 // Lifetime: the first Slam stream on a map starts the job (SlamJobs::Join); later streams join
 // it. When the last stream leaves, the job spends the rest of its iteration budget, publishes
-// the final version, releases the lease and ends. A job is shared (shared_ptr) by its streams,
+// the final version, releases the lease and ends. When the daemon drains, it only integrates
+// the keyframes already accepted, publishes and ends, so the save has every one of them. A job is shared (shared_ptr) by its streams,
 // the registry and its queued task.
 #pragma once
 
@@ -21,6 +22,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "absl/time/time.h"
 #include "core/geometry/intrinsics.h"
 #include "core/geometry/rgbd_frame.h"
 #include "core/geometry/se3.h"
@@ -92,7 +94,8 @@ class SlamJob : public std::enable_shared_from_this<SlamJob> {
   void ScheduleLocked();  // posts one mapping task if none is queued and there is work
   void RunStep(Backend* backend, bool cancelled);
   // Steps the mapper once (creating it first); returns whether a new version went to the store.
-  absl::Status StepMapper(Backend* backend, bool finishing);
+  // Draining: only integrates the keyframes already accepted, then publishes.
+  absl::Status StepMapper(Backend* backend, bool finishing, bool draining);
   absl::Status PublishToStore();
   // Marks the job ended and releases the map's lease; the caller then removes it from the
   // registry without holding mutex_ (lock order: registry, then job).
@@ -136,6 +139,9 @@ class SlamJobs {
                                                 std::shared_ptr<SlamJobListener> listener);
   // Jobs still running (for metrics and drain).
   std::vector<std::shared_ptr<SlamJob>> Running() const;
+  // Drain: waits until every job has ended (they only integrate what they accepted once the
+  // daemon drains and their streams are gone); false when `timeout` passed first.
+  bool WaitForAll(absl::Duration timeout) const;
 
  private:
   friend class SlamJob;

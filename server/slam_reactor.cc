@@ -156,6 +156,13 @@ absl::Status SlamReactor::HandleFirstMessage() {
 
 absl::Status SlamReactor::HandleRequestLocked(bool first) {
   if (first) PLX_RETURN_IF_ERROR(HandleFirstMessage());
+  if (request_.has_frame() && state_->draining) {
+    // The daemon stops: no more frames; the ones accepted are processed, their keyframes
+    // integrated and the map saved, and the stream ends with its done message.
+    LogEvent("info", "slam_input_ended", {{"map", map_name_}, {"reason", "draining"}});
+    EndInputLocked();
+    return absl::OkStatus();
+  }
   if (request_.has_frame()) {
     const std::string field = absl::StrCat("frame[", processed_ + queue_.size() + dropped_, "]");
     PLX_ASSIGN_OR_RETURN(CheckedFrame frame,

@@ -173,6 +173,14 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
     this->Finish(final_status_);
   }
 
+  // Takes no more requests, as if the client had half-closed (e.g. the daemon drains).
+  void EndInputLocked() {
+    if (phase_ != Phase::kOpen) return;
+    phase_ = Phase::kClosing;
+    OnInputClosedLocked();
+    MaybeFinishLocked();
+  }
+
   // Restarts reads held by backpressure.
   void ResumeReadingLocked() {
     if (phase_ == Phase::kOpen && !reading_ && WantsInputLocked()) ReadLocked();

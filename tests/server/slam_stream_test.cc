@@ -1,6 +1,7 @@
 // The Slam stream over loopback: the same trajectory as in-process SLAM in lock-step mode, two
 // cameras into one live map while readers render it, and the bad-input answers.
 #include <atomic>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -322,6 +323,125 @@ TEST(SlamStreamTest, BadInputNamesTheFieldAndLeavesOthersAlone) {
   const SlamRun run = RunSlam(*d.stub, "m1", SmallSlamOptions(false), Range(0, 3), GroundTruth(0));
   EXPECT_TRUE(run.status.ok()) << Describe(run.status);
   EXPECT_EQ(run.updates.size(), 3u);
+}
+
+TEST(SlamStreamTest, DrainMidStreamSavesEveryKeyframeAndARestartExtendsTheMap) {
+  const std::string dir = ScratchDir("plx_srv_slam_drain");
+  uint32_t keyframes_seen = 0;
+  uint32_t processed = 0;
+  {
+    absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(TestDaemonOptions(dir));
+    ASSERT_TRUE(started.ok()) << started.status();
+    TestDaemon& d = **started;
+    grpc::ClientContext context;
+    Prepare(&context);
+    auto stream = d.stub->Slam(&context);
+    pb::SlamRequest first;
+    first.set_map("drained");
+    *first.mutable_options() = SmallSlamOptions(false);
+    *first.mutable_initial_pose() = ToProto(GroundTruth(0));
+    ASSERT_TRUE(stream->Write(first));
+    // Half the frames, each answered before the next is sent.
+    pb::SlamUpdate update;
+    for (int i = 0; i < 20; ++i) {
+      pb::SlamRequest request;
+      *request.mutable_frame() = EncodeFrame(i, false);
+      ASSERT_TRUE(stream->Write(request));
+      ASSERT_TRUE(stream->Read(&update));
+      keyframes_seen += update.keyframe();
+      ++processed;
+    }
+    // SIGTERM's path while the camera keeps streaming: no frame after it is processed.
+    std::thread drain([&] { EXPECT_TRUE(d.daemon->Drain(absl::Seconds(20)).ok()); });
+    ASSERT_TRUE(WaitFor([&] { return HealthCheck(*d.health) != kServing; }));
+    for (int i = 20; i < kFrames; ++i) {
+      pb::SlamRequest request;
+      *request.mutable_frame() = EncodeFrame(i, false);
+      if (!stream->Write(request)) break;
+    }
+    stream->WritesDone();
+    std::optional<pb::SlamUpdate> done;
+    while (stream->Read(&update)) {
+      if (update.done()) {
+        done = update;
+      } else {
+        ++processed;
+        keyframes_seen += update.keyframe();
+      }
+    }
+    const grpc::Status status = stream->Finish();
+    drain.join();
+    EXPECT_TRUE(status.ok()) << Describe(status);
+    ASSERT_TRUE(done.has_value());
+    EXPECT_TRUE(done->mapping().finished());
+    EXPECT_EQ(done->mapping().keyframes_integrated(), keyframes_seen);
+    EXPECT_EQ(processed, 20u);
+    d.daemon.reset();
+  }
+  ASSERT_GE(keyframes_seen, 2u);
+  ASSERT_TRUE(std::filesystem::exists(dir + "/drained.plx"));
+  // A new daemon on the same data directory has the map, and a Slam stream extends it (in
+  // lock-step, so the number below is the same every run): its camera relocalises at frame
+  // 10's place and walks on to the last frame.
+  absl::StatusOr<std::unique_ptr<TestDaemon>> restarted = StartTestDaemon(TestDaemonOptions(dir));
+  ASSERT_TRUE(restarted.ok()) << restarted.status();
+  TestDaemon& d = **restarted;
+  // (A map file keeps the grid, not the keyframe count: the done message above showed every
+  // keyframe integrated before the job ended, and the save comes after the job's end.)
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap(*d.stub, "drained", &info).ok());
+  EXPECT_GT(info.bricks(), 0u);
+  const uint64_t loaded_version = info.version();
+  const std::vector<int> frames = Range(10, kFrames);
+  std::vector<double> times;
+  for (size_t i = 0; i < frames.size(); ++i) times.push_back(200.0 + 0.033 * i);
+  const SlamRun run =
+      RunSlam(*d.stub, "drained", SmallSlamOptions(true), frames, GroundTruth(10), times);
+  ASSERT_TRUE(run.status.ok()) << Describe(run.status);
+  ASSERT_EQ(run.updates.size(), frames.size());
+  EXPECT_EQ(run.updates.front().state(), pb::SLAM_STATE_RELOCALISED)
+      << run.updates.front().reason();
+  const double ate = AteRmse(run, frames);
+  std::printf("extended after a restart: ATE %.2f mm\n", 1000 * ate);
+  EXPECT_LE(ate, 0.01);
+  ASSERT_TRUE(GetMap(*d.stub, "drained", &info).ok());
+  EXPECT_GT(info.version(), loaded_version);
+}
+
+TEST(SlamStreamTest, CancelledStreamLeavesTheJobAndReleasesTheMap) {
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started =
+      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_slam_cancel")));
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+  {
+    grpc::ClientContext context;
+    Prepare(&context);
+    auto stream = d.stub->Slam(&context);
+    pb::SlamRequest first;
+    first.set_map("cancelled");
+    *first.mutable_options() = SmallSlamOptions(false);
+    ASSERT_TRUE(stream->Write(first));
+    pb::SlamUpdate update;
+    for (int i = 0; i < 5; ++i) {
+      pb::SlamRequest request;
+      *request.mutable_frame() = EncodeFrame(i, false);
+      ASSERT_TRUE(stream->Write(request));
+      ASSERT_TRUE(stream->Read(&update));
+    }
+    context.TryCancel();
+    while (stream->Read(&update)) {
+    }
+    EXPECT_EQ(stream->Finish().error_code(), grpc::StatusCode::CANCELLED);
+  }
+  // The job finishes what it has and releases the map; another Slam stream maps it after.
+  ASSERT_TRUE(WaitFor([&] {
+    pb::MapInfo info;
+    return GetMap(*d.stub, "cancelled", &info).ok() && !info.mapping() && info.keyframes() > 0;
+  }));
+  const SlamRun run =
+      RunSlam(*d.stub, "cancelled", SmallSlamOptions(false), Range(5, 10), GroundTruth(5));
+  EXPECT_TRUE(run.status.ok()) << Describe(run.status);
+  EXPECT_EQ(run.updates.size(), 5u);
 }
 
 }  // namespace
