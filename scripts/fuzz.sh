@@ -2,6 +2,8 @@
 # Builds the libFuzzer harnesses (fuzz/) with clang, ASan and UBSan in ./build-fuzz and runs each
 # for a set time on a copy of its seed corpus.
 #   scripts/fuzz.sh [SECONDS] [HARNESS...]  each harness (default: all) for SECONDS (default 60)
+#   scripts/fuzz.sh --runs N [HARNESS...]   each harness for exactly N inputs from a fixed seed
+#                                           (repeatable: CI's short run, .ci/run)
 #   scripts/fuzz.sh --seeds                 rewrite fuzz/corpus/*/ seeds with the project's writers
 # Fails (exit 1) when a harness crashes (a sanitizer report, a PLX_FUZZ_CHECK, a timeout or
 # running out of memory) and prints where libFuzzer saved the input and how to replay it.
@@ -15,9 +17,14 @@ cd "$(dirname "$0")/.."
 harnesses_all=(fuzz_image fuzz_frame_proto fuzz_map_file fuzz_text_files fuzz_tum_lists)
 seeds=0
 seconds=60
+runs=0
 if [[ "${1:-}" == "--seeds" ]]; then
   seeds=1
   shift
+elif [[ "${1:-}" == "--runs" ]]; then
+  [[ "${2:-}" =~ ^[0-9]+$ ]] || { echo "fuzz: --runs needs a count" >&2; exit 2; }
+  runs=$2
+  shift 2
 elif [[ "${1:-}" =~ ^[0-9]+$ ]]; then
   seconds=$1
   shift
@@ -57,7 +64,15 @@ for h in "${harnesses[@]}"; do
   if [[ -d /dev/shm && -w /dev/shm ]]; then tmp=/dev/shm/plx_fuzz_$$_$h; fi
   log=build-fuzz/logs/$h.log
   mkdir -p "$work" "$artifacts" "$tmp" "$(dirname "$log")"
-  echo "fuzz: $h for ${seconds}s (log: $log)"
+  # A time limit explores more on a fast machine; a run count from a fixed seed does the same
+  # work on every machine, so CI's result does not depend on its speed.
+  if (( runs > 0 )); then
+    budget=(-runs="$runs" -seed=1)
+    echo "fuzz: $h for $runs inputs (log: $log)"
+  else
+    budget=(-max_total_time="$seconds")
+    echo "fuzz: $h for ${seconds}s (log: $log)"
+  fi
   # The first corpus folder receives new inputs; the repository's seeds are only read.
   # -timeout: one input may take 10 s; -rss_limit_mb: what a decoder may hold for one input;
   # -close_fd_mask=2: the harnesses' own stderr is dropped (libpng prints a line for every
@@ -65,7 +80,7 @@ for h in "${harnesses[@]}"; do
   # PLX_FUZZ_CHECK messages also use, still reach the log.
   status=0
   [[ "$tmp" == /* ]] || tmp=$PWD/$tmp
-  TMPDIR=$tmp "./build-fuzz/fuzz/$h" "$work" "fuzz/corpus/$h" -max_total_time="$seconds" \
+  TMPDIR=$tmp "./build-fuzz/fuzz/$h" "$work" "fuzz/corpus/$h" "${budget[@]}" \
     -timeout=10 -rss_limit_mb=2048 -close_fd_mask=2 -print_final_stats=1 \
     -artifact_prefix="$artifacts" \
     > "$log" 2>&1 || status=$?
@@ -85,4 +100,8 @@ if (( ${#failed[@]} > 0 )); then
   echo "fuzz: ${#failed[@]} harness(es) failed: ${failed[*]}"
   exit 1
 fi
-echo "fuzz: ${#harnesses[@]} harness(es) ran ${seconds}s each without a crash"
+if (( runs > 0 )); then
+  echo "fuzz: ${#harnesses[@]} harness(es) ran $runs inputs each without a crash"
+else
+  echo "fuzz: ${#harnesses[@]} harness(es) ran ${seconds}s each without a crash"
+fi

@@ -4,6 +4,7 @@
 #include <grpcpp/health_check_service_interface.h>
 #include <grpcpp/server_builder.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <memory>
 #include <vector>
@@ -137,6 +138,8 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   d->state_.io = d->io_.get();
   d->state_.jobs = d->jobs_.get();
   d->state_.metrics = d->metrics_registry_.get();
+  d->slam_jobs_ = std::make_unique<SlamJobs>(&d->state_);
+  d->state_.slam_jobs = d->slam_jobs_.get();
   d->state_.config.auth_token = options.auth_token;
   d->state_.config.max_streams = options.max_streams;
   d->state_.config.max_frame_pixels = options.max_frame_pixels;
@@ -201,6 +204,12 @@ std::string Daemon::RenderMetrics() const {
   g.queue_depth = workers_->total_queue_depth();
   g.jobs_running = jobs_->running();
   g.serving = !state_.draining.load();
+  for (const std::shared_ptr<SlamJob>& job : slam_jobs_->Running()) {
+    const SlamJobStatus s = job->Status();
+    ++g.slam_jobs;
+    g.slam_pending_keyframes += s.pending_keyframes;
+    g.slam_last_publish_s = std::max(g.slam_last_publish_s, s.last_publish_s);
+  }
   for (size_t i = 0; i < workers_->size(); ++i) {
     const DeviceWorker& w = workers_->worker(i);
     g.devices.push_back({w.device().id, w.device().kind, w.device().name, w.queue_depth(),
@@ -219,6 +228,13 @@ absl::Status Daemon::Drain(absl::Duration grace) {
   // server is down, so queued frames and mapping chunks complete or see their stream cancelled.
   server_->Shutdown(std::chrono::system_clock::now() +
                     std::chrono::milliseconds(absl::ToInt64Milliseconds(grace)));
+  // SLAM jobs integrate the keyframes their streams handed them (not the rest of their
+  // optimisation budget) and publish, so the save below has every one; the workers must still
+  // run for that.
+  if (!slam_jobs_->WaitForAll(grace)) {
+    LogEvent("warning", "slam_jobs_not_finished",
+             {{"jobs", absl::StrCat(slam_jobs_->Running().size())}});
+  }
   workers_->StopAll();
   io_->Stop();
   // Every dirty map is tried; each one that could not be saved gets its own line.

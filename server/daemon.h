@@ -17,6 +17,7 @@
 #include "server/http_server.h"
 #include "server/metrics.h"
 #include "server/plenoxd_service.h"
+#include "server/slam_job.h"
 
 namespace plx::server {
 
@@ -79,6 +80,8 @@ class Daemon {
   std::unique_ptr<JobRegistry> jobs_;
   std::unique_ptr<Metrics> metrics_registry_;
   DaemonState state_;
+  // Destroyed before the state and the workers it uses (a job detaches from its worker).
+  std::unique_ptr<SlamJobs> slam_jobs_;
   std::unique_ptr<PlenoxdService> service_;
   std::unique_ptr<grpc::Server> server_;
   std::unique_ptr<HttpServer> http_;  // --metrics-port: /metrics

@@ -16,6 +16,8 @@
 
 namespace plx::server {
 
+class SlamJobs;  // server/slam_job.h
+
 // Pixels one Render may ask for (--max-render-pixels): a 4K view (3840 x 2160). Rendering is
 // cut into row tiles and stops when the call is cancelled, but a view this size still holds a
 // CPU worker for seconds and needs ~20 bytes per pixel besides the encoded images.
@@ -40,6 +42,7 @@ struct DaemonState {
   DeviceWorker* io = nullptr;  // file I/O (save/load), off the compute workers
   JobRegistry* jobs = nullptr;
   Metrics* metrics = nullptr;
+  SlamJobs* slam_jobs = nullptr;  // the maps' running SLAM mapping jobs
   DaemonConfig config;
   std::atomic<bool> draining{false};
 };

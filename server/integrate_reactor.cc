@@ -93,16 +93,7 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
   bool input_closed = false;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    // A cancelled call stops before its next bounded step (OnCancel may not have run yet).
-    if (!cancelled && !failed() && context_->IsCancelled()) {
-      FailLocked(absl::CancelledError("cancelled by the client"));
-    }
-    if (cancelled || finished() || failed()) {
-      TaskDoneLocked();
-      if (cancelled) FailLocked(absl::UnavailableError("plenoxd is shutting down"));
-      MaybeFinishLocked();
-      return;
-    }
+    if (!StartTaskLocked(cancelled)) return;
     // One keyframe per task into the session (it integrates one per step), so the frames
     // waiting stay bounded by kMaxQueuedKeyframes (backpressure on the client), and only the
     // one being integrated is ever decoded.

@@ -27,11 +27,32 @@ std::string LabelValue(const std::string& text) {
 
 }  // namespace
 
-void Metrics::ObserveTrackLatency(double seconds) {
+void LatencyHistogram::Observe(double seconds) {
   size_t bucket = 0;
   while (bucket < kBuckets.size() && seconds > kBuckets[bucket]) ++bucket;
-  latency_counts_[bucket].fetch_add(1, std::memory_order_relaxed);
-  latency_micros_sum_.fetch_add(static_cast<int64_t>(seconds * 1e6), std::memory_order_relaxed);
+  counts_[bucket].fetch_add(1, std::memory_order_relaxed);
+  micros_sum_.fetch_add(static_cast<int64_t>(seconds * 1e6), std::memory_order_relaxed);
+}
+
+void LatencyHistogram::Render(const char* h, const char* help, std::string* out) const {
+  absl::StrAppend(out, "# HELP ", h, " ", help, "\n", "# TYPE ", h, " histogram\n");
+  int64_t cumulative = 0;
+  for (size_t i = 0; i < kBuckets.size(); ++i) {
+    cumulative += counts_[i].load();
+    absl::StrAppend(out, h, "_bucket{le=\"", absl::StrFormat("%g", kBuckets[i]), "\"} ",
+                    cumulative, "\n");
+  }
+  cumulative += counts_[kBuckets.size()].load();
+  absl::StrAppend(out, h, "_bucket{le=\"+Inf\"} ", cumulative, "\n", h, "_sum ",
+                  absl::StrFormat("%.6f", micros_sum_.load() / 1e6), "\n", h, "_count ",
+                  cumulative, "\n");
+}
+
+void Metrics::ObserveSlamFrame(int state, double seconds) {
+  if (state >= 0 && state < static_cast<int>(slam_frames_.size())) {
+    slam_frames_[state].fetch_add(1, std::memory_order_relaxed);
+  }
+  slam_latency_.Observe(seconds);
 }
 
 std::string Metrics::Render(const Gauges& g) const {
@@ -74,25 +95,37 @@ std::string Metrics::Render(const Gauges& g) const {
                     d.queue_depth, "\n");
   }
   absl::StrAppend(&out,
-                  "# HELP plenoxd_device_streams Track and Integrate streams bound to each "
+                  "# HELP plenoxd_device_streams Track, Integrate and Slam streams (and SLAM jobs) bound to each "
                   "device.\n# TYPE plenoxd_device_streams gauge\n");
   for (const Gauges::Device& d : g.devices) {
     absl::StrAppend(&out, "plenoxd_device_streams{device=\"", LabelValue(d.id), "\"} ",
                     d.streams, "\n");
   }
-  const char* h = "plenoxd_track_latency_seconds";
-  absl::StrAppend(&out, "# HELP ", h, " Time from receiving a frame to its pose estimate.\n",
-                  "# TYPE ", h, " histogram\n");
-  int64_t cumulative = 0;
-  for (size_t i = 0; i < kBuckets.size(); ++i) {
-    cumulative += latency_counts_[i].load();
-    absl::StrAppend(&out, h, "_bucket{le=\"", absl::StrFormat("%g", kBuckets[i]), "\"} ",
-                    cumulative, "\n");
+  track_latency_.Render("plenoxd_track_latency_seconds",
+                        "Time from receiving a frame to its pose estimate.", &out);
+  // SLAM: streams, frames by state, keyframes, the jobs' mapping lag and publish time.
+  gauge("plenoxd_slam_streams", "Open Slam streams.", slam_streams.load());
+  absl::StrAppend(&out,
+                  "# HELP plenoxd_slam_frames_total Frames Slam streams processed, by state.\n"
+                  "# TYPE plenoxd_slam_frames_total counter\n");
+  static constexpr const char* kStates[] = {"ok", "degraded", "lost", "relocalised"};
+  for (size_t i = 0; i < slam_frames_.size(); ++i) {
+    absl::StrAppend(&out, "plenoxd_slam_frames_total{state=\"", kStates[i], "\"} ",
+                    slam_frames_[i].load(), "\n");
   }
-  cumulative += latency_counts_[kBuckets.size()].load();
-  absl::StrAppend(&out, h, "_bucket{le=\"+Inf\"} ", cumulative, "\n", h, "_sum ",
-                  absl::StrFormat("%.6f", latency_micros_sum_.load() / 1e6), "\n", h, "_count ",
-                  cumulative, "\n");
+  counter("plenoxd_slam_keyframes_total", "Keyframes Slam streams handed to mapping.",
+          slam_keyframes.load());
+  gauge("plenoxd_slam_jobs", "Running SLAM mapping jobs.", g.slam_jobs);
+  gauge("plenoxd_slam_pending_keyframes",
+        "Keyframes accepted by SLAM jobs and not integrated yet (mapping lag).",
+        g.slam_pending_keyframes);
+  absl::StrAppend(&out,
+                  "# HELP plenoxd_slam_last_publish_seconds The longest last publish of the "
+                  "running SLAM jobs.\n# TYPE plenoxd_slam_last_publish_seconds gauge\n"
+                  "plenoxd_slam_last_publish_seconds ",
+                  absl::StrFormat("%.6f", g.slam_last_publish_s), "\n");
+  slam_latency_.Render("plenoxd_slam_latency_seconds",
+                       "Time from receiving a Slam frame to its update.", &out);
   return out;
 }
 

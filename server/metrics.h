@@ -14,6 +14,19 @@
 
 namespace plx::server {
 
+// A Prometheus histogram of latencies in seconds (10 ms to 5 s buckets).
+class LatencyHistogram {
+ public:
+  void Observe(double seconds);
+  void Render(const char* name, const char* help, std::string* out) const;
+
+ private:
+  static constexpr std::array<double, 10> kBuckets = {0.01, 0.025, 0.05, 0.1, 0.15,
+                                                       0.25, 0.5,   1.0,  2.5, 5.0};
+  std::array<std::atomic<int64_t>, kBuckets.size() + 1> counts_{};
+  std::atomic<int64_t> micros_sum_{0};
+};
+
 class Metrics {
  public:
   std::atomic<int64_t> frames_tracked{0};
@@ -23,8 +36,13 @@ class Metrics {
   std::atomic<int64_t> renders{0};
   std::atomic<int64_t> rpc_errors{0};
   std::atomic<int64_t> active_streams{0};
+  std::atomic<int64_t> slam_streams{0};    // Slam streams on a job
+  std::atomic<int64_t> slam_keyframes{0};  // keyframes Slam streams handed to their jobs
 
-  void ObserveTrackLatency(double seconds);
+  void ObserveTrackLatency(double seconds) { track_latency_.Observe(seconds); }
+  // A frame a Slam stream processed: `state` is its SlamState's index (OK, DEGRADED, LOST,
+  // RELOCALISED), `seconds` from receiving it to its update.
+  void ObserveSlamFrame(int state, double seconds);
 
   // Gauges supplied by the daemon at scrape time.
   struct Gauges {
@@ -33,6 +51,11 @@ class Metrics {
     int64_t queue_depth = 0;
     int64_t jobs_running = 0;
     bool serving = true;
+    // Running SLAM mapping jobs, the keyframes they have accepted but not integrated yet
+    // (mapping lag), and the longest of their last publishes.
+    int64_t slam_jobs = 0;
+    int64_t slam_pending_keyframes = 0;
+    double slam_last_publish_s = 0.0;
     // One per compute worker: plenoxd_device_info{device, kind, name} 1 and, per device, the
     // tasks queued or running and the streams bound to it.
     struct Device {
@@ -47,10 +70,9 @@ class Metrics {
   std::string Render(const Gauges& gauges) const;
 
  private:
-  static constexpr std::array<double, 10> kBuckets = {0.01, 0.025, 0.05, 0.1, 0.15,
-                                                       0.25, 0.5,   1.0,  2.5, 5.0};
-  std::array<std::atomic<int64_t>, kBuckets.size() + 1> latency_counts_{};
-  std::atomic<int64_t> latency_micros_sum_{0};
+  LatencyHistogram track_latency_;
+  LatencyHistogram slam_latency_;
+  std::array<std::atomic<int64_t>, 4> slam_frames_{};  // by state
 };
 
 // Serves `render()` (the Prometheus text) at GET /metrics on `server`.

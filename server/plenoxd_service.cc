@@ -17,6 +17,7 @@
 #include "server/integrate_reactor.h"
 #include "server/log.h"
 #include "server/proto_convert.h"
+#include "server/slam_reactor.h"
 #include "server/track_reactor.h"
 
 namespace plx::server {
@@ -458,6 +459,11 @@ grpc::ServerBidiReactor<pb::IntegrateRequest, pb::MappingProgress>* PlenoxdServi
 grpc::ServerBidiReactor<pb::TrackRequest, pb::PoseEstimate>* PlenoxdService::Track(
     grpc::CallbackServerContext* context) {
   return new TrackReactor(state_, context);
+}
+
+grpc::ServerBidiReactor<pb::SlamRequest, pb::SlamUpdate>* PlenoxdService::Slam(
+    grpc::CallbackServerContext* context) {
+  return new SlamReactor(state_, context);
 }
 
 grpc::ServerWriteReactor<pb::ExportChunk>* PlenoxdService::Export(

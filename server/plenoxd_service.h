@@ -39,6 +39,8 @@ class PlenoxdService final : public plenoxd::v1::Plenoxd::CallbackService {
       grpc::CallbackServerContext* context) override;
   grpc::ServerBidiReactor<plenoxd::v1::TrackRequest, plenoxd::v1::PoseEstimate>* Track(
       grpc::CallbackServerContext* context) override;
+  grpc::ServerBidiReactor<plenoxd::v1::SlamRequest, plenoxd::v1::SlamUpdate>* Slam(
+      grpc::CallbackServerContext* context) override;
   grpc::ServerWriteReactor<plenoxd::v1::ExportChunk>* Export(
       grpc::CallbackServerContext* context, const plenoxd::v1::ExportRequest* request) override;
   grpc::ServerWriteReactor<plenoxd::v1::JobStatus>* WatchJob(

@@ -173,6 +173,14 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
     this->Finish(final_status_);
   }
 
+  // Takes no more requests, as if the client had half-closed (e.g. the daemon drains).
+  void EndInputLocked() {
+    if (phase_ != Phase::kOpen) return;
+    phase_ = Phase::kClosing;
+    OnInputClosedLocked();
+    MaybeFinishLocked();
+  }
+
   // Restarts reads held by backpressure.
   void ResumeReadingLocked() {
     if (phase_ == Phase::kOpen && !reading_ && WantsInputLocked()) ReadLocked();
@@ -187,6 +195,20 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
     worker_->Post(priority, std::move(task));
   }
   void TaskDoneLocked() { busy_ = false; }
+
+  // The start of every task: one whose worker stopped (`cancelled`), or whose call was
+  // cancelled or has failed, only cleans up and ends the stream. Returns whether to go on.
+  bool StartTaskLocked(bool cancelled) {
+    // A cancelled call stops before its next step (OnCancel may not have run yet).
+    if (!cancelled && !failed() && context_->IsCancelled()) {
+      FailLocked(absl::CancelledError("cancelled by the client"));
+    }
+    if (!cancelled && !finished() && !failed()) return true;
+    TaskDoneLocked();
+    if (cancelled) FailLocked(absl::UnavailableError("plenoxd is shutting down"));
+    MaybeFinishLocked();
+    return false;
+  }
 
   bool open() const { return phase_ == Phase::kOpen; }
   bool finished() const { return phase_ == Phase::kFinished; }

@@ -86,12 +86,7 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
   std::optional<Pending> work;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    if (cancelled || finished()) {
-      TaskDoneLocked();
-      if (cancelled) FailLocked(absl::UnavailableError("plenoxd is shutting down"));
-      MaybeFinishLocked();
-      return;
-    }
+    if (!StartTaskLocked(cancelled)) return;
     work = std::move(pending_);
     pending_.reset();
   }

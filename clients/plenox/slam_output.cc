@@ -43,15 +43,11 @@ void AddSlamFlags(FlagSet& flags, const std::string& voxel_help) {
 absl::StatusOr<SlamDatasetOptions> SlamOptionsFromFlags(const FlagSet& flags) {
   SlamDatasetOptions o;
   SlamOptions& s = o.slam;
-  PLX_ASSIGN_OR_RETURN(s.tracker, TrackerOptionsFromFlags(flags));
+  PLX_ASSIGN_OR_RETURN(const TrackerOptions tracker, TrackerOptionsFromFlags(flags));
   double voxel = 0.0;
   PLX_ASSIGN_OR_RETURN(voxel, VoxelSizeFromFlags(flags));
-  // The voxel size scales the allocation band and the fusion ramps; SLAM's mapping window
-  // stays as DefaultSlamOptions sets it.
-  const MapperOptions defaults = s.mapping.mapper;
-  s.mapping.mapper = MapperOptionsForVoxelSize(static_cast<float>(voxel));
-  s.mapping.mapper.window_keyframes = defaults.window_keyframes;
-  s.mapping.mapper.window_fraction = defaults.window_fraction;
+  // The daemon starts from the same SlamOptionsFor, so both forms run the same defaults.
+  s = SlamOptionsFor(static_cast<float>(voxel), tracker);
   PLX_ASSIGN_OR_RETURN(s.mapping.iterations_per_keyframe,
                        flags.GetInt("iterations-per-keyframe", 1, kMaxIterationsPerKeyframe));
   PLX_ASSIGN_OR_RETURN(s.keyframes.max_translation_m, flags.GetDouble("kf-translation", 1e-4, 100));
@@ -60,9 +56,6 @@ absl::StatusOr<SlamDatasetOptions> SlamOptionsFromFlags(const FlagSet& flags) {
   s.keyframes.max_rotation_rad = degrees * M_PI / 180.0;
   PLX_ASSIGN_OR_RETURN(s.keyframes.max_unmapped_fraction, flags.GetDouble("kf-unmapped", 0.001, 1));
   PLX_ASSIGN_OR_RETURN(s.keyframes.max_interval_s, flags.GetDouble("kf-interval", 0, 3600));
-  const int refine_iterations = s.refinement.tracker.iterations;
-  s.refinement.tracker = s.tracker;
-  s.refinement.tracker.iterations = std::max(refine_iterations, s.tracker.iterations);
   s.deterministic = flags.GetSwitch("deterministic");
   o.realtime = flags.GetSwitch("realtime");
   PLX_ASSIGN_OR_RETURN(o.speed, flags.GetDouble("speed", 0.01, 100));

@@ -4,6 +4,7 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <utility>
 
@@ -33,6 +34,19 @@ SlamOptions DefaultSlamOptions() {
   // the coarse-to-fine schedule needs room to converge (8 iterations stopped half-way on a
   // 2 cm, 1 degree error in the tests; 20 converge).
   o.refinement.tracker.iterations = 20;
+  return o;
+}
+
+SlamOptions SlamOptionsFor(float voxel_size, const TrackerOptions& tracker) {
+  SlamOptions o = DefaultSlamOptions();
+  const MapperOptions defaults = o.mapping.mapper;
+  o.mapping.mapper = MapperOptionsForVoxelSize(voxel_size);
+  o.mapping.mapper.window_keyframes = defaults.window_keyframes;
+  o.mapping.mapper.window_fraction = defaults.window_fraction;
+  o.tracker = tracker;
+  const int refine_iterations = o.refinement.tracker.iterations;
+  o.refinement.tracker = tracker;
+  o.refinement.tracker.iterations = std::max(refine_iterations, tracker.iterations);
   return o;
 }
 

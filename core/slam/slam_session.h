@@ -79,6 +79,10 @@ struct SlamOptions {
 
 // The defaults SLAM uses: the mapping window on, publishing as soon as a keyframe is in.
 SlamOptions DefaultSlamOptions();
+// The defaults at a voxel size (the mapper's lengths that scale with it) with `tracker`, which
+// keyframe refinement follows too (with at least its own iteration count). Every front end
+// (plenox slam, the daemon's Slam stream) starts from this.
+SlamOptions SlamOptionsFor(float voxel_size, const TrackerOptions& tracker);
 
 // InvalidArgument naming the field.
 absl::Status ValidateSlamOptions(const SlamOptions& options);

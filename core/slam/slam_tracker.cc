@@ -133,12 +133,18 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   out.keyframes = static_cast<int>(view.accepted_keyframes.size());
   out.map_version = view.version;
   const bool first = counts_.frames == 0;
+  const bool bootstrap = first && view.map == nullptr && view.accepted_keyframes.empty();
+  if (view.map == nullptr && !bootstrap) {
+    // Checked before anything changes, so the caller can hand the same frame in again later.
+    return absl::FailedPreconditionError(
+        "the map has no published version yet: its first keyframe is still being integrated");
+  }
   ++counts_.frames;
   if (first) {
     const SE3 pose = prior.value_or(options_.initial_pose.value_or(SE3::Identity()));
     tracker_.Reset(pose, frame.timestamp);
     last_good_pose_ = pose;
-    if (view.map == nullptr && view.accepted_keyframes.empty()) {
+    if (bootstrap) {
       // Bootstrap: the first frame is keyframe 0 and builds the first version.
       out.pose = pose;
       out.state = SlamState::kOk;
@@ -150,10 +156,6 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       ++counts_.ok;
       return out;
     }
-  }
-  if (view.map == nullptr) {
-    return absl::FailedPreconditionError(
-        "the map has no published version yet: its first keyframe is still being integrated");
   }
   tracked_map_ = view.map;
   tracker_.set_map(tracked_map_.get());

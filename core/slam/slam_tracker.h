@@ -96,7 +96,8 @@ class SlamTracker {
   // frame that cannot be tracked is a LOST result. The first frame of a map with neither a
   // version nor an accepted keyframe is the bootstrap keyframe (one camera must bootstrap a
   // map: the caller serialises that); any other frame while the map has no version yet is
-  // FailedPrecondition. `result.keyframes` counts view.accepted_keyframes plus this one.
+  // FailedPrecondition, with nothing changed (hand the frame in again once a version is out).
+  // `result.keyframes` counts view.accepted_keyframes plus this one.
   absl::StatusOr<SlamFrameResult> Track(const RgbdFrame& frame, const PinholeIntrinsics& k,
                                         const std::optional<SE3>& prior,
                                         const SlamMapView& view);

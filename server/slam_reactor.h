@@ -1,0 +1,85 @@
+// The Slam stream (bidirectional): unposed frames in, one SlamUpdate out per processed frame,
+// while the map's SLAM job (server/slam_job.h) grows the map from the keyframes this and the
+// other Slam streams on the map hand it. The stream is one camera: a SlamTracker
+// (core/slam/slam_tracker.h) run by tracking tasks at interactive priority on the stream's
+// device worker; the mapping runs as the job's background tasks.
+//
+// Frames are checked on arrival (CheckFrame) and decoded by the tracking task. Realtime streams
+// keep only the newest waiting frame (latest wins); others queue a few and stop reading
+// (backpressure). After a keyframe the next frame waits until the job has integrated it (in
+// lock-step mode: until the job has spent its iterations too), so the tracker never outruns
+// the map. After the client half-closes and every frame is processed, the stream leaves the
+// job and ends with a `done` update; the last stream on a map sends it once the job has
+// published its final version.
+#pragma once
+
+#include <chrono>
+#include <deque>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+
+#include "core/slam/slam_tracker.h"
+#include "plenoxd/v1/plenoxd.grpc.pb.h"
+#include "server/daemon_state.h"
+#include "server/proto_convert.h"
+#include "server/slam_job.h"
+#include "server/stream_reactor.h"
+
+namespace plx::server {
+
+class SlamReactor final : public StreamReactor<plenoxd::v1::SlamRequest, plenoxd::v1::SlamUpdate> {
+ public:
+  SlamReactor(DaemonState* state, grpc::CallbackServerContext* context);
+  ~SlamReactor() override;
+
+  // Frames received but not yet tracked before a non-realtime stream stops reading.
+  static constexpr size_t kMaxQueuedFrames = 8;
+
+ private:
+  struct Pending {
+    CheckedFrame frame;  // still encoded
+    std::chrono::steady_clock::time_point received;
+  };
+
+  absl::Status HandleRequestLocked(bool first) override;
+  void OnInputClosedLocked() override;
+  void OnFailedLocked(const absl::Status& status) override;
+  bool WantsInputLocked() const override {
+    return realtime_ || queue_.size() < kMaxQueuedFrames;
+  }
+  bool ReadyToFinishLocked() const override { return done_sent_; }
+  std::vector<LogField> LogFields() const override;
+
+  absl::Status HandleFirstMessage();
+  // Posts the tracking task when a frame waits, none is running and the job lets the stream
+  // go on; after the input is over and the queue is empty, leaves the job and sends `done`.
+  void AdvanceLocked();
+  bool JobAllowsNextFrameLocked();
+  void OnJobChanged();  // the job's listener
+  void RunTask(Backend* backend, bool cancelled);
+  void LeaveJobLocked();
+
+  // Guarded by mutex_.
+  std::deque<Pending> queue_;
+  uint32_t dropped_ = 0;
+  bool realtime_ = false;
+  bool deterministic_ = false;
+  bool wait_for_job_ = false;  // the last frame became a keyframe, or the map has no version
+  bool left_job_ = false;
+  bool done_sent_ = false;
+  std::shared_ptr<SlamJob> job_;
+  std::shared_ptr<SlamJobListener> listener_;
+  uint32_t processed_ = 0;
+  int keyframes_ = 0;
+  std::optional<SlamState> last_state_;  // logged when it changes
+
+  // Owned by the tracking task (one at a time).
+  SlamTrackerOptions tracker_options_;
+  std::unique_ptr<SlamTracker> tracker_;
+};
+
+}  // namespace plx::server

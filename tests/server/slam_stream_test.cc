@@ -1,0 +1,448 @@
+// The Slam stream over loopback: the same trajectory as in-process SLAM in lock-step mode, two
+// cameras into one live map while readers render it, and the bad-input answers.
+#include <atomic>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "core/cpu/cpu_backend.h"
+#include "core/eval/trajectory_metrics.h"
+#include "core/slam/slam_session.h"
+#include "server/proto_convert.h"
+#include "tests/server/daemon_fixture.h"
+
+namespace plx::server::testing {
+namespace {
+
+// Small and quick, as the other stream tests: 1024 tracking rays, 30 iterations per keyframe.
+pb::SlamOptions SmallSlamOptions(bool deterministic) {
+  pb::SlamOptions o;
+  o.set_voxel_size(kVoxel);
+  *o.mutable_tracking() = FastTrackOptions();
+  o.set_iterations_per_keyframe(30);
+  o.set_rays_per_iteration(2048);
+  o.set_deterministic(deterministic);
+  return o;
+}
+
+struct SlamRun {
+  grpc::Status status;
+  std::vector<pb::SlamUpdate> updates;  // per frame, in order
+  std::optional<pb::SlamUpdate> done;
+};
+
+// One Slam stream: the first message names the map with `options` and `initial_pose`, then the
+// room's frames `indices` (without poses), stamped `timestamps` when given; half-closes and
+// reads to the end. `on_update` sees every update as it arrives.
+SlamRun RunSlam(pb::Plenoxd::Stub& stub, const std::string& map, const pb::SlamOptions& options,
+                const std::vector<int>& indices, std::optional<SE3> initial_pose,
+                const std::vector<double>& timestamps = {},
+                const std::function<void(const pb::SlamUpdate&)>& on_update = nullptr) {
+  SlamRun run;
+  grpc::ClientContext context;
+  Prepare(&context, "", absl::Seconds(300));
+  auto stream = stub.Slam(&context);
+  pb::SlamRequest first;
+  first.set_map(map);
+  *first.mutable_options() = options;
+  if (initial_pose) *first.mutable_initial_pose() = ToProto(*initial_pose);
+  std::thread writer([&] {
+    bool writing = stream->Write(first);
+    for (size_t i = 0; i < indices.size() && writing; ++i) {
+      pb::SlamRequest request;
+      *request.mutable_frame() = EncodeFrame(indices[i], false);
+      if (!timestamps.empty()) request.mutable_frame()->set_timestamp(timestamps[i]);
+      writing = stream->Write(request);
+    }
+    stream->WritesDone();
+  });
+  pb::SlamUpdate update;
+  while (stream->Read(&update)) {
+    if (update.done()) {
+      run.done = update;
+      continue;
+    }
+    if (on_update) on_update(update);
+    run.updates.push_back(update);
+  }
+  writer.join();
+  run.status = stream->Finish();
+  return run;
+}
+
+// ATE (no alignment) of a stream's poses against the room's ground truth of `indices`.
+double AteRmse(const SlamRun& run, const std::vector<int>& indices) {
+  std::vector<StampedPose> estimate, truth;
+  for (size_t i = 0; i < run.updates.size() && i < indices.size(); ++i) {
+    estimate.push_back({static_cast<double>(i), FromProto(run.updates[i].pose())});
+    truth.push_back({static_cast<double>(i), GroundTruth(indices[i])});
+  }
+  absl::StatusOr<TrajectoryEvalResult> eval = EvaluateTrajectory(estimate, truth);
+  EXPECT_TRUE(eval.ok()) << eval.status();
+  return eval.ok() ? eval->ate.translation_m.rmse : 1e9;
+}
+
+std::vector<int> Range(int begin, int end, int step = 1) {
+  std::vector<int> out;
+  for (int i = begin; step > 0 ? i < end : i > end; i += step) out.push_back(i);
+  return out;
+}
+
+TEST(SlamStreamTest, LockStepStreamMatchesInProcessSlam) {
+  // One CPU thread in the daemon and in-process: lock-step SLAM is then bit-identical.
+  DaemonOptions daemon_options = TestDaemonOptions(ScratchDir("plx_srv_slam_same"));
+  daemon_options.threads = 1;
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(daemon_options);
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+  const std::vector<int> frames = Range(0, kFrames);
+  const pb::SlamOptions options = SmallSlamOptions(/*deterministic=*/true);
+  const SlamRun run = RunSlam(*d.stub, "live", options, frames, GroundTruth(0));
+  ASSERT_TRUE(run.status.ok()) << Describe(run.status);
+  ASSERT_EQ(run.updates.size(), frames.size());
+  ASSERT_TRUE(run.done.has_value());
+  EXPECT_TRUE(run.done->mapping().finished());
+
+  // In-process, on the frames exactly as the daemon decoded them (PNG16 depth).
+  SlamOptions slam = SlamOptionsFor(kVoxel, [] {
+    TrackerOptions t;
+    t.rays = 1024;
+    return t;
+  }());
+  slam.mapping.iterations_per_keyframe = 30;
+  slam.mapping.mapper.batch_size = 2048;
+  slam.deterministic = true;
+  slam.initial_pose = GroundTruth(0);
+  std::unique_ptr<Backend> tracking = MakeCpuBackend(1);
+  absl::StatusOr<std::unique_ptr<SlamSession>> session = SlamSession::Create(
+      slam, tracking.get(), []() -> absl::StatusOr<std::unique_ptr<Backend>> {
+        return MakeCpuBackend(1);
+      });
+  ASSERT_TRUE(session.ok()) << session.status();
+  int keyframes = 0;
+  for (int i : frames) {
+    absl::StatusOr<CheckedFrame> checked =
+        CheckFrame(EncodeFrame(i, false), "frame", false, int64_t{1} << 30);
+    ASSERT_TRUE(checked.ok()) << checked.status();
+    absl::StatusOr<DecodedFrame> decoded = DecodeCheckedFrame(*std::move(checked));
+    ASSERT_TRUE(decoded.ok()) << decoded.status();
+    absl::StatusOr<SlamFrameResult> r =
+        (*session)->ProcessFrame(decoded->frame, decoded->calibration.pinhole);
+    ASSERT_TRUE(r.ok()) << r.status();
+    const pb::SlamUpdate& u = run.updates[static_cast<size_t>(i)];
+    EXPECT_EQ(u.frame(), static_cast<uint32_t>(i));
+    EXPECT_EQ(u.keyframe(), r->keyframe) << "frame " << i;
+    EXPECT_EQ(u.state(), static_cast<int>(r->state) + 1) << "frame " << i;
+    // Through the wire's pose codec, as the daemon's poses came.
+    EXPECT_EQ(FromProto(u.pose()).matrix(), FromProto(ToProto(r->pose)).matrix())
+        << "frame " << i;
+    keyframes += r->keyframe;
+  }
+  ASSERT_TRUE((*session)->Finish().ok());
+  EXPECT_EQ(run.done->mapping().keyframes(), static_cast<uint32_t>(keyframes));
+  EXPECT_EQ(run.done->mapping().keyframes_integrated(), static_cast<uint32_t>(keyframes));
+  const double ate = AteRmse(run, frames);
+  std::printf("lock-step Slam stream: ATE %.2f mm, %d keyframes\n", 1000 * ate, keyframes);
+  EXPECT_LE(ate, 0.01);
+  // The map the job published is the store's, done, and no job holds it any more.
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap(*d.stub, "live", &info).ok());
+  EXPECT_EQ(info.keyframes(), static_cast<uint32_t>(keyframes));
+  EXPECT_EQ(info.version(), run.done->mapping().map_version());
+  EXPECT_FALSE(info.mapping());
+  EXPECT_TRUE(info.dirty());
+}
+
+TEST(SlamStreamTest, TwoCamerasIntoOneLiveMapWhileReadersRenderIt) {
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started =
+      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_slam_two")));
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+  // Camera A walks the room's path; once it has passed frame 15, camera B joins at frame 15's
+  // place and walks back to frame 0 (its own, later time stamps), while A goes on.
+  const std::vector<int> a_frames = Range(0, kFrames);
+  const std::vector<int> b_frames = Range(15, -1, -1);
+  std::vector<double> b_times;
+  for (size_t i = 0; i < b_frames.size(); ++i) b_times.push_back(100.0 + 0.033 * i);
+  std::atomic<int> a_seen{0};
+  std::atomic<int> renders{0};
+  std::atomic<bool> stop_readers{false};
+  SlamRun a, b;
+  std::thread a_thread([&] {
+    a = RunSlam(*d.stub, "shared", SmallSlamOptions(false), a_frames, GroundTruth(0), {},
+                [&](const pb::SlamUpdate&) { ++a_seen; });
+  });
+  // Readers on the live map: Render at a held-out pose while it grows.
+  std::thread reader([&] {
+    while (!stop_readers) {
+      pb::RenderResponse response;
+      if (Render(*d.stub, RenderRequestAt("shared", 5), &response).ok() &&
+          response.coverage() > 0.0) {
+        ++renders;
+      }
+      absl::SleepFor(absl::Milliseconds(50));
+    }
+  });
+  ASSERT_TRUE(WaitFor([&] { return a_seen.load() >= 16; }, absl::Seconds(120)));
+  b = RunSlam(*d.stub, "shared", SmallSlamOptions(false), b_frames, GroundTruth(15), b_times);
+  a_thread.join();
+  stop_readers = true;
+  reader.join();
+
+  ASSERT_TRUE(a.status.ok()) << Describe(a.status);
+  ASSERT_TRUE(b.status.ok()) << Describe(b.status);
+  ASSERT_EQ(a.updates.size(), a_frames.size());
+  ASSERT_EQ(b.updates.size(), b_frames.size());
+  EXPECT_EQ(b.updates.front().state(), pb::SLAM_STATE_RELOCALISED) << b.updates.front().reason();
+  int b_keyframes = 0, lost = 0;
+  for (const pb::SlamUpdate& u : b.updates) {
+    b_keyframes += u.keyframe();
+    lost += u.state() == pb::SLAM_STATE_LOST;
+  }
+  for (const pb::SlamUpdate& u : a.updates) lost += u.state() == pb::SLAM_STATE_LOST;
+  EXPECT_EQ(lost, 0);
+  const double ate_a = AteRmse(a, a_frames), ate_b = AteRmse(b, b_frames);
+  std::printf("camera A ATE %.2f mm, camera B ATE %.2f mm, B keyframes %d, %d renders\n",
+              1000 * ate_a, 1000 * ate_b, b_keyframes, renders.load());
+  EXPECT_LE(ate_a, 0.01);
+  EXPECT_LE(ate_b, 0.01);
+  // B walks where A's keyframes are: the policy checks every keyframe of the map.
+  EXPECT_LE(b_keyframes, 1);
+  EXPECT_GT(renders.load(), 0);
+  // One job served both: the second stream saw two streams on it; the last done message
+  // comes after the final version.
+  EXPECT_EQ(b.updates.front().mapping().streams(), 2u);
+  EXPECT_EQ(a.updates.front().mapping().job_id(), b.updates.front().mapping().job_id());
+  ASSERT_TRUE(a.done && b.done);
+  EXPECT_TRUE(a.done->mapping().finished() || b.done->mapping().finished());
+  ASSERT_TRUE(WaitFor([&] {
+    pb::MapInfo info;
+    return GetMap(*d.stub, "shared", &info).ok() && !info.mapping();
+  }));
+  // Metrics: frames by state, keyframes, no stream or job left.
+  int ok = 0, relocalised = 0, keyframes = 0;
+  for (const SlamRun* run : {&a, &b}) {
+    for (const pb::SlamUpdate& u : run->updates) {
+      ok += u.state() == pb::SLAM_STATE_OK;
+      relocalised += u.state() == pb::SLAM_STATE_RELOCALISED;
+      keyframes += u.keyframe();
+    }
+  }
+  const std::string metrics = d.daemon->RenderMetrics();
+  EXPECT_NE(metrics.find(absl::StrCat("plenoxd_slam_frames_total{state=\"ok\"} ", ok)),
+            std::string::npos) << metrics;
+  EXPECT_NE(metrics.find(absl::StrCat("plenoxd_slam_frames_total{state=\"relocalised\"} ",
+                                      relocalised)),
+            std::string::npos) << metrics;
+  EXPECT_NE(metrics.find(absl::StrCat("plenoxd_slam_keyframes_total ", keyframes)),
+            std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("plenoxd_slam_streams 0"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("plenoxd_slam_jobs 0"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find(absl::StrCat("plenoxd_slam_latency_seconds_count ",
+                                      a.updates.size() + b.updates.size())),
+            std::string::npos) << metrics;
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap(*d.stub, "shared", &info).ok());
+  EXPECT_EQ(info.keyframes(), a.done->mapping().keyframes() > b.done->mapping().keyframes()
+                                  ? a.done->mapping().keyframes()
+                                  : b.done->mapping().keyframes());
+}
+
+TEST(SlamStreamTest, BadInputNamesTheFieldAndLeavesOthersAlone) {
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started =
+      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_slam_bad")));
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+  const auto expect_refused = [&](const std::string& map, pb::SlamOptions options,
+                                  grpc::StatusCode code, const std::string& field,
+                                  std::optional<pb::Frame> frame = std::nullopt) {
+    grpc::ClientContext context;
+    Prepare(&context);
+    auto stream = d.stub->Slam(&context);
+    pb::SlamRequest first;
+    first.set_map(map);
+    *first.mutable_options() = options;
+    if (frame) *first.mutable_frame() = *frame;
+    stream->Write(first);
+    stream->WritesDone();
+    pb::SlamUpdate update;
+    while (stream->Read(&update)) {
+    }
+    const grpc::Status status = stream->Finish();
+    EXPECT_EQ(status.error_code(), code) << map << ": " << Describe(status);
+    EXPECT_NE(status.error_message().find(field), std::string::npos) << Describe(status);
+  };
+  pb::SlamOptions both = SmallSlamOptions(true);
+  both.set_realtime(true);
+  expect_refused("m1", both, grpc::StatusCode::INVALID_ARGUMENT, "realtime");
+  pb::SlamOptions negative = SmallSlamOptions(false);
+  negative.set_kf_translation_m(-1.0f);
+  expect_refused("m2", negative, grpc::StatusCode::INVALID_ARGUMENT, "kf_translation_m");
+  pb::SlamOptions nan_depth = SmallSlamOptions(false);
+  nan_depth.set_max_depth(std::nanf(""));
+  expect_refused("m3", nan_depth, grpc::StatusCode::INVALID_ARGUMENT, "max_depth");
+  expect_refused("bad name!", SmallSlamOptions(false), grpc::StatusCode::INVALID_ARGUMENT, "map");
+  // A frame whose intrinsics do not match its images.
+  pb::Frame wrong = EncodeFrame(0, false);
+  wrong.mutable_intrinsics()->set_width(kWidth + 2);
+  expect_refused("m4", SmallSlamOptions(false), grpc::StatusCode::INVALID_ARGUMENT, "frame[0]",
+                 wrong);
+  // A map with another voxel size.
+  ASSERT_TRUE(CreateMap(*d.stub, "coarse", 0.08f).ok());
+  expect_refused("coarse", SmallSlamOptions(false), grpc::StatusCode::INVALID_ARGUMENT,
+                 "voxel_size");
+  // Integrate holds the map: SLAM is refused, and the mapping job goes on.
+  ASSERT_TRUE(CreateMap(*d.stub, "integrating").ok());
+  grpc::ClientContext integrate_context;
+  Prepare(&integrate_context);
+  auto integrate = d.stub->Integrate(&integrate_context);
+  pb::IntegrateRequest first;
+  first.set_map("integrating");
+  *first.mutable_options() = SmallIntegrateOptions();
+  *first.mutable_frame() = EncodeFrame(0, true);
+  ASSERT_TRUE(integrate->Write(first));
+  ASSERT_TRUE(WaitFor([&] {
+    pb::MapInfo info;
+    return GetMap(*d.stub, "integrating", &info).ok() && info.mapping();
+  }));
+  pb::SlamOptions defaults;
+  expect_refused("integrating", defaults, grpc::StatusCode::FAILED_PRECONDITION, "integrating");
+  integrate->WritesDone();
+  pb::MappingProgress progress;
+  bool done = false;
+  while (integrate->Read(&progress)) done = done || progress.done();
+  EXPECT_TRUE(integrate->Finish().ok());
+  EXPECT_TRUE(done);
+  // None of the refused streams left a job or a lease behind: SLAM on a refused name works.
+  const SlamRun run = RunSlam(*d.stub, "m1", SmallSlamOptions(false), Range(0, 3), GroundTruth(0));
+  EXPECT_TRUE(run.status.ok()) << Describe(run.status);
+  EXPECT_EQ(run.updates.size(), 3u);
+}
+
+TEST(SlamStreamTest, DrainMidStreamSavesEveryKeyframeAndARestartExtendsTheMap) {
+  const std::string dir = ScratchDir("plx_srv_slam_drain");
+  uint32_t keyframes_seen = 0;
+  uint32_t processed = 0;
+  {
+    absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(TestDaemonOptions(dir));
+    ASSERT_TRUE(started.ok()) << started.status();
+    TestDaemon& d = **started;
+    grpc::ClientContext context;
+    Prepare(&context);
+    auto stream = d.stub->Slam(&context);
+    pb::SlamRequest first;
+    first.set_map("drained");
+    *first.mutable_options() = SmallSlamOptions(false);
+    *first.mutable_initial_pose() = ToProto(GroundTruth(0));
+    ASSERT_TRUE(stream->Write(first));
+    // Half the frames, each answered before the next is sent.
+    pb::SlamUpdate update;
+    for (int i = 0; i < 20; ++i) {
+      pb::SlamRequest request;
+      *request.mutable_frame() = EncodeFrame(i, false);
+      ASSERT_TRUE(stream->Write(request));
+      ASSERT_TRUE(stream->Read(&update));
+      keyframes_seen += update.keyframe();
+      ++processed;
+    }
+    // SIGTERM's path while the camera keeps streaming: no frame after it is processed.
+    std::thread drain([&] { EXPECT_TRUE(d.daemon->Drain(absl::Seconds(20)).ok()); });
+    ASSERT_TRUE(WaitFor([&] { return HealthCheck(*d.health) != kServing; }));
+    for (int i = 20; i < kFrames; ++i) {
+      pb::SlamRequest request;
+      *request.mutable_frame() = EncodeFrame(i, false);
+      if (!stream->Write(request)) break;
+    }
+    stream->WritesDone();
+    std::optional<pb::SlamUpdate> done;
+    while (stream->Read(&update)) {
+      if (update.done()) {
+        done = update;
+      } else {
+        ++processed;
+        keyframes_seen += update.keyframe();
+      }
+    }
+    const grpc::Status status = stream->Finish();
+    drain.join();
+    EXPECT_TRUE(status.ok()) << Describe(status);
+    ASSERT_TRUE(done.has_value());
+    EXPECT_TRUE(done->mapping().finished());
+    EXPECT_EQ(done->mapping().keyframes_integrated(), keyframes_seen);
+    EXPECT_EQ(processed, 20u);
+    d.daemon.reset();
+  }
+  ASSERT_GE(keyframes_seen, 2u);
+  ASSERT_TRUE(std::filesystem::exists(dir + "/drained.plx"));
+  // A new daemon on the same data directory has the map, and a Slam stream extends it (in
+  // lock-step, so the number below is the same every run): its camera relocalises at frame
+  // 10's place and walks on to the last frame.
+  absl::StatusOr<std::unique_ptr<TestDaemon>> restarted = StartTestDaemon(TestDaemonOptions(dir));
+  ASSERT_TRUE(restarted.ok()) << restarted.status();
+  TestDaemon& d = **restarted;
+  // (A map file keeps the grid, not the keyframe count: the done message above showed every
+  // keyframe integrated before the job ended, and the save comes after the job's end.)
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap(*d.stub, "drained", &info).ok());
+  EXPECT_GT(info.bricks(), 0u);
+  const uint64_t loaded_version = info.version();
+  const std::vector<int> frames = Range(10, kFrames);
+  std::vector<double> times;
+  for (size_t i = 0; i < frames.size(); ++i) times.push_back(200.0 + 0.033 * i);
+  const SlamRun run =
+      RunSlam(*d.stub, "drained", SmallSlamOptions(true), frames, GroundTruth(10), times);
+  ASSERT_TRUE(run.status.ok()) << Describe(run.status);
+  ASSERT_EQ(run.updates.size(), frames.size());
+  EXPECT_EQ(run.updates.front().state(), pb::SLAM_STATE_RELOCALISED)
+      << run.updates.front().reason();
+  const double ate = AteRmse(run, frames);
+  std::printf("extended after a restart: ATE %.2f mm\n", 1000 * ate);
+  EXPECT_LE(ate, 0.01);
+  ASSERT_TRUE(GetMap(*d.stub, "drained", &info).ok());
+  EXPECT_GT(info.version(), loaded_version);
+}
+
+TEST(SlamStreamTest, CancelledStreamLeavesTheJobAndReleasesTheMap) {
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started =
+      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_slam_cancel")));
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+  {
+    grpc::ClientContext context;
+    Prepare(&context);
+    auto stream = d.stub->Slam(&context);
+    pb::SlamRequest first;
+    first.set_map("cancelled");
+    *first.mutable_options() = SmallSlamOptions(false);
+    ASSERT_TRUE(stream->Write(first));
+    pb::SlamUpdate update;
+    for (int i = 0; i < 5; ++i) {
+      pb::SlamRequest request;
+      *request.mutable_frame() = EncodeFrame(i, false);
+      ASSERT_TRUE(stream->Write(request));
+      ASSERT_TRUE(stream->Read(&update));
+    }
+    context.TryCancel();
+    while (stream->Read(&update)) {
+    }
+    EXPECT_EQ(stream->Finish().error_code(), grpc::StatusCode::CANCELLED);
+  }
+  // The job finishes what it has and releases the map; another Slam stream maps it after.
+  ASSERT_TRUE(WaitFor([&] {
+    pb::MapInfo info;
+    return GetMap(*d.stub, "cancelled", &info).ok() && !info.mapping() && info.keyframes() > 0;
+  }));
+  const SlamRun run =
+      RunSlam(*d.stub, "cancelled", SmallSlamOptions(false), Range(5, 10), GroundTruth(5));
+  EXPECT_TRUE(run.status.ok()) << Describe(run.status);
+  EXPECT_EQ(run.updates.size(), 5u);
+}
+
+}  // namespace
+}  // namespace plx::server::testing
