@@ -190,7 +190,11 @@ TEST(SlamStreamTest, TwoCamerasIntoOneLiveMapWhileReadersRenderIt) {
     }
   });
   ASSERT_TRUE(WaitFor([&] { return a_seen.load() >= 16; }, absl::Seconds(120)));
+  // A third camera only localises (Track) in the live map meanwhile.
+  TrackResult tracked;
+  std::thread tracker([&] { tracked = TrackLockStep(*d.stub, "shared", Range(0, 15)); });
   b = RunSlam(*d.stub, "shared", SmallSlamOptions(false), b_frames, GroundTruth(15), b_times);
+  tracker.join();
   a_thread.join();
   stop_readers = true;
   reader.join();
@@ -210,11 +214,25 @@ TEST(SlamStreamTest, TwoCamerasIntoOneLiveMapWhileReadersRenderIt) {
   const double ate_a = AteRmse(a, a_frames), ate_b = AteRmse(b, b_frames);
   std::printf("camera A ATE %.2f mm, camera B ATE %.2f mm, B keyframes %d, %d renders\n",
               1000 * ate_a, 1000 * ate_b, b_keyframes, renders.load());
-  EXPECT_LE(ate_a, 0.01);
-  EXPECT_LE(ate_b, 0.01);
+  // Not lock-step: each frame tracks against whatever version mapping has published by then,
+  // so the error depends on the load (6-9 mm seen on a loaded 2-core machine with the Track
+  // and Render clients below; 6.3 mm in lock-step above).
+  EXPECT_LE(ate_a, 0.015);
+  EXPECT_LE(ate_b, 0.015);
   // B walks where A's keyframes are: the policy checks every keyframe of the map.
   EXPECT_LE(b_keyframes, 1);
   EXPECT_GT(renders.load(), 0);
+  ASSERT_TRUE(tracked.status.ok()) << Describe(tracked.status);
+  ASSERT_EQ(tracked.estimates.size(), 15u);
+  double worst_track_m = 0.0;
+  for (size_t i = 0; i < tracked.estimates.size(); ++i) {
+    EXPECT_NE(tracked.estimates[i].state(), pb::TRACKING_STATE_LOST) << "tracked frame " << i;
+    worst_track_m = std::max(
+        worst_track_m, (FromProto(tracked.estimates[i].pose()).translation() -
+                        GroundTruth(static_cast<int>(i)).translation()).norm());
+  }
+  std::printf("Track in the live map: worst error %.2f mm\n", 1000 * worst_track_m);
+  EXPECT_LE(worst_track_m, 0.02);
   // One job served both: the second stream saw two streams on it; the last done message
   // comes after the final version.
   EXPECT_EQ(b.updates.front().mapping().streams(), 2u);
