@@ -428,6 +428,13 @@ absl::StatusOr<int64_t> SparseGrid::AllocateBricks(absl::Span<const BrickCoord> 
   });
 }
 
+absl::Status SparseGrid::PrepareToAllocate(absl::Span<const BrickCoord> bricks) {
+  return CatchAllocationFailure("allocating bricks", [&]() -> absl::Status {
+    for (const BrickCoord& b : bricks) PLX_RETURN_IF_ERROR(CheckBrickInsideWorld(b, voxel_size_));
+    return GrowIndexToCover(bricks);
+  });
+}
+
 std::array<float, 3> SparseGrid::VertexPosition(int64_t slot, int local) const {
   const BrickCoord& b = brick_coords_[slot];
   const int lx = local & (kBrickEdge - 1), ly = (local >> kBrickShift) & (kBrickEdge - 1),

@@ -90,6 +90,11 @@ class SparseGrid {
   // brick added, when one is outside the world (CheckBrickInsideWorld).
   absl::StatusOr<int64_t> AllocateBricks(absl::Span<const BrickCoord> bricks,
                                          float initial_density = 0.0f);
+  // For allocating `bricks` in pieces: checks them all (InvalidArgument, nothing changed, when
+  // one is outside the world) and grows the index to cover them all now. AllocateBricks over
+  // consecutive pieces of `bricks` then leaves the grid exactly as AllocateBricks(bricks) would
+  // (the index bounds depend on the bricks covered at once; the slots on the order).
+  absl::Status PrepareToAllocate(absl::Span<const BrickCoord> bricks);
 
   // Sets the coarse index bounds (in bricks) of an empty grid, e.g. to restore a saved map's:
   // ray marching works in index coordinates, so the same bounds give bit-identical renders.

@@ -1,7 +1,10 @@
 #include "core/mapping/mapper.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
+#include <type_traits>
 
 #include "absl/strings/str_cat.h"
 #include "core/common/allocation_guard.h"
@@ -14,14 +17,121 @@
 namespace plx {
 namespace {
 
+using Clock = std::chrono::steady_clock;
+
 // Iterations between exact recomputations of cell occupancy.
 constexpr int kOccupancyRefreshInterval = 100;
 
-double Seconds(std::chrono::steady_clock::time_point since) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+// The first piece of each integration phase, before a rate is known, and the smallest piece:
+// a few milliseconds of work on a loaded 2-core machine.
+constexpr int64_t kAllocationPieceBricks = 16;                // 56 KB of parameters each
+constexpr int64_t kFusionPieceVertices = 8 * kBrickVertices;  // keyframes x vertices lookups
+constexpr int64_t kOccupancyPieceBlocks = 256;                // 512 cells each
+constexpr int64_t kBufferPieceBytes = int64_t{4} << 20;       // copied or zeroed
+
+double Seconds(Clock::time_point since) {
+  return std::chrono::duration<double>(Clock::now() - since).count();
 }
 
+// How fast a phase's pieces ran, so the next piece fills the time left.
+struct Pace {
+  double items_per_second = 0.0;
+  int64_t last_piece = 0;
+};
+
+// Works through [*next, end) in pieces, piece(first, count), until it is done or `deadline`
+// passes (at least one piece when anything is left). Each piece is sized from the rate of the
+// one before to fill the time left, at most twice as large as that one (a rate measured on a
+// small piece is a guess) and at least `min_piece`: a backend that pays per call (a CUDA launch
+// and its prefetch of the grid) is called a few times per slice, not thousands. Without a
+// deadline (time_point::max()) the whole range is one piece, as the unsliced code did it.
+template <typename Piece>
+absl::Status RunPaced(int64_t* next, int64_t end, int64_t min_piece, Clock::time_point deadline,
+                      Pace* pace, Piece&& piece) {
+  while (*next < end) {
+    int64_t count = end - *next;
+    if (deadline != Clock::time_point::max()) {
+      const double left = std::chrono::duration<double>(deadline - Clock::now()).count();
+      int64_t fits = static_cast<int64_t>(pace->items_per_second * std::max(left, 0.0));
+      if (pace->last_piece > 0) fits = std::min(fits, 2 * pace->last_piece);
+      count = std::min(count, std::max(min_piece, fits));
+    }
+    const auto start = Clock::now();
+    PLX_RETURN_IF_ERROR(piece(*next, count));
+    const double seconds = Seconds(start);
+    if (seconds > 0.0) pace->items_per_second = static_cast<double>(count) / seconds;
+    pace->last_piece = count;
+    *next += count;
+    if (Clock::now() >= deadline) break;
+  }
+  return absl::OkStatus();
+}
+
+// Grows one optimiser buffer to `size` elements in pieces, its contents kept and the new
+// elements zero. When the capacity is too small, the old contents are first copied into larger
+// storage in runs (a vector's own reallocation would copy them all in one go: hundreds of MB on
+// a large map), then the new elements are zeroed in runs (their pages are faulted in then).
+// Work items: the elements copied, then the elements zeroed.
+template <typename T>
+class BufferGrowth {
+ public:
+  BufferGrowth(UnifiedVector<T>* buffer, size_t size) : buffer_(buffer) {
+    if (buffer->capacity() < size) {
+      if (buffer->empty()) {
+        buffer->reserve(size);
+      } else {
+        larger_.reserve(std::max(size, 2 * buffer->size()));  // geometric, like resize
+        to_copy_ = static_cast<int64_t>(buffer->size());
+      }
+    }
+    items_ = to_copy_ + static_cast<int64_t>(size - buffer->size());
+  }
+
+  int64_t items() const { return items_; }
+
+  absl::Status Advance(int64_t first, int64_t count) {
+    const int64_t copy = std::clamp<int64_t>(to_copy_ - first, 0, count);
+    if (copy > 0) {
+      larger_.insert(larger_.end(), buffer_->begin() + first, buffer_->begin() + first + copy);
+      if (first + copy == to_copy_) {
+        buffer_->swap(larger_);
+        UnifiedVector<T>().swap(larger_);  // the old storage goes now, inside a timed piece
+      }
+    }
+    buffer_->resize(buffer_->size() + static_cast<size_t>(count - copy), T{});
+    return absl::OkStatus();
+  }
+
+ private:
+  UnifiedVector<T>* buffer_;
+  UnifiedVector<T> larger_;
+  int64_t to_copy_ = 0;
+  int64_t items_ = 0;
+};
+
 }  // namespace
+
+// The integration in progress (mapper.h, top): which phase, and where each one stands.
+struct Mapper::Integration {
+  enum class Phase { kList, kAllocate, kFuse, kOccupancy, kBuffers };
+  Phase phase = Phase::kList;
+  int first_frame = 0, end_frame = 0;  // keyframes [first_frame, end_frame) are integrated
+  int frame = 0;                       // the keyframe being listed or allocated
+  // The keyframes as the integration began: a pose refined meanwhile (SetKeyframePose) reaches
+  // the map through optimisation, as it would have after an integration in one go.
+  std::vector<SE3> poses;                  // of keyframes [first_frame, end_frame)
+  UnifiedVector<TrainingFrameView> views;  // of keyframes [0, end_frame), read by fusion
+  std::vector<BrickCoord> bricks;          // `frame`'s
+  int64_t next_brick = 0;
+  int64_t first_vertex = 0, next_vertex = 0;  // the new vertices start at first_vertex
+  int64_t next_block = 0;                     // into the grid's active blocks
+  // The optimiser buffers (in a fixed order), each growing by its own pieces.
+  std::vector<std::function<absl::Status(Clock::time_point)>> buffers;
+  size_t next_buffer = 0;
+  Pace allocation, fusion, occupancy;
+};
+
+Mapper::~Mapper() = default;
 
 MapperOptions MapperOptionsForVoxelSize(float voxel_size) {
   MapperOptions o;
@@ -49,6 +159,8 @@ Mapper::Mapper(const MapperOptions& options, Backend* backend, std::unique_ptr<P
 }
 
 absl::StatusOr<std::shared_ptr<const PlenoxelMap>> Mapper::Publish() {
+  // Unfused bricks must not reach readers.
+  if (integrating()) PLX_RETURN_IF_ERROR(IntegrateSlice(0.0).status());
   PLX_RETURN_IF_ERROR(RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold));
   return CatchAllocationFailure("publishing the map",
                                 [&]() -> absl::StatusOr<std::shared_ptr<const PlenoxelMap>> {
@@ -109,54 +221,187 @@ OptimizerStateView Mapper::state_view() {
   return OptimizerStateView{rms_density_.data(), rms_sh_.data()};
 }
 
-absl::Status Mapper::AllocateFrames(int first_frame, PlenoxelMap& map, float voxel_size) {
+absl::StatusOr<std::vector<BrickCoord>> Mapper::FrameBricks(int f, const SE3& pose,
+                                                            const SparseGrid& grid) const {
+  std::vector<BrickCoord> bricks =
+      BricksNearSurface(training_.frame(f).depth, pose, training_.intrinsics(f),
+                        grid.voxel_size(), options_.allocation);
+  if (options_.max_map_bytes > 0) {
+    // Before allocating: a keyframe that sees far or noisy depth can add gigabytes of bricks.
+    const GridMemory after = grid.MemoryAfterAllocating(bricks);
+    if (after.total_bytes() > options_.max_map_bytes) {
+      return absl::ResourceExhaustedError(absl::StrCat(
+          "keyframe ", f, " would add ", after.bricks - grid.num_bricks(),
+          " bricks and take the map to ", after.total_bytes() / 1000000,
+          " MB, over the limit of ", options_.max_map_bytes / 1000000,
+          " MB per map; nothing was allocated"));
+    }
+  }
+  return bricks;
+}
+
+absl::Status Mapper::AllocateFrames(int first_frame, PlenoxelMap& map) {
   const float init = options_.initialize_from_depth ? 0.0f : options_.initial_density;
   for (int f = first_frame; f < training_.num_frames(); ++f) {
-    const std::vector<BrickCoord> bricks =
-        BricksNearSurface(training_.frame(f).depth, training_.pose(f), training_.intrinsics(f),
-                          voxel_size, options_.allocation);
-    if (options_.max_map_bytes > 0) {
-      // Before allocating: a keyframe that sees far or noisy depth can add gigabytes of bricks.
-      const GridMemory after = map.grid.MemoryAfterAllocating(bricks);
-      if (after.total_bytes() > options_.max_map_bytes) {
-        return absl::ResourceExhaustedError(absl::StrCat(
-            "keyframe ", f, " would add ", after.bricks - map.grid.num_bricks(),
-            " bricks and take the map to ", after.total_bytes() / 1000000,
-            " MB, over the limit of ", options_.max_map_bytes / 1000000,
-            " MB per map; nothing was allocated"));
-      }
-    }
-    PLX_ASSIGN_OR_RETURN(int64_t added, map.grid.AllocateBricks(bricks, init));
-    (void)added;
+    PLX_ASSIGN_OR_RETURN(const std::vector<BrickCoord> bricks,
+                         FrameBricks(f, training_.pose(f), map.grid));
+    PLX_RETURN_IF_ERROR(map.grid.AllocateBricks(bricks, init).status());
   }
   return absl::OkStatus();
 }
 
 absl::Status Mapper::AllocateAndInitialize() {
-  const auto start = std::chrono::steady_clock::now();
-  const int64_t first_new_vertex = map_->grid.num_vertices();
-  PLX_RETURN_IF_ERROR(AllocateFrames(allocated_frames_, *map_, map_->grid.voxel_size()));
-  allocated_frames_ = training_.num_frames();
-  const int64_t new_vertices = map_->grid.num_vertices() - first_new_vertex;
-  if (options_.initialize_from_depth && new_vertices > 0) {
-    const UnifiedVector<TrainingFrameView>& frames = training_.frame_views();
-    PLX_RETURN_IF_ERROR(backend_->FuseDepth(map_->grid.view(), map_->grid.write_view(),
-                                            first_new_vertex, new_vertices, frames.data(),
-                                            static_cast<int>(frames.size()), options_.fusion));
+  while (integrating() || integrated_frames_ < training_.num_frames()) {
+    PLX_RETURN_IF_ERROR(IntegrateSlice(0.0).status());
   }
-  PLX_RETURN_IF_ERROR(RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold));
-  ResizeOptimizerBuffers();
+  return absl::OkStatus();
+}
+
+absl::StatusOr<bool> Mapper::IntegrateSlice(double max_seconds) {
+  if (!integrating()) {
+    if (integrated_frames_ == training_.num_frames()) return true;
+    StartIntegration();
+  }
+  const auto start = Clock::now();
+  const Clock::time_point deadline =
+      max_seconds > 0.0
+          ? start + std::chrono::duration_cast<Clock::duration>(
+                        std::chrono::duration<double>(max_seconds))
+          : Clock::time_point::max();
+  absl::Status status;
+  do {
+    status = AdvanceIntegration(deadline);
+  } while (status.ok() && integrating() && Clock::now() < deadline);
   summary_.allocation_s += Seconds(start);
+  PLX_RETURN_IF_ERROR(status);
+  return !integrating();
+}
+
+void Mapper::StartIntegration() {
+  auto in = std::make_unique<Integration>();
+  in->first_frame = integrated_frames_;
+  in->end_frame = training_.num_frames();
+  in->frame = in->first_frame;
+  for (int f = in->first_frame; f < in->end_frame; ++f) in->poses.push_back(training_.pose(f));
+  const UnifiedVector<TrainingFrameView>& views = training_.frame_views();
+  in->views.assign(views.begin(), views.end());
+  in->first_vertex = map_->grid.num_vertices();
+  integration_ = std::move(in);
+}
+
+absl::Status Mapper::AdvanceIntegration(Clock::time_point deadline) {
+  using Phase = Integration::Phase;
+  Integration& in = *integration_;
+  SparseGrid& grid = map_->grid;
+  switch (in.phase) {
+    case Phase::kList: {
+      // One piece: the brick list is a hash set over the keyframe's pixels.
+      PLX_ASSIGN_OR_RETURN(in.bricks,
+                           FrameBricks(in.frame, in.poses[in.frame - in.first_frame], grid));
+      PLX_RETURN_IF_ERROR(grid.PrepareToAllocate(in.bricks));
+      in.next_brick = 0;
+      in.phase = Phase::kAllocate;
+      return absl::OkStatus();
+    }
+    case Phase::kAllocate: {
+      const float init = options_.initialize_from_depth ? 0.0f : options_.initial_density;
+      const absl::Span<const BrickCoord> bricks(in.bricks);
+      PLX_RETURN_IF_ERROR(RunPaced(
+          &in.next_brick, static_cast<int64_t>(bricks.size()), kAllocationPieceBricks, deadline,
+          &in.allocation, [&](int64_t first, int64_t count) {
+            return grid.AllocateBricks(bricks.subspan(first, count), init).status();
+          }));
+      if (in.next_brick < static_cast<int64_t>(bricks.size())) return absl::OkStatus();
+      std::vector<BrickCoord>().swap(in.bricks);
+      ++in.frame;
+      in.next_vertex = in.first_vertex;
+      in.phase = in.frame < in.end_frame ? Phase::kList : Phase::kFuse;
+      return absl::OkStatus();
+    }
+    case Phase::kFuse: {
+      if (options_.initialize_from_depth) {
+        PLX_RETURN_IF_ERROR(RunPaced(
+            &in.next_vertex, grid.num_vertices(), kFusionPieceVertices, deadline, &in.fusion,
+            [&](int64_t first, int64_t count) {
+              return backend_->FuseDepth(grid.view(), grid.write_view(), first, count,
+                                         in.views.data(), static_cast<int>(in.views.size()),
+                                         options_.fusion);
+            }));
+        if (in.next_vertex < grid.num_vertices()) return absl::OkStatus();
+      }
+      in.next_block = 0;
+      in.phase = Phase::kOccupancy;
+      return absl::OkStatus();
+    }
+    case Phase::kOccupancy: {
+      // As RefreshOccupancyIfStale, by runs of blocks: the grid stays stale until the last run.
+      if (grid.occupancy_stale()) {
+        const UnifiedVector<int64_t>& blocks = grid.active_blocks();
+        const float threshold = map_->render.sigma_threshold;
+        PLX_RETURN_IF_ERROR(RunPaced(
+            &in.next_block, static_cast<int64_t>(blocks.size()), kOccupancyPieceBlocks, deadline,
+            &in.occupancy, [&](int64_t first, int64_t count) {
+              return backend_->RefreshOccupancy(grid.view(), grid.write_view(),
+                                                blocks.data() + first, count, threshold);
+            }));
+        if (in.next_block < static_cast<int64_t>(blocks.size())) return absl::OkStatus();
+        grid.set_occupancy_fresh();
+      }
+      StartBufferGrowth();
+      in.phase = Phase::kBuffers;
+      return absl::OkStatus();
+    }
+    case Phase::kBuffers: {
+      while (in.next_buffer < in.buffers.size()) {
+        PLX_RETURN_IF_ERROR(in.buffers[in.next_buffer](deadline));
+        if (Clock::now() >= deadline) return absl::OkStatus();
+      }
+      FinishIntegration();
+      return absl::OkStatus();
+    }
+  }
+  return absl::InternalError("unknown integration phase");
+}
+
+void Mapper::StartBufferGrowth() {
+  Integration& in = *integration_;
+  const size_t n = static_cast<size_t>(map_->grid.num_vertices());
+  auto add = [&in](auto* buffer, size_t size) {
+    using T = typename std::remove_pointer_t<decltype(buffer)>::value_type;
+    auto growth = std::make_shared<BufferGrowth<T>>(buffer, size);
+    auto next = std::make_shared<int64_t>(0);
+    auto pace = std::make_shared<Pace>();
+    in.buffers.push_back([&in, growth, next, pace](Clock::time_point deadline) -> absl::Status {
+      PLX_RETURN_IF_ERROR(RunPaced(next.get(), growth->items(),
+                                   std::max<int64_t>(1, kBufferPieceBytes / sizeof(T)), deadline,
+                                   pace.get(), [&](int64_t first, int64_t count) {
+                                     return growth->Advance(first, count);
+                                   }));
+      if (*next == growth->items()) ++in.next_buffer;
+      return absl::OkStatus();
+    });
+  };
+  // The sizes ResizeOptimizerBuffers gives.
+  add(&grad_density_, n);
+  add(&grad_sh_, n * kShCoeffCount);
+  add(&touched_, n);
+  add(&brick_touched_, static_cast<size_t>(map_->grid.num_bricks()));
+  add(&rms_density_, n);
+  add(&rms_sh_, n * kShCoeffCount);
+}
+
+void Mapper::FinishIntegration() {
+  integrated_frames_ = integration_->end_frame;
+  integration_.reset();
   summary_.keyframes = training_.num_frames();
   summary_.training_rays = training_.num_rays();
   summary_.memory = map_->grid.Memory();
-  return absl::OkStatus();
 }
 
 absl::Status Mapper::Upsample() {
   auto fine = std::make_unique<PlenoxelMap>(options_.voxel_size);
   fine->render = map_->render;
-  PLX_RETURN_IF_ERROR(AllocateFrames(0, *fine, options_.voxel_size));
+  PLX_RETURN_IF_ERROR(AllocateFrames(0, *fine));
   PLX_RETURN_IF_ERROR(RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold));
   PLX_RETURN_IF_ERROR(
       backend_->ResampleGrid(fine->grid.view(), fine->grid.write_view(), map_->grid.view()));
@@ -174,7 +419,7 @@ absl::Status Mapper::Upsample() {
 absl::StatusOr<MappingSummary> Mapper::Optimize(const MappingProgressCallback& progress,
                                                 int max_new_iterations, double max_seconds) {
   PLX_RETURN_IF_ERROR(ValidateOptions(options_));
-  if (allocated_frames_ != training_.num_frames()) PLX_RETURN_IF_ERROR(AllocateAndInitialize());
+  PLX_RETURN_IF_ERROR(AllocateAndInitialize());
   if (training_.num_rays() == 0) {
     return absl::FailedPreconditionError(
         "no keyframe has valid depth within the depth range: nothing to map");

@@ -4,8 +4,28 @@
 //   3. batches of random rays with valid depth refine density and SH with RMSProp on the
 //      colour + depth loss, with log-linear learning-rate decay and optional early TV,
 //      until the iteration or time budget is spent.
+//
+// Integration in slices (steps 1 and 2, plus what the optimiser needs for the new bricks): one
+// keyframe takes seconds on a 640x480 sensor (docs/BENCHMARKS.md, "Mapping steps"), and a
+// tracking frame on the same device would wait for all of it. IntegrateSlice does it in pieces,
+// each bounded by a count of bricks, vertices, blocks or bytes and sized from the rate the
+// previous pieces ran at, until a time budget is spent:
+//   list      per keyframe, the bricks near its surfaces and the map-size check (one piece);
+//   allocate  those bricks in runs, in the list's order, after the index grew to cover all of
+//             them (SparseGrid::PrepareToAllocate): the index and slots one call would give;
+//   fuse      FuseDepth over the new vertices in ranges: each vertex is computed from the
+//             keyframes alone and written only by itself, so ranges give the values of one call;
+//   occupancy exact cell occupancy in runs of active blocks (each block from its own densities);
+//   buffers   the optimiser's gradient and RMSProp buffers grown for the new vertices: old
+//             contents copied into larger storage in runs instead of one reallocation, then the
+//             new entries zeroed in runs (on teddy this was the longest part: up to 6.9 s).
+// The result is bit-identical to integrating in one go, whatever the slices. While an
+// integration is in progress the map holds allocated but unfused bricks, so it must be neither
+// optimised nor published: Optimize and Publish finish the integration first, which makes a
+// half-integrated map impossible to optimise or hand out, whoever calls them.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -112,13 +132,28 @@ class Mapper {
   // Checks options; called by the constructor's users before anything else.
   static absl::Status ValidateOptions(const MapperOptions& options);
 
+  ~Mapper();
+
   absl::Status AddKeyframe(RgbdFrame frame, const SE3& world_T_camera,
                            const PinholeIntrinsics& intrinsics);
 
-  // Allocates and initialises bricks for the keyframes added since the last call.
+  // Allocates and initialises bricks for the keyframes added and not integrated yet: every
+  // piece of their integration at once (batch mapping).
   absl::Status AllocateAndInitialize();
 
-  // Runs the optimisation until the budget is spent (or the callback says stop), or for at most
+  // One slice of integration (see the top of this file): starts integrating the keyframes
+  // added so far when none is in progress, then runs its pieces until it is done or
+  // `max_seconds` have passed (at least one piece; 0 = no limit). True when no integration is
+  // in progress afterwards (keyframes added after it began wait for the next one). On an error
+  // the integration stays where it was, and the next slice retries the failed piece.
+  absl::StatusOr<bool> IntegrateSlice(double max_seconds);
+  // An integration has begun and not finished: the map has bricks that are not fused yet.
+  bool integrating() const { return integration_ != nullptr; }
+  // Keyframes whose integration is complete.
+  int integrated_keyframes() const { return integrated_frames_; }
+
+  // Integrates the keyframes that are not yet (AllocateAndInitialize), then runs the
+  // optimisation until the budget is spent (or the callback says stop), or for at most
   // `max_new_iterations` iterations / `max_seconds` seconds when those are positive (at least
   // one iteration runs). The budget is cumulative over calls.
   absl::StatusOr<MappingSummary> Optimize(const MappingProgressCallback& progress = nullptr,
@@ -137,7 +172,8 @@ class Mapper {
 
   // A version of the current map for readers (the daemon's published versions), with exact
   // cell occupancy. Copy-on-write: it shares every brick with the mapper's map, which clones a
-  // brick before its next change, so this costs the index, not the bricks.
+  // brick before its next change, so this costs the index, not the bricks. An integration in
+  // progress is finished first (all its remaining pieces): a version never has unfused bricks.
   absl::StatusOr<std::shared_ptr<const PlenoxelMap>> Publish();
 
   // Moves keyframe i to a refined pose (SLAM's keyframe pose refinement). Its bricks stay
@@ -156,7 +192,18 @@ class Mapper {
   // Builds the final-resolution map from the keyframes' depth, fills it from the current
   // (coarse) map and restarts the optimiser state.
   absl::Status Upsample();
-  absl::Status AllocateFrames(int first_frame, PlenoxelMap& map, float voxel_size);
+  struct Integration;  // mapper.cc
+  // Every keyframe from first_frame on, in one go (coarse-to-fine's final map).
+  absl::Status AllocateFrames(int first_frame, PlenoxelMap& map);
+  // Keyframe f's bricks at `pose` for `grid` (RESOURCE_EXHAUSTED when allocating them would
+  // take the map over max_map_bytes).
+  absl::StatusOr<std::vector<BrickCoord>> FrameBricks(int f, const SE3& pose,
+                                                      const SparseGrid& grid) const;
+  void StartIntegration();
+  // Runs the current phase's pieces until it ends or `deadline` passes; moves to the next.
+  absl::Status AdvanceIntegration(std::chrono::steady_clock::time_point deadline);
+  void StartBufferGrowth();
+  void FinishIntegration();
   void ResizeOptimizerBuffers();
   GridGradView grad_view();
   OptimizerStateView state_view();
@@ -165,7 +212,8 @@ class Mapper {
   Backend* backend_;
   std::unique_ptr<PlenoxelMap> map_;
   TrainingSet training_;
-  int allocated_frames_ = 0;  // keyframes whose bricks exist
+  int integrated_frames_ = 0;  // keyframes whose integration is complete
+  std::unique_ptr<Integration> integration_;  // the one in progress, or null
   bool coarse_ = false;       // the map is at twice the final voxel size
   int iteration_ = 0;
   double schedule_ = 0.0;     // learning-rate schedule position: never decreases

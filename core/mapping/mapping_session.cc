@@ -98,13 +98,20 @@ bool MappingSession::BudgetLeft() const {
   return integrated_ > 0 && mapper_->training_set().num_rays() > 0 && !mapper_->budget_spent();
 }
 
-bool MappingSession::has_work() const { return pending_keyframes() > 0 || BudgetLeft(); }
+bool MappingSession::has_work() const {
+  return mapper_->integrating() || pending_keyframes() > 0 || BudgetLeft();
+}
 
 absl::StatusOr<MappingStepResult> MappingSession::Step(bool finish) {
   return CatchAllocationFailure("mapping step", [&]() -> absl::StatusOr<MappingStepResult> {
     MappingStepResult result;
     std::optional<PendingKeyframe> next;
-    {
+    // A keyframe just integrated gets one chunk before the next queued keyframe starts (the
+    // order of work before integration was sliced), so a queue of keyframes does not hold the
+    // optimisation back.
+    const bool chunk_first = chunk_before_next_keyframe_ && BudgetLeft();
+    chunk_before_next_keyframe_ = false;
+    if (!mapper_->integrating() && !chunk_first) {
       std::lock_guard<std::mutex> lock(mutex_);
       if (!pending_.empty()) {
         next = std::move(pending_.front());
@@ -112,20 +119,14 @@ absl::StatusOr<MappingStepResult> MappingSession::Step(bool finish) {
       }
     }
     if (next) {
-      // One keyframe per step: allocation and fusion of a keyframe is the longest piece of
-      // work a step cannot split.
-      const double start = NowSeconds();
       PLX_RETURN_IF_ERROR(
           mapper_->AddKeyframe(std::move(next->frame), next->world_T_camera, next->intrinsics));
-      PLX_RETURN_IF_ERROR(mapper_->AllocateAndInitialize());
-      ++integrated_;
-      ++keyframes_since_publish_;
-      changed_since_publish_ = true;
-      mapper_->set_max_iterations(options_.iterations_per_keyframe * integrated_);
-      result.keyframes_integrated = 1;
-      result.integrate_s = NowSeconds() - start;
     }
-    if (BudgetLeft()) {
+    if (next || mapper_->integrating()) {
+      // A step is one slice of a keyframe's integration or one optimisation chunk, not both:
+      // either is bounded by chunk_seconds, so a tracking frame waits for one of them.
+      PLX_RETURN_IF_ERROR(IntegrateSlice(options_.chunk_seconds, &result));
+    } else if (BudgetLeft()) {
       const double start = NowSeconds();
       const int before = mapper_->iterations_done();
       PLX_ASSIGN_OR_RETURN(
@@ -138,16 +139,37 @@ absl::StatusOr<MappingStepResult> MappingSession::Step(bool finish) {
       result.optimize_s = NowSeconds() - start;
     }
 
-    const double now = NowSeconds();
-    const double gap = std::max(options_.min_publish_interval_s, 10.0 * last_publish_cost_s_);
-    const bool enough_new = keyframes_since_publish_ > 0 ||
-                            mapper_->iterations_done() - iterations_at_publish_ >=
-                                options_.publish_every_iterations;
-    const bool due = changed_since_publish_ && now - last_publish_time_s_ >= gap && enough_new;
-    const bool final_version = finish && changed_since_publish_ && !has_work();
-    if (due || final_version) PLX_RETURN_IF_ERROR(PublishInto(&result));
+    // Never in the middle of an integration (Mapper::Publish would finish it in this step), nor
+    // between an integration and its first chunk: the version comes after that chunk, as it did
+    // when both ran in one step (publishing first would make the chunk clone, or with a clone
+    // cap defer, the bricks it writes).
+    const bool chunk_follows = chunk_before_next_keyframe_ && BudgetLeft();
+    if (!mapper_->integrating() && !chunk_follows) {
+      const double now = NowSeconds();
+      const double gap = std::max(options_.min_publish_interval_s, 10.0 * last_publish_cost_s_);
+      const bool enough_new = keyframes_since_publish_ > 0 ||
+                              mapper_->iterations_done() - iterations_at_publish_ >=
+                                  options_.publish_every_iterations;
+      const bool due = changed_since_publish_ && now - last_publish_time_s_ >= gap && enough_new;
+      const bool final_version = finish && changed_since_publish_ && !has_work();
+      if (due || final_version) PLX_RETURN_IF_ERROR(PublishInto(&result));
+    }
     return result;
   });
+}
+
+absl::Status MappingSession::IntegrateSlice(double max_seconds, MappingStepResult* result) {
+  const double start = NowSeconds();
+  PLX_ASSIGN_OR_RETURN(const bool done, mapper_->IntegrateSlice(max_seconds));
+  result->integrate_s += NowSeconds() - start;
+  if (!done) return absl::OkStatus();
+  ++integrated_;
+  ++keyframes_since_publish_;
+  changed_since_publish_ = true;
+  mapper_->set_max_iterations(options_.iterations_per_keyframe * integrated_);
+  result->keyframes_integrated = 1;
+  chunk_before_next_keyframe_ = true;
+  return absl::OkStatus();
 }
 
 absl::Status MappingSession::PublishInto(MappingStepResult* result) {
@@ -166,8 +188,10 @@ absl::Status MappingSession::PublishInto(MappingStepResult* result) {
 }
 
 absl::StatusOr<std::shared_ptr<const PlenoxelMap>> MappingSession::Publish() {
-  if (!changed_since_publish_ && latest_ != nullptr) return latest_;
   MappingStepResult ignored;
+  // The keyframe being integrated goes into this version whole (a save waits for it).
+  if (mapper_->integrating()) PLX_RETURN_IF_ERROR(IntegrateSlice(0.0, &ignored));
+  if (!changed_since_publish_ && latest_ != nullptr) return latest_;
   PLX_RETURN_IF_ERROR(CatchAllocationFailure("publishing the map",
                                              [&] { return PublishInto(&ignored); }));
   return latest_;

@@ -32,9 +32,12 @@ struct MappingSessionOptions {
   MapperOptions mapper;
   int iterations_per_keyframe = 50;
 
-  // One Step runs at most this many iterations or this long (at least one iteration), so a
-  // tracking frame queued behind it on the same device waits about chunk_seconds plus one
-  // iteration; integrating one keyframe (allocation and fusion) comes on top.
+  // One Step is either one optimisation chunk, at most chunk_iterations iterations or
+  // chunk_seconds (at least one iteration), or one slice of a keyframe's integration
+  // (allocation, fusion, occupancy, optimiser buffers: Mapper::IntegrateSlice), at most
+  // chunk_seconds plus one piece of it. A tracking frame queued behind a step on the same device
+  // waits about chunk_seconds plus one iteration or piece. One time bound for both: it is the
+  // wait a tracking frame may see, whatever the mapping work is.
   int chunk_iterations = 10;
   double chunk_seconds = 0.05;
   // Copy-on-write clones per iteration (MapperOptions::max_clones_per_iteration): 1024 bricks
@@ -54,7 +57,7 @@ struct MappingSessionOptions {
 absl::Status ValidateMappingSessionOptions(const MappingSessionOptions& options);
 
 struct MappingStepResult {
-  int keyframes_integrated = 0;  // by this step (0 or 1)
+  int keyframes_integrated = 0;  // completed by this step (0 or 1)
   int iterations = 0;            // run by this step
   // Set when this step published a new version of the map.
   std::shared_ptr<const PlenoxelMap> published;
@@ -65,7 +68,7 @@ struct MappingStepResult {
 
 struct MappingSessionProgress {
   int keyframes_added = 0;       // AddKeyframe calls accepted
-  int keyframes_integrated = 0;  // allocated and initialised in the map
+  int keyframes_integrated = 0;  // allocated and initialised in the map, every slice done
   int iterations = 0;
   int iteration_budget = 0;      // iterations_per_keyframe * keyframes integrated
   double fraction = 0.0;         // iterations / budget, capped at 1
@@ -92,16 +95,20 @@ class MappingSession {
                            const PinholeIntrinsics& intrinsics);
   int pending_keyframes() const;
 
-  // True while a Step would do something: keyframes are queued or budget is left.
+  // True while a Step would do something: a keyframe is being integrated, keyframes are queued
+  // or budget is left.
   bool has_work() const;
 
-  // One bounded piece of work: integrates at most one queued keyframe, runs at most one chunk
-  // of iterations, and publishes a version when one is due. With `finish`, also publishes
-  // whatever is not published yet once no work is left (the end of a job).
+  // One bounded piece of work: a slice of the integration of one keyframe (the one in progress,
+  // else the next queued one) or one chunk of iterations (when no keyframe is to be integrated,
+  // and once right after each integration, before the next queued keyframe starts). Then,
+  // unless an integration is in progress (its bricks are not all fused yet), publishes a version
+  // when one is due. With `finish`, also publishes whatever is not published yet once no work is
+  // left (the end of a job).
   absl::StatusOr<MappingStepResult> Step(bool finish = false);
 
   // Publishes the current map now (e.g. before a save), unless nothing changed since the last
-  // version, when it returns that one.
+  // version, when it returns that one. A keyframe being integrated is finished first.
   absl::StatusOr<std::shared_ptr<const PlenoxelMap>> Publish();
 
   // The keyframes integrated so far, in order (step-runner thread only).
@@ -123,6 +130,8 @@ class MappingSession {
 
   MappingSession(const MappingSessionOptions& options, std::unique_ptr<Mapper> mapper);
   bool BudgetLeft() const;
+  // Mapper::IntegrateSlice, counting the keyframe once its integration completes.
+  absl::Status IntegrateSlice(double max_seconds, MappingStepResult* result);
   absl::Status PublishInto(MappingStepResult* result);
 
   const MappingSessionOptions options_;
@@ -133,6 +142,7 @@ class MappingSession {
   int added_ = 0;                        // guarded by mutex_
 
   int integrated_ = 0;
+  bool chunk_before_next_keyframe_ = false;  // the last step completed an integration
   MappingProgress last_;
   std::shared_ptr<const PlenoxelMap> latest_;
   int published_versions_ = 0;

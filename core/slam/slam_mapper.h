@@ -70,8 +70,8 @@ class SlamMapper {
   // Queues a keyframe at `pose` (any thread): it is checked now and integrated by a later step.
   absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k);
 
-  // One bounded step (MappingSession::Step): integrates at most one keyframe, runs one chunk of
-  // iterations, publishes a version when one is due and, once the new keyframes have had their
+  // One bounded step (MappingSession::Step): a slice of one keyframe's integration or one chunk
+  // of iterations, publishes a version when one is due and, once the new keyframes have had their
   // iterations, refines the window's poses. With `finish`, publishes whatever is left once no
   // work remains. Returns whether a new version was published. Step-runner thread.
   absl::StatusOr<bool> Step(bool finish = false);

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <memory>
 #include <vector>
 
@@ -11,6 +12,46 @@
 
 namespace plx {
 namespace {
+
+// Shorter than any piece: every slice runs exactly one piece of work.
+constexpr double kTinySlice = 1e-9;
+
+// The same bricks with the same values and the same cell occupancy, bit for bit (fusion slices
+// are exact: nothing may differ, not even in the last bit). Brick by coordinate, not by slot: a
+// keyframe's brick list comes from a hash set whose order abseil salts per table, so two
+// mappers store the same bricks in different slots, with or without slices.
+void ExpectSameMap(const PlenoxelMap& expected, const PlenoxelMap& actual) {
+  const SparseGrid& e = expected.grid;
+  const SparseGrid& a = actual.grid;
+  ASSERT_EQ(a.num_bricks(), e.num_bricks());
+  EXPECT_EQ(a.index_min(), e.index_min());
+  EXPECT_EQ(a.index_dims(), e.index_dims());
+  int64_t differing_bricks = 0;
+  for (int64_t slot = 0; slot < e.num_bricks(); ++slot) {
+    const int32_t other = a.FindBrick(e.brick_coords()[slot]);
+    ASSERT_GE(other, 0) << "brick of slot " << slot << " missing";
+    const bool same =
+        std::equal(e.brick_density(slot), e.brick_density(slot) + kBrickVertices,
+                   a.brick_density(other)) &&
+        std::equal(e.brick_sh(slot), e.brick_sh(slot) + kBrickVertices * kShCoeffCount,
+                   a.brick_sh(other));
+    differing_bricks += same ? 0 : 1;
+  }
+  EXPECT_EQ(differing_bricks, 0) << "bricks whose densities or SH differ";
+  EXPECT_EQ(a.occupancy_stale(), e.occupancy_stale());
+  ASSERT_EQ(a.num_active_blocks(), e.num_active_blocks());
+  const GridView ev = e.view(), av = a.view();
+  int64_t differing_blocks = 0;
+  for (const int64_t block : e.active_blocks()) {
+    ASSERT_GE(av.block_cells[block], 0) << "block " << block << " inactive";
+    differing_blocks += std::equal(ev.cell_bits + ev.block_cells[block],
+                                   ev.cell_bits + ev.block_cells[block] + kBrickEdge,
+                                   av.cell_bits + av.block_cells[block])
+                            ? 0
+                            : 1;
+  }
+  EXPECT_EQ(differing_blocks, 0) << "blocks whose cell occupancy differs";
+}
 
 // The synthetic room at a small size: keyframes 0, 10 and 20 of a 30-frame sequence.
 class MappingSessionTest : public ::testing::Test {
@@ -53,6 +94,46 @@ class MappingSessionTest : public ::testing::Test {
     ASSERT_FALSE(session.has_work());
   }
 
+  // One thread: the optimiser's gradient scatter is then in a fixed order, so two mappers
+  // given the same work agree bit for bit (integration slices against one integration).
+  static std::unique_ptr<Backend> DeterministicBackend() { return MakeCpuBackend(1); }
+
+  static MapperOptions SliceMapperOptions() {
+    MapperOptions o = MapperOptionsForVoxelSize(0.03f);
+    o.max_iterations = 20;
+    o.batch_size = 1024;
+    return o;
+  }
+
+  static absl::Status AddKeyframe(Mapper& mapper, int index) {
+    const RgbdFrame& f = dataset_->frames()[index];
+    return mapper.AddKeyframe(f, *f.ground_truth, dataset_->calibration().pinhole);
+  }
+
+  // Integrates the keyframes added to `mapper` in tiny slices; returns how many it took.
+  static int IntegrateInTinySlices(Mapper& mapper) {
+    int slices = 0;
+    for (;;) {
+      absl::StatusOr<bool> done = mapper.IntegrateSlice(kTinySlice);
+      EXPECT_TRUE(done.ok()) << done.status();
+      ++slices;
+      if (!done.ok() || *done || slices > 100000) break;
+      EXPECT_TRUE(mapper.integrating());
+    }
+    EXPECT_FALSE(mapper.integrating());
+    return slices;
+  }
+
+  // Steps until a step publishes a version: a keyframe's integration may take several steps,
+  // and its first chunk of iterations comes before the version.
+  static absl::StatusOr<MappingStepResult> StepUntilPublished(MappingSession& session) {
+    for (int guard = 0; guard < 10000; ++guard) {
+      absl::StatusOr<MappingStepResult> step = session.Step();
+      if (!step.ok() || step->published != nullptr) return step;
+    }
+    return absl::DeadlineExceededError("no version published in 10000 steps");
+  }
+
   static InMemoryDataset* dataset_;
   std::unique_ptr<Backend> backend_;
 };
@@ -86,9 +167,10 @@ TEST_F(MappingSessionTest, PublishedVersionsNeverChangeAndShareUnchangedBricks) 
   auto session = MappingSession::Create(o, backend_.get(), nullptr);
   ASSERT_TRUE(session.ok()) << session.status();
   ASSERT_TRUE(AddKeyframe(**session, 0).ok());
-  absl::StatusOr<MappingStepResult> first = (*session)->Step();
+  absl::StatusOr<MappingStepResult> first = StepUntilPublished(**session);
   ASSERT_TRUE(first.ok()) << first.status();
-  // The first keyframe is published at once: a reader (a tracker) needs a map to start.
+  // The first keyframe is published once integrated and given its first chunk: a reader (a
+  // tracker) needs a map to start.
   ASSERT_NE(first->published, nullptr);
   EXPECT_EQ(first->keyframes_in_published, 1);
   const std::shared_ptr<const PlenoxelMap> v1 = first->published;
@@ -117,7 +199,7 @@ TEST_F(MappingSessionTest, ClonesPerIterationAreBoundedAndDeferredBricksCatchUp)
   auto session = MappingSession::Create(o, backend_.get(), nullptr);
   ASSERT_TRUE(session.ok()) << session.status();
   ASSERT_TRUE(AddKeyframe(**session, 0).ok());
-  absl::StatusOr<MappingStepResult> first = (*session)->Step();
+  absl::StatusOr<MappingStepResult> first = StepUntilPublished(**session);
   ASSERT_TRUE(first.ok() && first->published != nullptr);
   const std::shared_ptr<const PlenoxelMap> v1 = first->published;
   const std::vector<float> v1_density = v1->grid.DensityValues();
@@ -203,6 +285,127 @@ TEST_F(MappingSessionTest, RejectsBadKeyframesAndOptions) {
             absl::StatusCode::kInvalidArgument);
   EXPECT_EQ((*session)->pending_keyframes(), 0);
   EXPECT_FALSE((*session)->has_work());
+}
+
+// Two keyframes with optimisation between them: the second integration grows optimiser buffers
+// that already hold gradients and RMSProp state, which must come through the piecewise copy.
+TEST_F(MappingSessionTest, IntegrationSlicesGiveTheMapOfOneIntegrationBitForBit) {
+  const std::unique_ptr<Backend> backend = DeterministicBackend();
+  Mapper whole(SliceMapperOptions(), backend.get());
+  Mapper sliced(SliceMapperOptions(), backend.get());
+  for (int keyframe : {0, 10}) {
+    SCOPED_TRACE(keyframe);
+    ASSERT_TRUE(AddKeyframe(whole, keyframe).ok());
+    ASSERT_TRUE(AddKeyframe(sliced, keyframe).ok());
+    ASSERT_TRUE(whole.AllocateAndInitialize().ok());
+    const int before = sliced.integrated_keyframes();
+    const int slices = IntegrateInTinySlices(sliced);
+    EXPECT_GT(slices, 10) << "listing, allocation runs, fusion ranges, occupancy, buffers";
+    EXPECT_EQ(sliced.integrated_keyframes(), before + 1);
+    ExpectSameMap(whole.map(), sliced.map());
+
+    ASSERT_TRUE(whole.Optimize(nullptr, 10).ok());
+    ASSERT_TRUE(sliced.Optimize(nullptr, 10).ok());
+    EXPECT_EQ(sliced.iterations_done(), whole.iterations_done());
+    ExpectSameMap(whole.map(), sliced.map());
+  }
+}
+
+TEST_F(MappingSessionTest, AHalfIntegratedMapIsNeitherPublishedNorOptimised) {
+  const std::unique_ptr<Backend> backend = DeterministicBackend();
+  Mapper whole(SliceMapperOptions(), backend.get());
+  ASSERT_TRUE(AddKeyframe(whole, 0).ok());
+  ASSERT_TRUE(whole.AllocateAndInitialize().ok());
+
+  Mapper sliced(SliceMapperOptions(), backend.get());
+  ASSERT_TRUE(AddKeyframe(sliced, 0).ok());
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(sliced.IntegrateSlice(kTinySlice).ok());
+  ASSERT_TRUE(sliced.integrating());
+  // Publishing finishes the integration first: the version has every brick fused.
+  absl::StatusOr<std::shared_ptr<const PlenoxelMap>> version = sliced.Publish();
+  ASSERT_TRUE(version.ok()) << version.status();
+  EXPECT_FALSE(sliced.integrating());
+  EXPECT_EQ(sliced.integrated_keyframes(), 1);
+  ExpectSameMap(whole.map(), **version);
+
+  // So does optimising.
+  ASSERT_TRUE(AddKeyframe(whole, 10).ok());
+  ASSERT_TRUE(AddKeyframe(sliced, 10).ok());
+  ASSERT_TRUE(sliced.IntegrateSlice(kTinySlice).ok());
+  ASSERT_TRUE(sliced.integrating());
+  ASSERT_TRUE(whole.Optimize(nullptr, 3).ok());
+  ASSERT_TRUE(sliced.Optimize(nullptr, 3).ok());
+  EXPECT_FALSE(sliced.integrating());
+  EXPECT_EQ(sliced.iterations_done(), 3);
+  ExpectSameMap(whole.map(), sliced.map());
+}
+
+MappingSessionOptions SliceSessionOptions(double chunk_seconds) {
+  MappingSessionOptions o;
+  o.mapper = MapperOptionsForVoxelSize(0.03f);
+  o.mapper.batch_size = 1024;
+  o.iterations_per_keyframe = 10;
+  o.chunk_iterations = 1;  // the same chunks whatever chunk_seconds
+  o.chunk_seconds = chunk_seconds;
+  o.min_publish_interval_s = 0.0;
+  o.publish_every_iterations = 5;
+  o.max_clones_per_iteration = 0;  // publishing at other moments must not defer any update
+  return o;
+}
+
+TEST_F(MappingSessionTest, StepsIntegrateInSlicesWithoutOptimisingOrPublishing) {
+  const std::unique_ptr<Backend> backend = DeterministicBackend();
+  auto tiny = MappingSession::Create(SliceSessionOptions(kTinySlice), backend.get(), nullptr);
+  auto roomy = MappingSession::Create(SliceSessionOptions(10.0), backend.get(), nullptr);
+  ASSERT_TRUE(tiny.ok() && roomy.ok());
+  MappingSession& sliced = **tiny;
+  MappingSession& whole = **roomy;
+
+  for (int keyframe : {0, 10}) {
+    SCOPED_TRACE(keyframe);
+    ASSERT_TRUE(AddKeyframe(sliced, keyframe).ok());
+    ASSERT_TRUE(AddKeyframe(whole, keyframe).ok());
+    const int integrated = sliced.progress().keyframes_integrated;
+
+    // With room for it, one step integrates the keyframe, and does nothing else.
+    absl::StatusOr<MappingStepResult> one = whole.Step();
+    ASSERT_TRUE(one.ok()) << one.status();
+    EXPECT_EQ(one->keyframes_integrated, 1);
+    EXPECT_EQ(one->iterations, 0);
+    EXPECT_EQ(one->published, nullptr) << "published before the keyframe's first chunk";
+
+    int steps = 0;
+    absl::StatusOr<MappingStepResult> step;
+    for (;;) {
+      step = sliced.Step();
+      ASSERT_TRUE(step.ok()) << step.status();
+      ++steps;
+      EXPECT_EQ(step->iterations, 0) << "step " << steps << " optimised while integrating";
+      if (step->keyframes_integrated > 0) break;
+      EXPECT_EQ(step->published, nullptr) << "step " << steps << " published unfused bricks";
+      EXPECT_EQ(sliced.progress().keyframes_integrated, integrated);
+      EXPECT_TRUE(sliced.has_work());
+      ASSERT_LT(steps, 100000);
+    }
+    EXPECT_GT(steps, 10);
+    EXPECT_EQ(sliced.progress().keyframes_integrated, integrated + 1);
+    EXPECT_EQ(step->published, nullptr) << "published before the keyframe's first chunk";
+    // The next step of each is that chunk (one iteration), and then the version is due.
+    absl::StatusOr<MappingStepResult> whole_chunk = whole.Step();
+    absl::StatusOr<MappingStepResult> sliced_chunk = sliced.Step();
+    ASSERT_TRUE(whole_chunk.ok() && sliced_chunk.ok());
+    EXPECT_EQ(sliced_chunk->iterations, 1);
+    EXPECT_EQ(whole_chunk->iterations, 1);
+    ASSERT_NE(whole_chunk->published, nullptr);
+    ASSERT_NE(sliced_chunk->published, nullptr);
+    ExpectSameMap(*whole_chunk->published, *sliced_chunk->published);
+
+    // The budgets run out the same way, whatever the chunks.
+    while (whole.has_work()) ASSERT_TRUE(whole.Step(/*finish=*/true).ok());
+    while (sliced.has_work()) ASSERT_TRUE(sliced.Step(/*finish=*/true).ok());
+    EXPECT_EQ(sliced.progress().iterations, whole.progress().iterations);
+    ExpectSameMap(*whole.latest(), *sliced.latest());
+  }
 }
 
 }  // namespace
