@@ -262,14 +262,22 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
   bool retry = false;         // the map has no version yet: the frame waits for it
   SlamFrameResult result;
   const absl::Status failure = CatchAllocationFailure("SLAM tracking", [&]() -> absl::Status {
-    absl::StatusOr<DecodedFrame> decoded = DecodeCheckedFrame(CheckedFrame(work->frame));
+    const SlamMapView view = job->View();
+    // Only the bootstrap frame (the map's first, from its first camera) tracks without a
+    // version; any other waits for one, still encoded (SlamTracker::Track's precondition,
+    // checked before the frame is decoded or moved).
+    const bool bootstrap = tracker_ == nullptr && view.accepted_keyframes.empty();
+    if (view.map == nullptr && !bootstrap) {
+      retry = true;
+      return absl::OkStatus();
+    }
+    absl::StatusOr<DecodedFrame> decoded = DecodeCheckedFrame(std::move(work->frame));
     if (!decoded.ok()) {
       client_error = decoded.status().code() == absl::StatusCode::kInvalidArgument;
       return decoded.status();
     }
     const RgbdFrame& frame = decoded->frame;
     const PinholeIntrinsics& k = decoded->calibration.pinhole;
-    const SlamMapView view = job->View();
     if (!tracker_) {
       // A camera that joins a map with content, or a job that has accepted its first keyframe
       // from another stream, finds itself in it (relocalisation from the initial pose).
@@ -282,10 +290,6 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
     }
     absl::StatusOr<SlamFrameResult> tracked =
         tracker_->Track(frame, k, decoded->client_pose, view);
-    if (absl::IsFailedPrecondition(tracked.status())) {
-      retry = true;
-      return absl::OkStatus();
-    }
     if (!tracked.ok()) return tracked.status();  // the backend's (memory, device)
     result = *std::move(tracked);
     if (result.keyframe) PLX_RETURN_IF_ERROR(job->AddKeyframe(frame, result.pose, k));
