@@ -334,6 +334,8 @@ def main():
                     help="sequence under --data, or 'synthetic' (default tum_fr3_teddy; the "
                          "synthetic one when it is absent)")
     ap.add_argument("--every", type=int, default=10, help="keyframe stride for mapping")
+    ap.add_argument("--map", help="use this map file of the sequence instead of mapping it "
+                                  "(e.g. the bench.plx of an earlier run)")
     ap.add_argument("--scenarios", default=DEFAULT_SCENARIOS,
                     help="comma-separated CLIENTS:MAPPING:ENCODING, mapping on|off, encoding "
                          "raw|png (default %s)" % DEFAULT_SCENARIOS)
@@ -368,11 +370,15 @@ def main():
         data_dir = os.path.join(tmp, "daemon_data")
         os.makedirs(data_dir)
         map_path = os.path.join(data_dir, MAP_NAME + ".plx")
-        m = run_json("map", [args.plenox, "map", "--dataset", dataset, "--out", map_path,
-                             "--every", str(args.every), "--json"], args.timeout)
-        notes.append("map: %s keyframes of %s mapped in-process in %.0f s (every %d-th frame, "
-                     "ground-truth poses); the daemon loads the same file"
-                     % (m.get("keyframes"), name, m.get("seconds", 0), args.every))
+        if args.map:
+            shutil.copyfile(args.map, map_path)
+            notes.append("map: %s (given with --map); the daemon loads a copy" % args.map)
+        else:
+            m = run_json("map", [args.plenox, "map", "--dataset", dataset, "--out", map_path,
+                                 "--every", str(args.every), "--json"], args.timeout)
+            notes.append("map: %s keyframes of %s mapped in-process in %.0f s (every %d-th "
+                         "frame, ground-truth poses); the daemon loads the same file"
+                         % (m.get("keyframes"), name, m.get("seconds", 0), args.every))
         inproc_traj = os.path.join(tmp, "inprocess.txt")
 
         def in_process(label):

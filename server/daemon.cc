@@ -245,12 +245,15 @@ absl::Status Daemon::Drain(absl::Duration grace) {
   server_->GetHealthCheckService()->SetServingStatus(false);
   // Running calls get `grace` to finish; then gRPC cancels them. Workers keep running until the
   // server is down, so queued frames and mapping chunks complete or see their stream cancelled.
+  const absl::Time deadline = absl::Now() + grace;
   server_->Shutdown(std::chrono::system_clock::now() +
                     std::chrono::milliseconds(absl::ToInt64Milliseconds(grace)));
   // SLAM jobs integrate the keyframes their streams handed them (not the rest of their
   // optimisation budget) and publish, so the save below has every one; the workers must still
-  // run for that.
-  if (!slam_jobs_->WaitForAll(grace)) {
+  // run for that. A Slam call ends after its job's done message, so this mostly happened
+  // within Shutdown; what is left shares the same `grace` (never more in all: the stop
+  // watchdog's budget is --drain-seconds + --stop-grace-seconds, server/stop_watchdog.h).
+  if (!slam_jobs_->WaitForAll(std::max(absl::ZeroDuration(), deadline - absl::Now()))) {
     LogEvent("warning", "slam_jobs_not_finished",
              {{"jobs", absl::StrCat(slam_jobs_->Running().size())}});
   }

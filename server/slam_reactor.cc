@@ -92,6 +92,19 @@ absl::StatusOr<SlamOptions> SlamOptionsFromProto(const pb::SlamOptions& o, float
         "options: realtime and deterministic exclude each other (lock-step waits for mapping)");
   }
   s.deterministic = o.deterministic();
+  if (o.has_max_pending_keyframes()) {
+    if (o.max_pending_keyframes() > static_cast<uint32_t>(kMaxPendingKeyframes)) {
+      return absl::InvalidArgumentError(absl::StrCat("options.max_pending_keyframes: at most ",
+                                                     kMaxPendingKeyframes, ", got ",
+                                                     o.max_pending_keyframes()));
+    }
+    if (o.deterministic() && o.max_pending_keyframes() > 0) {
+      return absl::InvalidArgumentError(
+          "options.max_pending_keyframes: must be 0 with deterministic (lock-step waits for "
+          "each keyframe)");
+    }
+    s.max_pending_keyframes = static_cast<int>(o.max_pending_keyframes());
+  }
   if (absl::Status st = ValidateSlamOptions(s); !st.ok()) {
     return absl::InvalidArgumentError(absl::StrCat("options: ", st.message()));
   }
@@ -116,13 +129,15 @@ absl::Status SlamReactor::HandleFirstMessage() {
   }
   // The options are checked before the store is touched (a refused stream creates no map);
   // the lengths that scale with the voxel size are set again at the map's own below.
-  PLX_RETURN_IF_ERROR(SlamOptionsFromProto(o, o.voxel_size() > 0 ? o.voxel_size() : 0.02f,
-                                           state_->maps->max_map_bytes())
-                          .status());
+  // 0 = SLAM's default voxel size (the proto's 0.02 m), for a new map and for these checks.
+  const float voxel_size =
+      o.voxel_size() > 0 ? o.voxel_size() : DefaultSlamOptions().mapping.mapper.voxel_size;
+  PLX_RETURN_IF_ERROR(
+      SlamOptionsFromProto(o, voxel_size, state_->maps->max_map_bytes()).status());
   // A map that does not exist yet is created here; another stream may create it meanwhile.
   absl::StatusOr<MapStatus> info = state_->maps->Info(map_name_);
   if (absl::IsNotFound(info.status())) {
-    info = state_->maps->Create(map_name_, o.voxel_size());
+    info = state_->maps->Create(map_name_, voxel_size);
     if (absl::IsAlreadyExists(info.status())) info = state_->maps->Info(map_name_);
   }
   if (!info.ok()) return info.status();
@@ -142,6 +157,7 @@ absl::Status SlamReactor::HandleFirstMessage() {
   }
   realtime_ = o.realtime();
   deterministic_ = o.deterministic();
+  max_pending_keyframes_ = slam.max_pending_keyframes;
   const bool mapping_set =
       o.iterations_per_keyframe() > 0 || o.rays_per_iteration() > 0 || o.max_depth() > 0;
   listener_ = std::make_shared<SlamJobListener>([this] { OnJobChanged(); });
@@ -189,9 +205,11 @@ bool SlamReactor::JobAllowsNextFrameLocked() {
   if (!wait_for_job_) return true;
   const SlamJobStatus s = job_->Status();
   if (!s.error.ok() || s.finished) return true;  // the task reports it
-  // The keyframe is integrated and published (lock-step: its iterations are spent too).
-  const bool ready = s.pending_keyframes == 0 && job_->View().map != nullptr &&
-                     (!deterministic_ || s.idle);
+  // The keyframe is integrated and published (lock-step: its iterations are spent too), or
+  // the stream may run that many keyframes ahead (max_pending_keyframes); the map must have a
+  // version either way.
+  const bool ready = s.pending_keyframes <= max_pending_keyframes_ &&
+                     job_->View().map != nullptr && (!deterministic_ || s.idle);
   if (ready) wait_for_job_ = false;
   return ready;
 }

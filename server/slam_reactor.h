@@ -68,6 +68,7 @@ class SlamReactor final : public StreamReactor<plenoxd::v1::SlamRequest, plenoxd
   uint32_t dropped_ = 0;
   bool realtime_ = false;
   bool deterministic_ = false;
+  int max_pending_keyframes_ = 0;  // SlamOptions.max_pending_keyframes
   bool wait_for_job_ = false;  // the last frame became a keyframe, or the map has no version
   bool left_job_ = false;
   bool done_sent_ = false;

@@ -66,6 +66,9 @@ pb::SlamOptions SlamOptionsToProto(const FlagSet& flags, const SlamDatasetOption
   if (flags.IsSet("iterations-per-keyframe")) {
     wire.set_iterations_per_keyframe(static_cast<uint32_t>(s.mapping.iterations_per_keyframe));
   }
+  if (flags.IsSet("max-pending-keyframes")) {
+    wire.set_max_pending_keyframes(static_cast<uint32_t>(s.max_pending_keyframes));
+  }
   wire.set_realtime(options.realtime);
   wire.set_deterministic(s.deterministic);
   return wire;

@@ -35,6 +35,10 @@ void AddSlamFlags(FlagSet& flags, const std::string& voxel_help) {
            absl::StrCat(d.keyframes.max_unmapped_fraction))
       .Add("kf-interval", "S", "keyframe when this long passed since the last one (0 = never)",
            absl::StrCat(d.keyframes.max_interval_s))
+      .Add("max-pending-keyframes", "N",
+           absl::StrCat("keyframes tracking may run ahead of mapping (0-", kMaxPendingKeyframes,
+                        "): 0 = the frame after a keyframe waits for its integration"),
+           absl::StrCat(d.max_pending_keyframes))
       .Add("rpe-delta", "M", "RPE pair distance in metres of path (as eval-traj --delta)", "1");
   AddTrackerFlags(flags);
   AddVoxelSizeFlag(flags, voxel_help);
@@ -57,6 +61,12 @@ absl::StatusOr<SlamDatasetOptions> SlamOptionsFromFlags(const FlagSet& flags) {
   PLX_ASSIGN_OR_RETURN(s.keyframes.max_unmapped_fraction, flags.GetDouble("kf-unmapped", 0.001, 1));
   PLX_ASSIGN_OR_RETURN(s.keyframes.max_interval_s, flags.GetDouble("kf-interval", 0, 3600));
   s.deterministic = flags.GetSwitch("deterministic");
+  PLX_ASSIGN_OR_RETURN(s.max_pending_keyframes,
+                       flags.GetInt("max-pending-keyframes", 0, kMaxPendingKeyframes));
+  if (s.deterministic && s.max_pending_keyframes > 0) {
+    return absl::InvalidArgumentError(
+        "--max-pending-keyframes must be 0 with --deterministic (lock-step waits for mapping)");
+  }
   o.realtime = flags.GetSwitch("realtime");
   PLX_ASSIGN_OR_RETURN(o.speed, flags.GetDouble("speed", 0.01, 100));
   PLX_ASSIGN_OR_RETURN(o.max_frames, flags.GetInt("max-frames", 0, 1 << 30));

@@ -50,8 +50,10 @@ SlamOptions SlamOptionsFor(float voxel_size, const TrackerOptions& tracker) {
 absl::Status ValidateSlamOptions(const SlamOptions& o) {
   PLX_RETURN_IF_ERROR(ValidateSlamTrackerOptions(SlamTrackerOptionsOf(o)));
   PLX_RETURN_IF_ERROR(ValidateSlamMapperOptions(SlamMapperOptionsOf(o)));
-  if (o.max_pending_keyframes < 0) {
-    return absl::InvalidArgumentError("max_pending_keyframes must not be negative");
+  if (o.max_pending_keyframes < 0 || o.max_pending_keyframes > kMaxPendingKeyframes) {
+    return absl::InvalidArgumentError(absl::StrCat("max_pending_keyframes must be in [0, ",
+                                                   kMaxPendingKeyframes, "], got ",
+                                                   o.max_pending_keyframes));
   }
   if (o.mapping_nice < 0 || o.mapping_nice > 19) {
     return absl::InvalidArgumentError(

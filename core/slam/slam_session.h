@@ -47,6 +47,10 @@
 
 namespace plx {
 
+// The most keyframes a camera may run ahead of mapping (SlamOptions::max_pending_keyframes):
+// beyond a few, views go unmapped faster than keyframes integrate.
+inline constexpr int kMaxPendingKeyframes = 4;
+
 struct SlamOptions {
   TrackerOptions tracker;
   MappingSessionOptions mapping;
@@ -61,6 +65,7 @@ struct SlamOptions {
   // keyframes still wait for integration (allocation and fusion), so the frames after it track
   // against a map that has (all but this many of) them. Optimisation is never waited for.
   // Without a bound, tracking outruns mapping, views go unmapped and tracking is lost.
+  // At most kMaxPendingKeyframes.
   int max_pending_keyframes = 0;
   // Concurrent mode: the mapping thread's nice increment (Linux; 0 = same priority as the
   // tracker). Its backend's worker threads inherit it. 0 by default: on the synthetic room

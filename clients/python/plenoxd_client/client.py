@@ -363,7 +363,8 @@ def _slam_options(options):
     iterations)."""
     if isinstance(options, pb.SlamOptions):
         return options
-    known = set(_SLAM_FLOAT_OPTIONS + _SLAM_INT_OPTIONS + _SLAM_BOOL_OPTIONS + ("tracking",))
+    known = set(_SLAM_FLOAT_OPTIONS + _SLAM_INT_OPTIONS + _SLAM_BOOL_OPTIONS +
+                ("tracking", "max_pending_keyframes"))
     unknown = sorted(set(options) - known)
     if unknown:
         raise ValueError(f"unknown SlamOptions field(s) {unknown}; known: {sorted(known)}")
@@ -376,6 +377,8 @@ def _slam_options(options):
         setattr(o, name, bool(options.get(name, False)))
     if options.get("tracking") is not None:
         o.tracking.CopyFrom(_track_options(options["tracking"]))
+    if options.get("max_pending_keyframes") is not None:  # 0 is a value here, not "default"
+        o.max_pending_keyframes = int(options["max_pending_keyframes"])
     return o
 
 
@@ -586,7 +589,8 @@ class Client:
         False when the poses are ground truth.
         options: SlamOptions or a dict of its fields (voxel_size, tracking={mode, rays,
         iterations}, kf_translation_m, kf_rotation_deg, kf_unmapped_fraction, kf_interval_s,
-        iterations_per_keyframe, rays_per_iteration, max_depth, realtime, deterministic)."""
+        iterations_per_keyframe, rays_per_iteration, max_depth, realtime, deterministic,
+        max_pending_keyframes)."""
         if options is not None:
             _slam_options(options)  # a bad option raises here, before the call starts
         return SlamStream(self, map_name, frames, initial_pose, lockstep, options, priors, fps)
