@@ -182,7 +182,7 @@ def start_slam(args, daemon, dataset, workdir, tag, map_name):
     timings = os.path.join(workdir, "%s_slam_timings.txt" % tag)
     cmd = [args.plenox, "--server", daemon.address, "slam", "--dataset", dataset, "--name",
            map_name, "--out", traj, "--timings", timings, "--encoding", "raw", "--json",
-           "--quiet"] + slam_frame_flags(args)
+           "--quiet"] + slam_frame_flags(args) + args.slam_args.split()
     log("%s: %s" % (tag, " ".join(cmd)))
     return [(subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE), traj, timings)]
@@ -341,6 +341,9 @@ def main():
                          "raw|png (default %s)" % DEFAULT_SCENARIOS)
     ap.add_argument("--slam-frames", type=int, default=0,
                     help="frames of the sequence the SLAM rows stream (0 = all)")
+    ap.add_argument("--slam-args", default="",
+                    help="extra flags of the daemon's Slam client, space-separated (e.g. "
+                         "'--max-pending-keyframes 1')")
     ap.add_argument("--plenoxd-args", default="",
                     help="extra plenoxd flags, space-separated (e.g. '--mapping-worker off')")
     ap.add_argument("--timeout", type=float, default=1800.0, help="limit per command (s)")
@@ -481,6 +484,8 @@ def main():
                  "restarted whenever it finishes, for the whole window")
     if args.plenoxd_args:
         notes.append("plenoxd ran with %s" % args.plenoxd_args)
+    if args.slam_args:
+        notes.append("the Slam client ran with %s" % args.slam_args)
     report = render_table(cols, body, header, notes) if rows else ""
     if slam_rows:
         alone = next((r for r in rows if r["clients"] == 1 and not r["mapping"]
