@@ -62,14 +62,14 @@ class Backend {
   absl::Status AddTvGradient(const GridView& grid, const GridGradView& grad,
                              int64_t first_vertex, int64_t vertex_count, float lambda_density,
                              float lambda_sh);
-  absl::Status CountIsoTriangles(const GridView& grid, int64_t first_item, int64_t count,
+  absl::Status CountIsoTriangles(const GridView& grid, int64_t first_vertex, int64_t count,
                                  const IsoSurfaceParams& params, uint8_t* triangles);
-  absl::Status EmitIsoTriangles(const GridView& grid, int64_t first_item, int64_t count,
+  absl::Status EmitIsoTriangles(const GridView& grid, int64_t first_vertex, int64_t count,
                                 const IsoSurfaceParams& params, const int64_t* first_triangle,
                                 int64_t* edge_keys);
   absl::Status ComputeIsoVertices(const GridView& grid, const int64_t* edge_keys, int64_t count,
                                   const IsoSurfaceParams& params, float* positions,
-                                  float* normals, uint8_t* colors);
+                                  float* normals, uint8_t* colors, uint8_t* observed);
 
  protected:
   // Implementations: called with checked arguments; return device errors as a Status.
@@ -104,16 +104,16 @@ class Backend {
   virtual absl::Status DoAddTvGradient(const GridView& grid, const GridGradView& grad,
                                        int64_t first_vertex, int64_t vertex_count,
                                        float lambda_density, float lambda_sh) = 0;
-  virtual absl::Status DoCountIsoTriangles(const GridView& grid, int64_t first_item,
+  virtual absl::Status DoCountIsoTriangles(const GridView& grid, int64_t first_vertex,
                                            int64_t count, const IsoSurfaceParams& params,
                                            uint8_t* triangles) = 0;
-  virtual absl::Status DoEmitIsoTriangles(const GridView& grid, int64_t first_item,
+  virtual absl::Status DoEmitIsoTriangles(const GridView& grid, int64_t first_vertex,
                                           int64_t count, const IsoSurfaceParams& params,
                                           const int64_t* first_triangle, int64_t* edge_keys) = 0;
   virtual absl::Status DoComputeIsoVertices(const GridView& grid, const int64_t* edge_keys,
                                             int64_t count, const IsoSurfaceParams& params,
                                             float* positions, float* normals,
-                                            uint8_t* colors) = 0;
+                                            uint8_t* colors, uint8_t* observed) = 0;
 };
 
 // RefreshOccupancyIfStale: core/kernels/refresh_occupancy.h. MakeCpuBackend:

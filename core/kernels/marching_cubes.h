@@ -1,17 +1,15 @@
 // Marching cubes on the density field of the brick grid, per cell and per mesh vertex (the
 // drivers are in core/kernels/marching_cubes_impl.h, the host side in core/mesh/).
 //
-// Work items: each stored brick visits the 9^3 cells whose lowest corner lies in
-// [origin - 1, origin + 7] per axis, i.e. every cell with a corner in the brick, including the
-// cells that straddle into an unstored neighbour (unstored vertices read as density 0, so the
-// surface closes there). A cell with corners in several stored bricks is visited by each of
-// them and kept by one: the brick of its first stored corner (corner order 0..7), so every cell
-// is triangulated exactly once whatever the brick order.
+// Work items are stored vertices (slot * 512 + local), each the lowest corner of one cell. A
+// cell is meshed only when all 8 of its corners are stored: unstored space is space the map
+// knows nothing about (allocation covers a band around every measured surface, in front of and
+// behind it), so a crossing from a stored solid vertex into it would be a wall the map never
+// saw. The real surfaces lie inside the band, between stored vertices.
 //
 // A mesh vertex is identified by the cell edge it lies on: the edge key packs the edge's low
-// vertex (shifted by one so -1 fits) and its axis. Cells sharing an edge compute the same key,
-// which is how the host merges duplicate vertices; the vertex's position, normal and colour are
-// then computed once per key.
+// vertex and its axis. Cells sharing an edge compute the same key, which is how the host merges
+// duplicate vertices; the vertex's position, normal and colour are then computed once per key.
 #pragma once
 
 #include <cstdint>
@@ -23,10 +21,6 @@
 #include "core/math/vec3.h"
 
 namespace plx {
-
-inline constexpr int kIsoCellsPerBrickEdge = kBrickEdge + 1;
-inline constexpr int kIsoCellsPerBrick =
-    kIsoCellsPerBrickEdge * kIsoCellsPerBrickEdge * kIsoCellsPerBrickEdge;  // 729
 
 enum class MeshColorMode : int {
   kDc = 0,           // the view-independent SH term (as the point export)
@@ -45,52 +39,32 @@ PLX_HD float IsoVertexDensity(const GridView& g, int vx, int vy, int vz) {
   return slot < 0 ? 0.0f : g.Density(slot);
 }
 
-// Lowest corner of work item `item` (brick slot item / 729) in the grid's vertex coordinates.
-PLX_HD void IsoCellCorner(const GridView& g, int64_t item, int cell[3]) {
-  const int64_t slot = item / kIsoCellsPerBrick;
-  const int local = static_cast<int>(item % kIsoCellsPerBrick);
-  const int l[3] = {local % kIsoCellsPerBrickEdge - 1,
-                    (local / kIsoCellsPerBrickEdge) % kIsoCellsPerBrickEdge - 1,
-                    local / (kIsoCellsPerBrickEdge * kIsoCellsPerBrickEdge) - 1};
-  for (int a = 0; a < 3; ++a) cell[a] = g.brick_origin[3 * slot + a] + l[a];
-}
-
-// The case (inside-corner mask) of work item `item`, or -1 when another brick owns the cell.
-PLX_HD int IsoCellCase(const GridView& g, int64_t item, float iso_level) {
-  int cell[3];
-  IsoCellCorner(g, item, cell);
-  const int64_t brick = item / kIsoCellsPerBrick;
-  bool owner_found = false;
+// The case (inside-corner mask) of the cell whose lowest corner is stored vertex `vertex`, or
+// -1 when a corner is not stored. `cell` gets the corner's vertex coordinates.
+PLX_HD int IsoCellCase(const GridView& g, int64_t vertex, float iso_level, int cell[3]) {
+  g.VertexCoords(vertex, cell);
   int mask = 0;
   for (int k = 0; k < 8; ++k) {
     const int64_t slot = g.VertexSlot(cell[0] + (k & 1), cell[1] + ((k >> 1) & 1),
                                       cell[2] + ((k >> 2) & 1));
-    if (slot < 0) continue;
-    if (!owner_found) {
-      if (slot / kBrickVertices != brick) return -1;
-      owner_found = true;
-    }
+    if (slot < 0) return -1;
     if (g.Density(slot) > iso_level) mask |= 1 << k;
   }
   return mask;
 }
 
-// Per-axis size of the edge-key lattice: vertex coordinates -1 .. extent.
-PLX_HD int64_t IsoKeyExtent(const GridView& g, int axis) { return int64_t{g.vertex_extent(axis)} + 2; }
-
 PLX_HD int64_t IsoEdgeKey(const GridView& g, const int low[3], int axis) {
-  const int64_t ex = IsoKeyExtent(g, 0), ey = IsoKeyExtent(g, 1);
-  return (((low[2] + 1) * ey + (low[1] + 1)) * ex + (low[0] + 1)) * 3 + axis;
+  const int64_t ex = g.vertex_extent(0), ey = g.vertex_extent(1);
+  return ((low[2] * ey + low[1]) * ex + low[0]) * 3 + axis;
 }
 
 PLX_HD void DecodeIsoEdgeKey(const GridView& g, int64_t key, int low[3], int* axis) {
-  const int64_t ex = IsoKeyExtent(g, 0), ey = IsoKeyExtent(g, 1);
+  const int64_t ex = g.vertex_extent(0), ey = g.vertex_extent(1);
   *axis = static_cast<int>(key % 3);
-  int64_t r = key / 3;
-  low[0] = static_cast<int>(r % ex) - 1;
-  r /= ex;
-  low[1] = static_cast<int>(r % ey) - 1;
-  low[2] = static_cast<int>(r / ey) - 1;
+  const int64_t r = key / 3;
+  low[0] = static_cast<int>(r % ex);
+  low[1] = static_cast<int>((r / ex) % ey);
+  low[2] = static_cast<int>(r / (ex * ey));
 }
 
 // Edge key of cube edge e of the cell with lowest corner `cell`.
@@ -118,6 +92,11 @@ struct IsoVertex {
   Vec3f position;
   Vec3f normal;  // unit, towards falling density; zero when the gradient vanishes
   uint8_t color[3];
+  // Some SH coefficient of the edge's ends is non-zero: a keyframe saw the surface here.
+  // Fusion colours every vertex near a measured surface and optimisation moves the SH of every
+  // vertex a training ray reaches, so all-zero SH marks a surface no view saw, such as the back
+  // of a wall where fusion's truncation ends the solid.
+  bool observed;
 };
 
 // The mesh vertex on the edge `key`: where the density, linear along the edge (it is, between
@@ -157,9 +136,11 @@ PLX_HD IsoVertex ComputeIsoVertex(const GridView& g, int64_t key, const IsoSurfa
     wb = t;
   }
   float sh[kShCoeffCount];
+  out.observed = false;
   for (int j = 0; j < kShCoeffCount; ++j) {
     const float va = slot_a < 0 ? 0.0f : g.Sh(slot_a)[j];
     const float vb = slot_b < 0 ? 0.0f : g.Sh(slot_b)[j];
+    out.observed = out.observed || va != 0.0f || vb != 0.0f;
     sh[j] = (wa * va + wb * vb) / (wa + wb);
   }
   float basis[kShBasisCount];

@@ -8,28 +8,28 @@
 
 namespace plx::PLX_BACKEND_NS {
 
-void CountIsoTriangles(const ExecContext& ctx, const GridView& grid, int64_t first_item,
+void CountIsoTriangles(const ExecContext& ctx, const GridView& grid, int64_t first_vertex,
                        int64_t count, const IsoSurfaceParams& params, uint8_t* triangles) {
   const GridView g = grid;
   const IsoSurfaceParams p = params;
   ParallelFor(ctx, count, [=] PLX_HD_LAMBDA(int64_t i) {
-    const int mask = IsoCellCase(g, first_item + i, p.iso_level);
+    int cell[3];
+    const int mask = IsoCellCase(g, first_vertex + i, p.iso_level, cell);
     triangles[i] = mask < 0 ? 0 : p.table->triangle_count[mask];
   });
 }
 
-void EmitIsoTriangles(const ExecContext& ctx, const GridView& grid, int64_t first_item,
+void EmitIsoTriangles(const ExecContext& ctx, const GridView& grid, int64_t first_vertex,
                       int64_t count, const IsoSurfaceParams& params,
                       const int64_t* first_triangle, int64_t* edge_keys) {
   const GridView g = grid;
   const IsoSurfaceParams p = params;
   ParallelFor(ctx, count, [=] PLX_HD_LAMBDA(int64_t i) {
-    const int mask = IsoCellCase(g, first_item + i, p.iso_level);
+    int cell[3];
+    const int mask = IsoCellCase(g, first_vertex + i, p.iso_level, cell);
     if (mask <= 0) return;
     const int n = p.table->triangle_count[mask];
     if (n == 0) return;
-    int cell[3];
-    IsoCellCorner(g, first_item + i, cell);
     int64_t* out = edge_keys + 3 * first_triangle[i];
     for (int j = 0; j < 3 * n; ++j) out[j] = IsoCellEdgeKey(g, cell, p.table->edges[mask][j]);
   });
@@ -37,7 +37,7 @@ void EmitIsoTriangles(const ExecContext& ctx, const GridView& grid, int64_t firs
 
 void ComputeIsoVertices(const ExecContext& ctx, const GridView& grid, const int64_t* edge_keys,
                         int64_t count, const IsoSurfaceParams& params, float* positions,
-                        float* normals, uint8_t* colors) {
+                        float* normals, uint8_t* colors, uint8_t* observed) {
   const GridView g = grid;
   const IsoSurfaceParams p = params;
   ParallelFor(ctx, count, [=] PLX_HD_LAMBDA(int64_t i) {
@@ -49,6 +49,7 @@ void ComputeIsoVertices(const ExecContext& ctx, const GridView& grid, const int6
     normals[3 * i + 1] = v.normal.y;
     normals[3 * i + 2] = v.normal.z;
     for (int c = 0; c < 3; ++c) colors[3 * i + c] = v.color[c];
+    observed[i] = v.observed ? 1 : 0;
   });
 }
 

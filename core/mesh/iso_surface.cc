@@ -11,12 +11,12 @@
 #include "core/common/status_macros.h"
 #include "core/common/unified_allocator.h"
 #include "core/math/vec3.h"
-#include "core/mesh/mesh_components.h"
+#include "core/mesh/mesh_cleanup.h"
 
 namespace plx {
 namespace {
 
-// Bricks per slice: 746 k cells, 6.7 MB of counts and offsets, and a cancellation check every
+// Bricks per slice: 512 k cells, 4.7 MB of counts and offsets, and a cancellation check every
 // few tens of milliseconds on a CPU.
 constexpr int64_t kBricksPerSlice = 1024;
 
@@ -62,8 +62,8 @@ class Extraction {
   }
 
   absl::Status Slice(int64_t first_brick, int64_t bricks) {
-    const int64_t first_item = first_brick * kIsoCellsPerBrick;
-    const int64_t items = bricks * kIsoCellsPerBrick;
+    const int64_t first_item = first_brick * kBrickVertices;
+    const int64_t items = bricks * kBrickVertices;
     counts_.resize(static_cast<size_t>(items));
     offsets_.resize(static_cast<size_t>(items));
     PLX_RETURN_IF_ERROR(
@@ -104,13 +104,23 @@ class Extraction {
     vertex_of_key_ = {};
     const int64_t n = static_cast<int64_t>(unique_keys_.size());
     UnifiedVector<float> positions(3 * n), normals(3 * n);
-    UnifiedVector<uint8_t> colors(3 * n);
+    UnifiedVector<uint8_t> colors(3 * n), observed(n);
     PLX_RETURN_IF_ERROR(backend_.ComputeIsoVertices(view_, unique_keys_.data(), n, params_,
                                                     positions.data(), normals.data(),
-                                                    colors.data()));
+                                                    colors.data(), observed.data()));
     mesh_.positions.assign(positions.begin(), positions.end());
     mesh_.normals.assign(normals.begin(), normals.end());
     mesh_.colors.assign(colors.begin(), colors.end());
+    if (!options_.keep_unobserved) {
+      // A triangle goes when none of its corners was seen: one seen corner means it borders
+      // what a view saw (the rim of a surface).
+      std::vector<uint8_t> keep(static_cast<size_t>(mesh_.num_triangles()));
+      for (int64_t t = 0; t < mesh_.num_triangles(); ++t) {
+        const int32_t* f = &mesh_.triangles[3 * t];
+        keep[t] = observed[f[0]] || observed[f[1]] || observed[f[2]];
+      }
+      KeepTriangles(&mesh_, keep);
+    }
     FillMissingNormals(&mesh_);
     RemoveSmallComponents(&mesh_, options_.min_component_triangles);
     return std::move(mesh_);

@@ -1,7 +1,7 @@
 // Marching cubes on analytic fields written into a brick grid: a sphere (closed, watertight,
-// within half a voxel of the true surface, normals and winding outward), a plane cut by the end
-// of the stored bricks (the surface closes through the cells that straddle into unstored
-// space), colours, options and their errors.
+// within half a voxel of the true surface, normals and winding outward), a plane cut off where
+// the stored bricks end (no wall there: unstored space is unknown, not empty), colours, the
+// unobserved-surface and small-component filters, options and their errors.
 #include "core/mesh/iso_surface.h"
 
 #include <gtest/gtest.h>
@@ -52,7 +52,8 @@ SparseGrid FieldGrid(const float lo[3], const float hi[3],
     for (int i = 0; i < kBrickVertices; ++i) {
       const std::array<float, 3> p = grid.VertexPosition(slot, i);
       d[i] = std::max(0.0f, density(p.data()));
-      const float g = gray ? gray(p.data()) : 0.5f;
+      // Grey 0.6, not 0.5: a DC term of exactly 0 would mark the surface unobserved.
+      const float g = gray ? gray(p.data()) : 0.6f;
       for (int c = 0; c < 3; ++c) sh[i * kShCoeffCount + c * kShBasisCount] = ShDcForColor(g);
     }
   }
@@ -130,53 +131,53 @@ TEST(IsoSurfaceTest, TheSameMeshOnAnyThreadCount) {
   EXPECT_EQ(one.colors, two.colors);
 }
 
-// Solid below z = 0.21 inside a slab of bricks: the top is the plane; where the stored bricks
-// end, unstored vertices read 0 and close the solid, so the mesh is a closed box surface whose
-// top is flat and within half a voxel of the plane.
-TEST(IsoSurfaceTest, PlaneClosesWhereTheStoredBricksEnd) {
+// Solid below z = 0.21 inside a slab of bricks: the mesh is the plane alone, open where the
+// stored bricks end (the solid's sides and bottom border unstored space, which is not meshed),
+// flat and within half a voxel of the plane, as large as the stored slab.
+TEST(IsoSurfaceTest, PlaneEndsWhereTheStoredBricksEnd) {
   constexpr float kPlane = 0.21f;
   const float lo[3] = {0.0f, 0.0f, 0.0f}, hi[3] = {0.7f, 0.3f, 0.3f};
   const SparseGrid grid = FieldGrid(lo, hi, [](const float p[3]) {
     return kIso + kSlope * (kPlane - p[2]);
   });
   const TriangleMesh mesh = Extract(grid);
+  ASSERT_GT(mesh.num_triangles(), 0);
   const testing::EdgeUse use = testing::CountEdgeUse(mesh);
-  EXPECT_EQ(use.not_twice, 0);
   EXPECT_EQ(use.same_direction, 0);
-  double top_area = 0.0;
-  int64_t top = 0;
+  // Stored vertices span x in [0, 0.75] and y in [0, 0.35] (2 x 1 bricks of 8 vertices), so the
+  // plane crosses 15 x 7 cells, each a quad of two triangles; only the rim is open, one
+  // triangle edge per rim cell: 2 * (15 + 7).
+  EXPECT_EQ(use.not_twice, 2 * (15 + 7));
+  double area = 0.0;
   for (int64_t t = 0; t < mesh.num_triangles(); ++t) {
     const Vec3f n = FaceNormal(mesh, t);
-    if (n.z < 0.99f * Norm(n)) continue;  // the sides and the bottom
-    ++top;
-    top_area += 0.5 * Norm(n);
-    for (int c = 0; c < 3; ++c) {
-      const int32_t v = mesh.triangles[3 * t + c];
-      const Vec3f p = Position(mesh, v);
-      EXPECT_NEAR(p.z, kPlane, 0.5 * kVoxel);
-      // Away from the walls the gradient is the plane's; at them it also sees the wall.
-      if (p.x > kVoxel && p.x < 0.75f - kVoxel && p.y > kVoxel && p.y < 0.35f - kVoxel) {
-        EXPECT_GT(Normal(mesh, v).z, 0.999f);
-      }
+    EXPECT_GT(n.z, 0.999f * Norm(n));
+    area += 0.5 * Norm(n);
+  }
+  EXPECT_NEAR(area, 0.75 * 0.35, 1e-4);
+  for (int64_t v = 0; v < mesh.num_vertices(); ++v) {
+    const Vec3f p = Position(mesh, v);
+    EXPECT_NEAR(p.z, kPlane, 1e-4);
+    // Away from the rim the gradient is the plane's; at it, central differences see unstored
+    // space (read as 0) beside the slab.
+    if (p.x > 0.0f && p.x < 0.75f && p.y > 0.0f && p.y < 0.35f) {
+      EXPECT_GT(Normal(mesh, v).z, 0.999f);
     }
   }
-  EXPECT_GT(top, 0);
-  // The stored bricks span 2 x 1 brick (0.8 m x 0.4 m) and the solid reaches to the outermost
-  // stored vertices (x, y up to 0.75 / 0.35 m), closed half a voxel further on average.
-  EXPECT_NEAR(top_area, 0.8 * 0.4, 0.06);
 }
 
 TEST(IsoSurfaceTest, ColoursComeFromTheDcTerm) {
   const float lo[3] = {-0.6f, -0.6f, -0.6f}, hi[3] = {0.6f, 0.6f, 0.6f};
   // Grey level rising with x: each vertex's colour follows its x within the blending error.
   const SparseGrid shaded = FieldGrid(lo, hi, SphereDensity,
-                                      [](const float p[3]) { return 0.5f + 0.5f * p[0]; });
+                                      [](const float p[3]) { return 0.513f + 0.4f * p[0]; });
   const TriangleMesh mesh = Extract(shaded);
   ASSERT_GT(mesh.num_vertices(), 0);
   for (int64_t v = 0; v < mesh.num_vertices(); ++v) {
-    const float expected = (0.5f + 0.5f * Position(mesh, v).x) * 255.0f;
-    // The colour blends the two edge ends (at most a voxel apart): 0.5 * 0.05 * 255 = 6.4.
-    EXPECT_NEAR(mesh.colors[3 * v], expected, 7.0f) << "vertex " << v;
+    const float expected = (0.513f + 0.4f * Position(mesh, v).x) * 255.0f;
+    // The colour blends the two edge ends (at most a voxel apart): 0.4 * 0.05 * 255 = 5.1.
+    // (Never exactly grey 0.5 at a vertex, which would read as unobserved.)
+    EXPECT_NEAR(mesh.colors[3 * v], expected, 5.5f) << "vertex " << v;
     EXPECT_EQ(mesh.colors[3 * v], mesh.colors[3 * v + 1]);
   }
 }
@@ -198,6 +199,23 @@ TEST(IsoSurfaceTest, SmallComponentsAreRemovedOnRequest) {
   EXPECT_EQ(cleaned.num_vertices(), sphere.num_vertices());
   for (int64_t v = 0; v < cleaned.num_vertices(); ++v) EXPECT_LT(Position(cleaned, v).x, 0.6f);
   EXPECT_EQ(testing::CountEdgeUse(cleaned).not_twice, 0);
+}
+
+// A surface whose SH are all zero was never seen (IsoVertex::observed): dropped unless asked for.
+TEST(IsoSurfaceTest, UnobservedSurfacesAreDroppedUnlessKept) {
+  const float lo[3] = {-0.6f, -0.6f, -0.6f}, hi[3] = {0.6f, 0.6f, 0.6f};
+  const SparseGrid grid = FieldGrid(lo, hi, SphereDensity, [](const float p[3]) {
+    return p[0] > 0.0f ? 0.5f : 0.7f;  // DC 0 (and so all SH 0) on the +x half
+  });
+  const TriangleMesh half = Extract(grid);
+  MeshOptions o;
+  o.keep_unobserved = true;
+  const TriangleMesh whole = Extract(grid, o);
+  EXPECT_EQ(whole.num_triangles(), Extract(SphereGrid()).num_triangles());
+  EXPECT_GT(half.num_triangles(), whole.num_triangles() * 4 / 10);
+  EXPECT_LT(half.num_triangles(), whole.num_triangles() * 6 / 10);
+  // What is left is the seen half, plus the triangles with a corner next to it.
+  for (int64_t v = 0; v < half.num_vertices(); ++v) EXPECT_LT(Position(half, v).x, kVoxel);
 }
 
 TEST(IsoSurfaceTest, BadOptionsCancellationAndTheTriangleCap) {

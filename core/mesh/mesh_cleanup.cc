@@ -1,9 +1,8 @@
-#include "core/mesh/mesh_components.h"
+#include "core/mesh/mesh_cleanup.h"
 
 #include <cstddef>
 #include <numeric>
 #include <utility>
-#include <vector>
 
 namespace plx {
 namespace {
@@ -31,28 +30,19 @@ void Union(std::vector<int32_t>& parent, int32_t a, int32_t b) {
 
 }  // namespace
 
-int64_t RemoveSmallComponents(TriangleMesh* mesh, int64_t min_triangles) {
+int64_t KeepTriangles(TriangleMesh* mesh, const std::vector<uint8_t>& keep) {
   const int64_t triangles = mesh->num_triangles();
-  if (min_triangles <= 1 || triangles == 0) return 0;
   const int64_t vertices = mesh->num_vertices();
-  std::vector<int32_t> parent(static_cast<size_t>(vertices));
-  std::iota(parent.begin(), parent.end(), 0);
   const std::vector<int32_t>& t = mesh->triangles;
-  for (int64_t i = 0; i < triangles; ++i) {
-    Union(parent, t[3 * i], t[3 * i + 1]);
-    Union(parent, t[3 * i], t[3 * i + 2]);
-  }
-  std::vector<int64_t> size(static_cast<size_t>(vertices), 0);
-  for (int64_t i = 0; i < triangles; ++i) ++size[Find(parent, t[3 * i])];
-
-  // Keep the triangles of large components, then renumber the vertices they use.
-  std::vector<int32_t> remap(static_cast<size_t>(vertices), -1);
   std::vector<int32_t> kept;
   kept.reserve(t.size());
   for (int64_t i = 0; i < triangles; ++i) {
-    if (size[Find(parent, t[3 * i])] < min_triangles) continue;
+    if (!keep[i]) continue;
     for (int c = 0; c < 3; ++c) kept.push_back(t[3 * i + c]);
   }
+  if (static_cast<int64_t>(kept.size()) == 3 * triangles) return 0;
+  // Renumber the vertices the kept triangles use, moving each down to its new place.
+  std::vector<int32_t> remap(static_cast<size_t>(vertices), -1);
   for (int32_t v : kept) remap[v] = 0;
   int32_t next = 0;
   for (int64_t v = 0; v < vertices; ++v) {
@@ -72,6 +62,24 @@ int64_t RemoveSmallComponents(TriangleMesh* mesh, int64_t min_triangles) {
   const int64_t removed = triangles - static_cast<int64_t>(kept.size() / 3);
   mesh->triangles = std::move(kept);
   return removed;
+}
+
+int64_t RemoveSmallComponents(TriangleMesh* mesh, int64_t min_triangles) {
+  const int64_t triangles = mesh->num_triangles();
+  if (min_triangles <= 1 || triangles == 0) return 0;
+  const int64_t vertices = mesh->num_vertices();
+  std::vector<int32_t> parent(static_cast<size_t>(vertices));
+  std::iota(parent.begin(), parent.end(), 0);
+  const std::vector<int32_t>& t = mesh->triangles;
+  for (int64_t i = 0; i < triangles; ++i) {
+    Union(parent, t[3 * i], t[3 * i + 1]);
+    Union(parent, t[3 * i], t[3 * i + 2]);
+  }
+  std::vector<int64_t> size(static_cast<size_t>(vertices), 0);
+  for (int64_t i = 0; i < triangles; ++i) ++size[Find(parent, t[3 * i])];
+  std::vector<uint8_t> keep(static_cast<size_t>(triangles));
+  for (int64_t i = 0; i < triangles; ++i) keep[i] = size[Find(parent, t[3 * i])] >= min_triangles;
+  return KeepTriangles(mesh, keep);
 }
 
 }  // namespace plx
