@@ -21,8 +21,8 @@
 
 #include "app/make_backend.h"
 #include "tests/clients/cli_runner.h"
+#include "tests/clients/mesh_output.h"
 #include "tests/clients/remote_daemon.h"
-#include "tests/ply_mesh_reader.h"
 #include "tests/test_util.h"
 
 namespace plx {
@@ -353,13 +353,7 @@ TEST_F(RemoteCliTest, ExportMeshWritesAPlyMesh) {
       work.path());
   ASSERT_EQ(r.exit_code, kExitOk) << r.Describe();
   EXPECT_EQ(ListTree(work.path()), (std::set<std::string>{"mesh.ply"}));
-  const absl::StatusOr<plx::testing::PlyMeshFile> mesh =
-      plx::testing::ReadPlyMesh(ReadFileToString(work / "mesh.ply"));
-  ASSERT_TRUE(mesh.ok()) << mesh.status();
-  EXPECT_GT(mesh->mesh.num_triangles(), 100);
-  const FlatJson json = LastLineJson(r);
-  EXPECT_EQ(JsonNumber(json, "vertices").value_or(-1), mesh->mesh.num_vertices());
-  EXPECT_EQ(JsonNumber(json, "faces").value_or(-1), mesh->mesh.num_triangles());
+  EXPECT_GT(plx::testing::ExpectMeshFileMatchingJson(work / "mesh.ply", r).num_triangles(), 100);
   // A limit below the mesh: the daemon's RESOURCE_EXHAUSTED, no file.
   ScopedTempDir capped("plenox_remote_mesh_cap");
   const CommandResult c = Remote(
