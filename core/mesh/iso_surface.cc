@@ -84,7 +84,8 @@ class Extraction {
                                                   offsets_.data(), keys_.data()));
     mesh_.triangles.reserve(mesh_.triangles.size() + keys_.size());
     for (int64_t key : keys_) {
-      auto [it, inserted] = vertex_of_key_.try_emplace(key, static_cast<int32_t>(unique_keys_.size()));
+      const int32_t next = static_cast<int32_t>(unique_keys_.size());
+      auto [it, inserted] = vertex_of_key_.try_emplace(key, next);
       if (inserted) {
         if (unique_keys_.size() >= static_cast<size_t>(std::numeric_limits<int32_t>::max())) {
           return absl::ResourceExhaustedError("the mesh has more than 2^31 vertices");
