@@ -242,6 +242,47 @@ class CudaBackend final : public Backend {
     return Finish();
   }
 
+  absl::Status DoCountIsoTriangles(const GridView& grid, int64_t first_vertex, int64_t count,
+                                   const IsoSurfaceParams& params, uint8_t* triangles) override {
+    PLX_RETURN_IF_ERROR(Begin("CountIsoTriangles"));
+    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
+    PLX_RETURN_IF_ERROR(Check(params.table, "params.table"));
+    PLX_RETURN_IF_ERROR(Check(triangles, "triangles"));
+    PrefetchGrid(grid);
+    cuda::CountIsoTriangles(ctx_, grid, first_vertex, count, params, triangles);
+    return Finish();
+  }
+
+  absl::Status DoEmitIsoTriangles(const GridView& grid, int64_t first_vertex, int64_t count,
+                                  const IsoSurfaceParams& params, const int64_t* first_triangle,
+                                  int64_t* edge_keys) override {
+    PLX_RETURN_IF_ERROR(Begin("EmitIsoTriangles"));
+    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
+    PLX_RETURN_IF_ERROR(Check(params.table, "params.table"));
+    PLX_RETURN_IF_ERROR(Check(first_triangle, "first_triangle"));
+    PLX_RETURN_IF_ERROR(Check(edge_keys, "edge_keys"));
+    PrefetchGrid(grid);
+    cuda::EmitIsoTriangles(ctx_, grid, first_vertex, count, params, first_triangle, edge_keys);
+    return Finish();
+  }
+
+  absl::Status DoComputeIsoVertices(const GridView& grid, const int64_t* edge_keys, int64_t count,
+                                    const IsoSurfaceParams& params, float* positions,
+                                    float* normals, uint8_t* colors, uint8_t* observed) override {
+    PLX_RETURN_IF_ERROR(Begin("ComputeIsoVertices"));
+    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
+    PLX_RETURN_IF_ERROR(Check(params.table, "params.table"));
+    PLX_RETURN_IF_ERROR(Check(edge_keys, "edge_keys"));
+    PLX_RETURN_IF_ERROR(Check(positions, "positions"));
+    PLX_RETURN_IF_ERROR(Check(normals, "normals"));
+    PLX_RETURN_IF_ERROR(Check(colors, "colors"));
+    PLX_RETURN_IF_ERROR(Check(observed, "observed"));
+    PrefetchGrid(grid);
+    cuda::ComputeIsoVertices(ctx_, grid, edge_keys, count, params, positions, normals, colors,
+                             observed);
+    return Finish();
+  }
+
  private:
   CudaBackend(int device, const cudaDeviceProp& prop, bool pageable_access, cudaStream_t stream)
       : device_(device),

@@ -9,10 +9,10 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
-#include "core/formats/ply_export.h"
 #include "core/geometry/world_pose.h"
 #include "core/mapping/mapper.h"
 #include "core/render/render_view.h"
+#include "server/export_request.h"
 #include "server/grpc_status.h"
 #include "server/integrate_reactor.h"
 #include "server/log.h"
@@ -62,7 +62,8 @@ pb::JobStatus::State ToProto(JobState state) {
   return pb::JobStatus::STATE_UNSPECIFIED;
 }
 
-// Export: the PLY is built on a device worker from a published version, then streamed in chunks.
+// Export: the PLY (points or mesh) is built on a device worker from a published version, then
+// streamed in chunks.
 class ExportReactor final : public grpc::ServerWriteReactor<pb::ExportChunk> {
  public:
   static constexpr size_t kChunkBytes = 1 << 20;
@@ -83,30 +84,25 @@ class ExportReactor final : public grpc::ServerWriteReactor<pb::ExportChunk> {
       Done(map.status());
       return;
     }
-    // Exactly 0 means the default; a negative or non-finite threshold is a client's mistake,
-    // not a request for the default.
-    if (!(std::isfinite(request->min_density()) && request->min_density() >= 0)) {
-      Done(absl::InvalidArgumentError(absl::StrCat(
-          "min_density: must be finite and >= 0 (0 = the default, ", kDefaultExportMinDensity,
-          "), got ", request->min_density())));
+    absl::StatusOr<ExportSpec> spec = ParseExportRequest(*request);
+    if (!spec.ok()) {
+      Done(spec.status());
       return;
     }
-    const float min_density = request->min_density() > 0 ? request->min_density()
-                                                          : kDefaultExportMinDensity;
     state_->workers->Pick(Priority::kBackground).Post(
-        Priority::kBackground, [this, map = *map, min_density](Backend*, bool stopped) {
+        Priority::kBackground, [this, map = *map, spec = *spec](Backend* backend, bool stopped) {
           if (absl::Status queued = QueuedCallStatus(stopped, context_); !queued.ok()) {
             Done(queued);
             return;
           }
           // A call cancelled while exporting stops within a few bricks.
-          absl::StatusOr<PlyExport> ply = ExportSurfacePointsPly(
-              *map.map, min_density, [this] { return context_->IsCancelled(); });
-          if (!ply.ok()) {
-            Done(ply.status());
+          absl::StatusOr<std::string> bytes = BuildExport(
+              spec, *map.map, *backend, [this] { return context_->IsCancelled(); });
+          if (!bytes.ok()) {
+            Done(bytes.status());
             return;
           }
-          bytes_ = std::move(ply->bytes);
+          bytes_ = *std::move(bytes);
           WriteNext();
         });
   }

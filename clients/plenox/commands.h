@@ -15,6 +15,7 @@ int RunTrack(const std::vector<std::string>& args);
 int RunSlam(const std::vector<std::string>& args);
 int RunSynth(const std::vector<std::string>& args);
 int RunDemo(const std::vector<std::string>& args);
+int RunExport(const std::vector<std::string>& args);
 
 // The global flags that point plenox at a daemon (given before the command). With an empty
 // `server` everything runs in-process.
@@ -25,7 +26,7 @@ struct RemoteOptions {
 };
 
 // The same commands against a plenoxd daemon (remote_*.cc; only in builds with gRPC, where
-// PLX_WITH_SERVER is defined). export, maps, save, load and info exist only in this form; they
+// PLX_WITH_SERVER is defined). maps, save, load and info exist only in this form; they
 // print their --help without --server and otherwise say that they need it.
 int RunRemoteMap(const RemoteOptions& remote, const std::vector<std::string>& args);
 int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& args);

@@ -26,10 +26,10 @@ constexpr char kUsage[] =
     "  eval-traj  compare an estimated trajectory with ground truth (ATE, RPE)\n"
     "  render     render colour and depth images of a map from a pose\n"
     "  synth      write the synthetic RGB-D sequence to a folder (TUM layout)\n"
+    "  export     write a map file as a PLY point cloud or, with --mesh, a triangle mesh\n"
     "\n"
     "with --server, on the daemon's maps (map/slam --name N, track/render --map N):\n"
-    "  map, track, slam, render   as above, the work done by the daemon\n"
-    "  export     write a map as a PLY point cloud\n"
+    "  map, track, slam, render, export   as above, the work done by the daemon\n"
     "  maps       list the daemon's maps\n"
     "  save       write a map to the daemon's data directory\n"
     "  load       read a map back from the daemon's data directory\n"
@@ -41,7 +41,7 @@ constexpr char kUsage[] =
     "  --tls-ca PEM        root certificate of a daemon serving TLS\n";
 
 // Commands that only exist against a daemon, and commands that only run in-process.
-const std::set<std::string> kDaemonOnly = {"export", "maps", "save", "load", "info"};
+const std::set<std::string> kDaemonOnly = {"maps", "save", "load", "info"};
 const std::set<std::string> kInProcessOnly = {"demo", "eval-map", "eval-traj", "synth"};
 
 int UsageError(const std::string& message) {
@@ -147,7 +147,7 @@ int main(int argc, char** argv) {
   if (command == "track" && use_server) return plx::cli::RunRemoteTrack(remote, args);
   if (command == "slam" && use_server) return plx::cli::RunRemoteSlam(remote, args);
   if (command == "render" && use_server) return plx::cli::RunRemoteRender(remote, args);
-  if (command == "export") return plx::cli::RunRemoteExport(remote, args);
+  if (command == "export" && use_server) return plx::cli::RunRemoteExport(remote, args);
   if (command == "maps") return plx::cli::RunRemoteMaps(remote, args);
   if (command == "save") return plx::cli::RunRemoteSave(remote, args);
   if (command == "load") return plx::cli::RunRemoteLoad(remote, args);
@@ -164,6 +164,7 @@ int main(int argc, char** argv) {
   if (command == "slam") return plx::cli::RunSlam(args);
   if (command == "render") return plx::cli::RunRender(args);
   if (command == "synth") return plx::cli::RunSynth(args);
+  if (command == "export") return plx::cli::RunExport(args);
   if (command == "demo") return plx::cli::RunDemo(args);
   std::cerr << "plenox: unknown command \"" << command << "\"\n\n" << kUsage;
   return 2;

@@ -1,4 +1,5 @@
-// plenox --server HOST:PORT export: a map on the daemon as a PLY point cloud (Export stream).
+// plenox --server HOST:PORT export: a map on the daemon as a PLY point cloud or triangle mesh
+// (Export stream).
 #include <unistd.h>
 
 #include <cerrno>
@@ -12,16 +13,16 @@
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "clients/plenox/remote_client.h"
-#include "core/formats/ply_export.h"
+#include "clients/plenox/export_flags.h"
 
 namespace plx::cli {
 namespace {
 
 constexpr char kCommand[] = "export";
 
-// The vertex count from a PLY header ("element vertex N"), -1 when the header lacks it.
-int64_t VertexCount(const std::string& head) {
-  const std::string key = "\nelement vertex ";
+// An element's count from a PLY header ("element vertex N"), -1 when the header lacks it.
+int64_t ElementCount(const std::string& head, const std::string& element) {
+  const std::string key = "\nelement " + element + " ";
   const size_t at = head.find(key);
   const size_t header_end = head.find("end_header");
   if (at == std::string::npos || (header_end != std::string::npos && at > header_end)) return -1;
@@ -36,20 +37,17 @@ int64_t VertexCount(const std::string& head) {
 
 int RunRemoteExport(const RemoteOptions& remote, const std::vector<std::string>& args) {
   FlagSet flags("plenox export",
-                "Needs --server: writes map N on the daemon as a coloured point cloud (binary\n"
-                "little-endian PLY: one point per voxel vertex on the surface of the density\n"
-                "field). The file appears only once it is complete.");
-  flags.Add("map", "N", "the map on the daemon", std::nullopt, true)
-      .Add("out", "CLOUD.ply", "point cloud to write", std::nullopt, true)
-      .Add("min-density", "D",
-           absl::StrCat("points where the density exceeds D (0 = the daemon's default, ",
-                        kDefaultExportMinDensity, ")"),
-           "0");
+                "With --server: writes map N on the daemon as binary little-endian PLY, a\n"
+                "coloured point cloud (one point per voxel vertex on the surface of the density\n"
+                "field) or, with --mesh, a triangle mesh built on the daemon's device. The file\n"
+                "appears only once it is complete.");
+  flags.Add("map", "N", "the map on the daemon", std::nullopt, true);
+  AddExportFlags(flags);
   AddJsonAndQuietSwitches(flags);
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
-  absl::StatusOr<double> min_density = flags.GetDouble("min-density", 0.0, 1e9);
-  if (!min_density.ok()) return ReportError(kCommand, min_density.status(), true);
+  absl::StatusOr<ExportChoice> choice = ExportChoiceFromFlags(flags);
+  if (!choice.ok()) return ReportError(kCommand, choice.status(), true);
   const std::string map_name = flags.GetString("map");
   const std::string out = flags.GetString("out");
   if (absl::Status s = CheckOutputDirectory(out); !s.ok()) return ReportError(kCommand, s);
@@ -58,7 +56,20 @@ int RunRemoteExport(const RemoteOptions& remote, const std::vector<std::string>&
   if (!client) return exit_code;
   pb::ExportRequest request;
   request.set_map(map_name);
-  request.set_min_density(static_cast<float>(*min_density));
+  if (choice->mesh) {
+    // Defaults resolved by the flags are sent as they are: the daemon applies the same ones.
+    const MeshOptions& o = choice->mesh_options;
+    request.set_format(pb::EXPORT_FORMAT_MESH);
+    request.set_iso_level(o.iso_level);
+    request.set_min_component_triangles(static_cast<uint64_t>(o.min_component_triangles));
+    request.set_max_triangles(static_cast<uint64_t>(o.max_triangles));
+    request.set_keep_unobserved(o.keep_unobserved);
+    request.set_mesh_color(o.color_mode == MeshColorMode::kViewAlongNormal
+                               ? pb::MESH_COLOR_ALONG_NORMAL
+                               : pb::MESH_COLOR_DC);
+  } else {
+    request.set_min_density(static_cast<float>(choice->min_density));
+  }
   std::unique_ptr<grpc::ClientContext> context =
       client->NewContext(absl::InfiniteDuration(), map_name);
   std::unique_ptr<grpc::ClientReader<pb::ExportChunk>> stream =
@@ -117,19 +128,25 @@ int RunRemoteExport(const RemoteOptions& remote, const std::vector<std::string>&
     if (received > 0) line.Finish("export failed");
     return ReportError(kCommand, problem);
   }
-  const int64_t points = VertexCount(head);
-  line.Finish(absl::StrFormat("exported \"%s\" from %s: %d points, %.1f MB", map_name,
-                              client->server(), points, received / 1e6));
+  const int64_t points = ElementCount(head, "vertex");
+  const int64_t faces = ElementCount(head, "face");
+  const std::string what = choice->mesh
+                               ? absl::StrFormat("%d vertices, %d triangles", points, faces)
+                               : absl::StrFormat("%d points", points);
+  line.Finish(absl::StrFormat("exported \"%s\" from %s: %s, %.1f MB", map_name,
+                              client->server(), what, received / 1e6));
   if (flags.GetSwitch("json")) {
     JsonObject json;
-    json.Add("map", map_name)
-        .Add("server", client->server())
-        .Add("out", out)
-        .Add("points", points)
-        .Add("bytes", static_cast<int64_t>(received));
+    json.Add("map", map_name).Add("server", client->server()).Add("out", out);
+    if (choice->mesh) {
+      json.Add("vertices", points).Add("faces", faces);
+    } else {
+      json.Add("points", points);
+    }
+    json.Add("bytes", static_cast<int64_t>(received));
     std::cout << json.str() << "\n";
   } else {
-    std::cout << absl::StrFormat("wrote %s (%d points, %.1f MB)\n", out, points, received / 1e6);
+    std::cout << absl::StrFormat("wrote %s (%s, %.1f MB)\n", out, what, received / 1e6);
   }
   return kExitOk;
 }

@@ -76,6 +76,24 @@ class CpuBackend final : public Backend {
     cpu::AddTvGradient(ctx_, grid, grad, first_vertex, vertex_count, lambda_density, lambda_sh);
     return absl::OkStatus();
   }
+  absl::Status DoCountIsoTriangles(const GridView& grid, int64_t first_vertex, int64_t count,
+                                   const IsoSurfaceParams& params, uint8_t* triangles) override {
+    cpu::CountIsoTriangles(ctx_, grid, first_vertex, count, params, triangles);
+    return absl::OkStatus();
+  }
+  absl::Status DoEmitIsoTriangles(const GridView& grid, int64_t first_vertex, int64_t count,
+                                  const IsoSurfaceParams& params, const int64_t* first_triangle,
+                                  int64_t* edge_keys) override {
+    cpu::EmitIsoTriangles(ctx_, grid, first_vertex, count, params, first_triangle, edge_keys);
+    return absl::OkStatus();
+  }
+  absl::Status DoComputeIsoVertices(const GridView& grid, const int64_t* edge_keys, int64_t count,
+                                    const IsoSurfaceParams& params, float* positions,
+                                    float* normals, uint8_t* colors, uint8_t* observed) override {
+    cpu::ComputeIsoVertices(ctx_, grid, edge_keys, count, params, positions, normals, colors,
+                            observed);
+    return absl::OkStatus();
+  }
 
  private:
   std::unique_ptr<cpu::ThreadPool> own_pool_;

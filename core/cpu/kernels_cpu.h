@@ -6,6 +6,7 @@
 #include "core/grid/grid_view.h"
 #include "core/kernels/depth_fusion.h"
 #include "core/kernels/kernel_types.h"
+#include "core/kernels/marching_cubes.h"
 #include "core/kernels/tracking_terms.h"
 
 namespace plx::cpu {

@@ -2,22 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 
 #include "absl/strings/str_cat.h"
 #include "core/common/allocation_guard.h"
+#include "core/formats/ply_binary.h"
 #include "core/math/spherical_harmonics.h"
 
 namespace plx {
-namespace {
-
-void AppendFloat(std::string* out, float v) {
-  char b[4];
-  std::memcpy(b, &v, 4);  // the project targets little-endian machines (x86-64, aarch64)
-  out->append(b, 4);
-}
-
-}  // namespace
 
 absl::StatusOr<PlyExport> ExportSurfacePointsPly(const PlenoxelMap& map, float min_density,
                                                  const std::function<bool()>& cancelled) {
@@ -46,9 +37,9 @@ absl::StatusOr<PlyExport> ExportSurfacePointsPly(const PlenoxelMap& map, float m
       }
       if (!surface) continue;
       const Vec3f p = view.VertexPosition(v[0], v[1], v[2]);
-      AppendFloat(&body, p.x);
-      AppendFloat(&body, p.y);
-      AppendFloat(&body, p.z);
+      ply::Append(&body, p.x);
+      ply::Append(&body, p.y);
+      ply::Append(&body, p.z);
       const float* sh = view.Sh(vertex);
       for (int c = 0; c < 3; ++c) {
         const float value = std::clamp(c0 * sh[c * kShBasisCount] + 0.5f, 0.0f, 1.0f);
@@ -58,11 +49,8 @@ absl::StatusOr<PlyExport> ExportSurfacePointsPly(const PlenoxelMap& map, float m
     }
     PlyExport out;
     out.points = points;
-    std::string comment = map.source.empty() ? "unnamed" : map.source;
-    std::replace_if(
-        comment.begin(), comment.end(), [](char c) { return c == '\n' || c == '\r'; }, ' ');
-    out.bytes = absl::StrCat("ply\nformat binary_little_endian 1.0\ncomment plenoxd map: ",
-                             comment, "\nelement vertex ", points,
+    out.bytes = absl::StrCat("ply\nformat binary_little_endian 1.0\n",
+                             ply::SourceComment(map.source), "element vertex ", points,
                              "\nproperty float x\nproperty float y\nproperty float z\n"
                              "property uchar red\nproperty uchar green\nproperty uchar blue\n"
                              "end_header\n");

@@ -2,6 +2,8 @@
 // failures turned into a Status, before the backend's own Do* call.
 #include "core/kernels/backend.h"
 
+#include <cmath>
+
 #include "absl/strings/str_cat.h"
 #include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
@@ -151,6 +153,69 @@ absl::Status Backend::AddTvGradient(const GridView& grid, const GridGradView& gr
   if (grid.num_vertices() == 0) return absl::OkStatus();
   return CatchAllocationFailure("AddTvGradient", [&] {
     return DoAddTvGradient(grid, grad, first_vertex, vertex_count, lambda_density, lambda_sh);
+  });
+}
+
+namespace {
+
+// What every marching-cubes driver needs: a readable grid, a table, a finite level, and cells
+// named by stored vertices.
+absl::Status CheckIsoSurface(const GridView& grid, const IsoSurfaceParams& params,
+                             int64_t first_vertex, int64_t count, bool items) {
+  PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
+  PLX_RETURN_IF_ERROR(CheckCount(count, items ? "cell count" : "edge count"));
+  if (params.table == nullptr) return absl::InvalidArgumentError("marching-cubes table is null");
+  if (!std::isfinite(params.iso_level) || params.iso_level < 0.0f) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("iso level must be finite and >= 0, got ", params.iso_level));
+  }
+  if (items && (first_vertex < 0 || count > grid.num_vertices() - first_vertex)) {
+    return absl::InvalidArgumentError(absl::StrCat("cells [", first_vertex, ", +", count,
+                                                   ") outside the grid's ",
+                                                   grid.num_vertices(), " vertices"));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status Backend::CountIsoTriangles(const GridView& grid, int64_t first_vertex, int64_t count,
+                                        const IsoSurfaceParams& params, uint8_t* triangles) {
+  PLX_RETURN_IF_ERROR(CheckIsoSurface(grid, params, first_vertex, count, true));
+  PLX_RETURN_IF_ERROR(CheckPointer(triangles, count, "triangles"));
+  if (count == 0) return absl::OkStatus();
+  return CatchAllocationFailure("CountIsoTriangles", [&] {
+    return DoCountIsoTriangles(grid, first_vertex, count, params, triangles);
+  });
+}
+
+absl::Status Backend::EmitIsoTriangles(const GridView& grid, int64_t first_vertex, int64_t count,
+                                       const IsoSurfaceParams& params,
+                                       const int64_t* first_triangle, int64_t* edge_keys) {
+  PLX_RETURN_IF_ERROR(CheckIsoSurface(grid, params, first_vertex, count, true));
+  PLX_RETURN_IF_ERROR(CheckPointer(first_triangle, count, "first_triangle"));
+  if (count == 0) return absl::OkStatus();
+  // Null only when no cell has a triangle; the counts were the caller's to check.
+  if (edge_keys == nullptr) return absl::InvalidArgumentError("edge_keys is null");
+  return CatchAllocationFailure("EmitIsoTriangles", [&] {
+    return DoEmitIsoTriangles(grid, first_vertex, count, params, first_triangle, edge_keys);
+  });
+}
+
+absl::Status Backend::ComputeIsoVertices(const GridView& grid, const int64_t* edge_keys,
+                                         int64_t count, const IsoSurfaceParams& params,
+                                         float* positions, float* normals, uint8_t* colors,
+                                         uint8_t* observed) {
+  PLX_RETURN_IF_ERROR(CheckIsoSurface(grid, params, 0, count, false));
+  PLX_RETURN_IF_ERROR(CheckPointer(edge_keys, count, "edge_keys"));
+  PLX_RETURN_IF_ERROR(CheckPointer(positions, count, "positions"));
+  PLX_RETURN_IF_ERROR(CheckPointer(normals, count, "normals"));
+  PLX_RETURN_IF_ERROR(CheckPointer(colors, count, "colors"));
+  PLX_RETURN_IF_ERROR(CheckPointer(observed, count, "observed"));
+  if (count == 0) return absl::OkStatus();
+  return CatchAllocationFailure("ComputeIsoVertices", [&] {
+    return DoComputeIsoVertices(grid, edge_keys, count, params, positions, normals, colors,
+                                observed);
   });
 }
 

@@ -24,6 +24,7 @@
 #include "core/grid/grid_view.h"
 #include "core/kernels/depth_fusion.h"
 #include "core/kernels/kernel_types.h"
+#include "core/kernels/marching_cubes.h"
 #include "core/kernels/tracking_terms.h"
 
 namespace plx {
@@ -61,6 +62,14 @@ class Backend {
   absl::Status AddTvGradient(const GridView& grid, const GridGradView& grad,
                              int64_t first_vertex, int64_t vertex_count, float lambda_density,
                              float lambda_sh);
+  absl::Status CountIsoTriangles(const GridView& grid, int64_t first_vertex, int64_t count,
+                                 const IsoSurfaceParams& params, uint8_t* triangles);
+  absl::Status EmitIsoTriangles(const GridView& grid, int64_t first_vertex, int64_t count,
+                                const IsoSurfaceParams& params, const int64_t* first_triangle,
+                                int64_t* edge_keys);
+  absl::Status ComputeIsoVertices(const GridView& grid, const int64_t* edge_keys, int64_t count,
+                                  const IsoSurfaceParams& params, float* positions,
+                                  float* normals, uint8_t* colors, uint8_t* observed);
 
  protected:
   // Implementations: called with checked arguments; return device errors as a Status.
@@ -95,6 +104,16 @@ class Backend {
   virtual absl::Status DoAddTvGradient(const GridView& grid, const GridGradView& grad,
                                        int64_t first_vertex, int64_t vertex_count,
                                        float lambda_density, float lambda_sh) = 0;
+  virtual absl::Status DoCountIsoTriangles(const GridView& grid, int64_t first_vertex,
+                                           int64_t count, const IsoSurfaceParams& params,
+                                           uint8_t* triangles) = 0;
+  virtual absl::Status DoEmitIsoTriangles(const GridView& grid, int64_t first_vertex,
+                                          int64_t count, const IsoSurfaceParams& params,
+                                          const int64_t* first_triangle, int64_t* edge_keys) = 0;
+  virtual absl::Status DoComputeIsoVertices(const GridView& grid, const int64_t* edge_keys,
+                                            int64_t count, const IsoSurfaceParams& params,
+                                            float* positions, float* normals,
+                                            uint8_t* colors, uint8_t* observed) = 0;
 };
 
 // RefreshOccupancyIfStale: core/kernels/refresh_occupancy.h. MakeCpuBackend:

@@ -18,6 +18,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "tests/clients/cli_runner.h"
+#include "tests/clients/mesh_output.h"
 #include "tests/test_util.h"
 
 namespace plx {
@@ -109,6 +110,10 @@ TEST(PlenoxUsageTest, EveryCommandHelpListsItsFlags) {
         "--device", "--threads", "--json", "--quiet", "--help"}},
       {"synth",
        {"--out", "--frames", "--width", "--height", "--noise", "--noise-seed", "--help"}},
+      {"export",
+       {"--map", "--out", "--mesh", "--min-density", "--iso-level", "--min-component",
+        "--max-triangles", "--keep-unobserved", "--mesh-color", "--backend", "--device",
+        "--threads", "--json", "--quiet", "--help"}},
       {"demo",
        {"--out", "--frames", "--width", "--height", "--no-noise", "--noise-seed", "--voxel-size",
         "--iterations", "--seed", "--every", "--backend", "--device", "--threads", "--json",
@@ -232,6 +237,37 @@ CommandResult* PlenoxBadInputTest::setup_map_ = nullptr;
 // Pose and intrinsics that are valid for the tiny sequence (32x24).
 constexpr char kGoodPose[] = "0 0 0 0 0 0 1";
 constexpr char kGoodIntrinsics[] = "27.2 27.2 16 12 32 24";
+
+// In-process export of the suite's map file: a mesh the tests' PLY reader reads, counts in the
+// JSON line matching the file; a point cloud without --mesh.
+TEST_F(PlenoxBadInputTest, ExportWritesAMeshOrPointsOfAMapFile) {
+  ScopedTempDir work("plenox_export");
+  const CommandResult r = RunPlenox({"export", "--map", *map_, "--out", "mesh.ply", "--mesh",
+                                     "--keep-unobserved", "--threads", kThreads, "--json"},
+                                    work.path());
+  ASSERT_EQ(r.exit_code, kExitOk) << r.Describe();
+  EXPECT_EQ(ListTree(work.path()), (std::set<std::string>{"mesh.ply"}));
+  EXPECT_GT(plx::testing::ExpectMeshFileMatchingJson(work / "mesh.ply", r).num_triangles(), 0);
+
+  const CommandResult points =
+      RunPlenox({"export", "--map", *map_, "--out", "points.ply", "--threads", kThreads},
+                work.path());
+  ASSERT_EQ(points.exit_code, kExitOk) << points.Describe();
+  EXPECT_THAT(points.out, HasSubstr("points"));
+  EXPECT_THAT(ReadFileToString(work / "points.ply"), Not(HasSubstr("element face")));
+}
+
+TEST_F(PlenoxBadInputTest, ExportFlagsOfTheOtherFormatAreUsageErrors) {
+  ScopedTempDir work("plenox_export_bad");
+  ExpectFailsCleanly({"export", "--map", *map_, "--out", "x.ply", "--iso-level", "30"},
+                     kExitUsage, {"--iso-level", "--mesh"}, work);
+  ExpectFailsCleanly({"export", "--map", *map_, "--out", "x.ply", "--mesh", "--min-density", "3"},
+                     kExitUsage, {"--min-density"}, work);
+  ExpectFailsCleanly({"export", "--map", *map_, "--out", "x.ply", "--mesh", "--mesh-color", "red"},
+                     kExitUsage, {"--mesh-color"}, work);
+  ExpectFailsCleanly({"export", "--map", "missing.plx", "--out", "x.ply", "--mesh"}, kExitFailure,
+                     {"missing.plx"}, work);
+}
 
 TEST_F(PlenoxBadInputTest, MapWithoutDatasetIsUsageError) {
   ScopedTempDir work("plenox_cli_bad");

@@ -355,6 +355,19 @@ def main():
             ply = client.export("room")
             failures.check(ply.startswith(b"ply\n") and b"binary_little_endian" in ply[:200],
                            f"export returns a binary PLY ({len(ply)} bytes)")
+            mesh_path = os.path.join(work, "room_mesh.ply")
+            mesh = client.export_mesh("room", mesh_path, min_component_triangles=10)
+            with open(mesh_path, "rb") as f:
+                data = f.read()
+            # 27 bytes per vertex (6 floats, 3 uchar), 13 per triangle (count, 3 int32).
+            body = len(data) - data.find(b"end_header\n") - len(b"end_header\n")
+            failures.check(mesh.faces > 100 and mesh.bytes == len(data)
+                           and body == 27 * mesh.vertices + 13 * mesh.faces,
+                           f"export_mesh writes a PLY mesh ({mesh.vertices} vertices, "
+                           f"{mesh.faces} triangles)")
+            failures.expect_error(lambda: client.export_mesh("room", mesh_path, iso_level=-1.0),
+                                  "INVALID_ARGUMENT", "export_mesh with a negative iso level",
+                                  "iso_level")
 
         def raw_frames():
             # convert.frame_from_arrays (RAW encodings, as from a live camera) tracks the same.

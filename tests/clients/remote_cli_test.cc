@@ -21,6 +21,7 @@
 
 #include "app/make_backend.h"
 #include "tests/clients/cli_runner.h"
+#include "tests/clients/mesh_output.h"
 #include "tests/clients/remote_daemon.h"
 #include "tests/test_util.h"
 
@@ -115,14 +116,13 @@ TEST(RemoteCliBadInputTest, TokenFileProblemsAreUsageErrors) {
 }
 
 TEST(RemoteCliBadInputTest, CommandsThatNeedOrRefuseADaemonSaySo) {
-  for (const char* command : {"maps", "export", "save", "load", "info"}) {
+  for (const char* command : {"maps", "save", "load", "info"}) {
     SCOPED_TRACE(command);
     const CommandResult help = RunPlenox({command, "--help"});
     EXPECT_EQ(help.exit_code, kExitOk) << help.Describe();
     EXPECT_THAT(help.out, StartsWith(std::string("usage: plenox ") + command)) << help.Describe();
     std::vector<std::string> args = {command};
     if (std::string(command) != "maps" && std::string(command) != "info") args.insert(args.end(), {"--map", "m"});
-    if (std::string(command) == "export") args.insert(args.end(), {"--out", "x.ply"});
     const CommandResult r = RunPlenox(args);
     EXPECT_EQ(r.exit_code, kExitUsage) << r.Describe();
     EXPECT_THAT(r.err, HasSubstr("--server HOST:PORT")) << r.Describe();
@@ -343,6 +343,25 @@ TEST_F(RemoteCliTest, ExportWritesAPlyWithPoints) {
   const FlatJson json = LastLineJson(r);
   EXPECT_EQ(JsonNumber(json, "points").value_or(-1), vertices);
   EXPECT_EQ(JsonNumber(json, "bytes").value_or(-1), static_cast<double>(ply.size()));
+}
+
+// --mesh: the daemon builds the mesh; the file reads back as one, the JSON counts match it.
+TEST_F(RemoteCliTest, ExportMeshWritesAPlyMesh) {
+  ScopedTempDir work("plenox_remote_mesh");
+  const CommandResult r = Remote(
+      {"export", "--map", kMap, "--out", "mesh.ply", "--mesh", "--min-component", "10", "--json"},
+      work.path());
+  ASSERT_EQ(r.exit_code, kExitOk) << r.Describe();
+  EXPECT_EQ(ListTree(work.path()), (std::set<std::string>{"mesh.ply"}));
+  EXPECT_GT(plx::testing::ExpectMeshFileMatchingJson(work / "mesh.ply", r).num_triangles(), 100);
+  // A limit below the mesh: the daemon's RESOURCE_EXHAUSTED, no file.
+  ScopedTempDir capped("plenox_remote_mesh_cap");
+  const CommandResult c = Remote(
+      {"export", "--map", kMap, "--out", "mesh.ply", "--mesh", "--max-triangles", "5"},
+      capped.path());
+  EXPECT_EQ(c.exit_code, kExitFailure) << c.Describe();
+  EXPECT_THAT(c.err, HasSubstr("max_triangles")) << c.Describe();
+  EXPECT_THAT(ListTree(capped.path()), IsEmpty());
 }
 
 TEST_F(RemoteCliTest, SaveWritesTheMapFileAndLoadReadsItBack) {

@@ -331,12 +331,11 @@ inline grpc::Status Render(pb::Plenoxd::Stub& stub, const pb::RenderRequest& req
 }
 
 // The whole Export stream concatenated; `chunks` counts the messages.
-inline grpc::Status Export(pb::Plenoxd::Stub& stub, const std::string& map, std::string* bytes,
-                           int* chunks = nullptr, const std::string& token = "") {
+inline grpc::Status Export(pb::Plenoxd::Stub& stub, const pb::ExportRequest& request,
+                           std::string* bytes, int* chunks = nullptr,
+                           const std::string& token = "") {
   grpc::ClientContext context;
   Prepare(&context, token);
-  pb::ExportRequest request;
-  request.set_map(map);
   std::unique_ptr<grpc::ClientReader<pb::ExportChunk>> reader = stub.Export(&context, request);
   pb::ExportChunk chunk;
   int n = 0;
@@ -354,6 +353,14 @@ inline grpc::Status Export(pb::Plenoxd::Stub& stub, const std::string& map, std:
     EXPECT_TRUE(last_seen) << "no chunk marked last";
   }
   return s;
+}
+
+// The same for the point cloud of `map` with the default threshold.
+inline grpc::Status Export(pb::Plenoxd::Stub& stub, const std::string& map, std::string* bytes,
+                           int* chunks = nullptr, const std::string& token = "") {
+  pb::ExportRequest request;
+  request.set_map(map);
+  return Export(stub, request, bytes, chunks, token);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -14,6 +14,7 @@
 Every failed call raises PlenoxdError with the gRPC status code and the server's message.
 """
 
+import os
 import queue
 import threading
 from collections import namedtuple
@@ -58,6 +59,9 @@ class PlenoxdError(Exception):
         details = error.details() if hasattr(error, "details") else str(error)
         return cls(code, details, method)
 
+
+MeshExport = namedtuple("MeshExport", "vertices faces bytes")
+MeshExport.__doc__ = """What Client.export_mesh wrote: vertex and face counts, file size."""
 
 Rendering = namedtuple("Rendering", "color depth coverage map_version")
 Rendering.__doc__ = """color: HxWx3 uint8 RGB; depth: HxW float32 z-depth in metres (0 = nothing
@@ -615,11 +619,44 @@ class Client:
 
     def export(self, map_name, min_density=0.0):
         """The map's surface points as binary little-endian PLY bytes."""
+        return self._export(pb.ExportRequest(map=map_name, min_density=min_density))
+
+    def export_mesh(self, map_name, path, iso_level=0.0, min_component_triangles=0,
+                    max_triangles=0, keep_unobserved=False, color="dc"):
+        """Writes the map's triangle mesh (marching cubes on the daemon's device) to `path` as
+        binary little-endian PLY (vertex x y z nx ny nz red green blue, face vertex_indices),
+        which Open3D, MeshLab and Blender read; the file appears only once complete. Returns
+        MeshExport(vertices, faces, bytes).
+
+        iso_level: surface density in 1/m (0 = the daemon's default, 50); min_component_triangles:
+        drop connected pieces smaller than this (0 keeps all); max_triangles: fail with
+        RESOURCE_EXHAUSTED beyond this (0 = the daemon's limit); keep_unobserved: keep surfaces
+        no view saw (the backs of walls); color: "dc" (view-independent) or "normal" (as seen
+        looking along the vertex normal). Bad values: PlenoxdError INVALID_ARGUMENT naming the
+        field."""
+        colors = {"dc": pb.MESH_COLOR_DC, "normal": pb.MESH_COLOR_ALONG_NORMAL}
+        if color not in colors:
+            raise ValueError(f"color: expected 'dc' or 'normal', got {color!r}")
+        data = self._export(pb.ExportRequest(
+            map=map_name, format=pb.EXPORT_FORMAT_MESH, iso_level=iso_level,
+            min_component_triangles=min_component_triangles, max_triangles=max_triangles,
+            keep_unobserved=keep_unobserved, mesh_color=colors[color]))
+        header = data[:data.find(b"end_header\n")].decode("ascii", "replace")
+        counts = dict(line.split()[1:3] for line in header.splitlines()
+                      if line.startswith("element "))
+        temp = f"{path}.tmp.{os.getpid()}.ply"
+        with open(temp, "wb") as f:
+            f.write(data)
+        os.replace(temp, path)
+        return MeshExport(int(counts.get("vertex", 0)), int(counts.get("face", 0)), len(data))
+
+    def _export(self, request):
+        """Every chunk of an Export call, joined."""
+        map_name = request.map
         parts, offset = [], 0
         call = None
         try:
-            call = self._stub.Export(pb.ExportRequest(map=map_name, min_density=min_density),
-                                     metadata=self.metadata_for(map_name))
+            call = self._stub.Export(request, metadata=self.metadata_for(map_name))
             for chunk in call:
                 if chunk.offset != offset:
                     raise PlenoxdError(grpc.StatusCode.DATA_LOSS,
