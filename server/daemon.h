@@ -14,10 +14,12 @@
 #include "absl/time/time.h"
 #include "app/make_backend.h"
 #include "server/daemon_state.h"
-#include "server/http_server.h"
 #include "server/metrics.h"
 #include "server/plenoxd_service.h"
 #include "server/slam_job.h"
+#include "web/http_server.h"
+#include "web/three_js.h"
+#include "web/viewer_routes.h"
 
 namespace plx::server {
 
@@ -28,6 +30,10 @@ struct DaemonOptions {
   std::string tls_cert_pem, tls_key_pem;   // both empty: plaintext
   int metrics_port = -1;                   // < 0: off; 0: a free port
   std::string metrics_host = "127.0.0.1";
+  // The web viewer (web/viewer_routes.h) at /viewer/ on the metrics port (which it needs);
+  // three.js is read from viewer_three_dir at Start (Debian's libjs-three).
+  bool viewer = false;
+  std::string viewer_three_dir = web::kDefaultThreeJsDir;
   int max_maps = 16;
   int64_t max_map_bytes = int64_t{4} << 30;
   int max_streams = 32;
@@ -84,7 +90,10 @@ class Daemon {
   std::unique_ptr<SlamJobs> slam_jobs_;
   std::unique_ptr<PlenoxdService> service_;
   std::unique_ptr<grpc::Server> server_;
-  std::unique_ptr<HttpServer> http_;  // --metrics-port: /metrics
+  // --viewer: what the viewer's routes use; destroyed after the HTTP server that calls them.
+  std::unique_ptr<web::ViewerSource> viewer_source_;
+  std::unique_ptr<web::Viewer> viewer_;
+  std::unique_ptr<web::HttpServer> http_;  // --metrics-port: /metrics (and --viewer: /viewer/)
   int port_ = 0;
   bool drained_ = false;
 };

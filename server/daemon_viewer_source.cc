@@ -1,0 +1,93 @@
+#include "server/daemon_viewer_source.h"
+
+#include <atomic>
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+
+#include "core/common/allocation_guard.h"
+#include "server/slam_job.h"
+
+namespace plx::server {
+
+std::vector<web::ViewerMapInfo> DaemonViewerSource::ListMaps() const {
+  std::vector<web::ViewerMapInfo> out;
+  for (const MapStatus& s : state_->maps->List()) {
+    out.push_back({s.name, s.voxel_size, s.version, s.bricks, s.memory_bytes, s.keyframes,
+                   s.mapping, s.source});
+  }
+  return out;
+}
+
+absl::StatusOr<web::ViewerMap> DaemonViewerSource::Latest(const std::string& name) const {
+  absl::StatusOr<MapVersion> latest = state_->maps->Latest(name);
+  if (!latest.ok()) return latest.status();
+  if (latest->map == nullptr) {
+    return absl::NotFoundError("map \"" + name + "\" has no published version yet");
+  }
+  return web::ViewerMap{latest->map, latest->version};
+}
+
+absl::StatusOr<web::ViewerTrajectories> DaemonViewerSource::Trajectories(
+    const std::string& name) const {
+  absl::StatusOr<MapStatus> info = state_->maps->Info(name);
+  if (!info.ok()) return info.status();
+  web::ViewerTrajectories out;
+  out.map_version = info->version;
+  if (const std::shared_ptr<SlamJob> job = state_->slam_jobs->RunningOn(name)) {
+    const SlamJobStatus s = job->Status();
+    out.slam_running = !s.finished;
+    out.keyframes_integrated = s.keyframes_integrated;
+  }
+  if (const std::shared_ptr<const TrajectoryRecord> record = state_->slam_jobs->Trajectory(name)) {
+    out.cameras = record->Cameras();
+    out.keyframes = record->Keyframes();
+    if (!out.slam_running) out.keyframes_integrated = static_cast<int>(out.keyframes.size());
+  }
+  return out;
+}
+
+absl::StatusOr<RenderedView> DaemonViewerSource::Render(const web::ViewerMap& map,
+                                                        const SE3& world_T_camera,
+                                                        const PinholeIntrinsics& intrinsics,
+                                                        absl::Duration timeout) {
+  if (state_->draining.load()) return absl::UnavailableError("plenoxd is shutting down");
+  // Shared with the task: the HTTP thread may give up (timeout) while the task still runs or
+  // waits in the queue; the task then stops at its next tile and its result is dropped.
+  struct Call {
+    std::mutex mutex;
+    std::condition_variable done_cv;
+    bool done = false;
+    absl::StatusOr<RenderedView> result = absl::UnknownError("not rendered");
+    std::atomic<bool> abandoned{false};
+  };
+  auto call = std::make_shared<Call>();
+  state_->workers->Pick().Post(
+      Priority::kInteractive,
+      [call, map, world_T_camera, intrinsics](Backend* backend, bool stopped) {
+        absl::StatusOr<RenderedView> result = absl::UnavailableError("plenoxd is shutting down");
+        if (!stopped) {
+          result = CatchAllocationFailure("viewer render", [&]() -> absl::StatusOr<RenderedView> {
+            if (call->abandoned.load()) return absl::CancelledError("the viewer gave up");
+            RenderViewOptions options;
+            options.cancelled = [call] { return call->abandoned.load(); };
+            return RenderView(*backend, *map.map, world_T_camera, intrinsics, options);
+          });
+        }
+        std::lock_guard<std::mutex> lock(call->mutex);
+        call->result = std::move(result);
+        call->done = true;
+        call->done_cv.notify_all();
+      });
+  std::unique_lock<std::mutex> lock(call->mutex);
+  const bool finished = call->done_cv.wait_for(
+      lock, std::chrono::microseconds(absl::ToInt64Microseconds(timeout)),
+      [&] { return call->done; });
+  if (!finished) {
+    call->abandoned = true;
+    return absl::DeadlineExceededError("the render did not finish in time (the device is busy)");
+  }
+  return std::move(call->result);
+}
+
+}  // namespace plx::server
