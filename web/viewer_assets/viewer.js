@@ -566,6 +566,7 @@
           ? 'depth ' + parseFloat(range[0]).toFixed(2) + '–' + parseFloat(range[1]).toFixed(2) +
             ' m (near bright)'
           : 'depth (nothing rendered)';
+      $('render-figures').hidden = false;
       $('render-info').textContent = name + ' from ' + label;
       body.dataset.renders = String(parseInt(body.dataset.renders || '0', 10) + 1);
     } catch (e) {
