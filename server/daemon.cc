@@ -5,9 +5,9 @@
 #include <grpcpp/server_builder.h>
 
 #include <algorithm>
-#include <optional>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -16,6 +16,9 @@
 #include "server/daemon_viewer_source.h"
 #include "server/log.h"
 #include "server/secret_files.h"
+#include "web/http_server.h"
+#include "web/viewer_routes.h"
+#include "web/viewer_source.h"
 
 #ifndef PLX_VERSION
 #define PLX_VERSION "unknown"
@@ -85,6 +88,10 @@ absl::StatusOr<std::vector<std::unique_ptr<DeviceWorker>>> MakeWorkers(const Dae
 }  // namespace
 
 std::string PlenoxdVersion() { return PLX_VERSION; }
+
+Daemon::Daemon() = default;
+
+int Daemon::metrics_port() const { return http_ ? http_->port() : -1; }
 
 absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& options) {
   // A bad certificate or key would otherwise only show as BuildAndStart failing, which reads

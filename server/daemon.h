@@ -17,9 +17,15 @@
 #include "server/metrics.h"
 #include "server/plenoxd_service.h"
 #include "server/slam_job.h"
-#include "web/http_server.h"
 #include "web/three_js.h"
-#include "web/viewer_routes.h"
+
+// The HTTP side (web/): defined in daemon.cc's includes, so the daemon's users do not compile
+// the viewer's headers.
+namespace plx::web {
+class HttpServer;
+class Viewer;
+class ViewerSource;
+}  // namespace plx::web
 
 namespace plx::server {
 
@@ -61,7 +67,7 @@ class Daemon {
   ~Daemon();
 
   int port() const { return port_; }
-  int metrics_port() const { return http_ ? http_->port() : -1; }
+  int metrics_port() const;
 
   // Stops taking calls (health NOT_SERVING, new calls UNAVAILABLE), lets running calls finish
   // for up to `grace` and cancels the rest, stops the workers and saves every dirty map, logging
@@ -77,7 +83,7 @@ class Daemon {
   std::string RenderMetrics() const;
 
  private:
-  Daemon() = default;
+  Daemon();
 
   DaemonOptions options_;
   std::unique_ptr<MapStore> maps_;

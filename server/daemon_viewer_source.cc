@@ -47,47 +47,50 @@ absl::StatusOr<web::ViewerTrajectories> DaemonViewerSource::Trajectories(
   return out;
 }
 
-absl::StatusOr<RenderedView> DaemonViewerSource::Render(const web::ViewerMap& map,
-                                                        const SE3& world_T_camera,
-                                                        const PinholeIntrinsics& intrinsics,
-                                                        absl::Duration timeout) {
+absl::Status DaemonViewerSource::RunOnDevice(const DeviceWork& work, absl::Duration timeout) {
   if (state_->draining.load()) return absl::UnavailableError("plenoxd is shutting down");
-  // Shared with the task: the HTTP thread may give up (timeout) while the task still runs or
-  // waits in the queue; the task then stops at its next tile and its result is dropped.
+  // Shared with the task. `work` may refer to the caller's stack, so it never runs after this
+  // function returned: a task still queued at the deadline skips it, and a running one is told
+  // to stop (`cancelled`, checked between a render's row tiles) and waited for.
   struct Call {
     std::mutex mutex;
     std::condition_variable done_cv;
+    bool started = false;
     bool done = false;
-    absl::StatusOr<RenderedView> result = absl::UnknownError("not rendered");
-    std::atomic<bool> abandoned{false};
+    bool abandoned = false;
+    std::atomic<bool> cancelled{false};
+    absl::Status result;
   };
   auto call = std::make_shared<Call>();
-  state_->workers->Pick().Post(
-      Priority::kInteractive,
-      [call, map, world_T_camera, intrinsics](Backend* backend, bool stopped) {
-        absl::StatusOr<RenderedView> result = absl::UnavailableError("plenoxd is shutting down");
-        if (!stopped) {
-          result = CatchAllocationFailure("viewer render", [&]() -> absl::StatusOr<RenderedView> {
-            if (call->abandoned.load()) return absl::CancelledError("the viewer gave up");
-            RenderViewOptions options;
-            options.cancelled = [call] { return call->abandoned.load(); };
-            return RenderView(*backend, *map.map, world_T_camera, intrinsics, options);
-          });
-        }
-        std::lock_guard<std::mutex> lock(call->mutex);
-        call->result = std::move(result);
-        call->done = true;
-        call->done_cv.notify_all();
+  state_->workers->Pick().Post(Priority::kInteractive, [call, &work](Backend* backend,
+                                                                    bool stopped) {
+    {
+      std::lock_guard<std::mutex> lock(call->mutex);
+      if (call->abandoned) return;  // the caller is gone, and so may `work` be
+      call->started = true;
+    }
+    absl::Status result = absl::UnavailableError("plenoxd is shutting down");
+    if (!stopped) {
+      result = CatchAllocationFailure("viewer", [&]() -> absl::Status {
+        return work(*backend, [call] { return call->cancelled.load(); });
       });
+    }
+    std::lock_guard<std::mutex> lock(call->mutex);
+    call->result = std::move(result);
+    call->done = true;
+    call->done_cv.notify_all();
+  });
   std::unique_lock<std::mutex> lock(call->mutex);
-  const bool finished = call->done_cv.wait_for(
-      lock, std::chrono::microseconds(absl::ToInt64Microseconds(timeout)),
-      [&] { return call->done; });
-  if (!finished) {
-    call->abandoned = true;
-    return absl::DeadlineExceededError("the render did not finish in time (the device is busy)");
+  const bool finished =
+      call->done_cv.wait_for(lock, std::chrono::microseconds(absl::ToInt64Microseconds(timeout)),
+                             [&] { return call->done; });
+  if (finished) return call->result;
+  call->abandoned = true;
+  if (call->started) {
+    call->cancelled = true;
+    call->done_cv.wait(lock, [&] { return call->done; });
   }
-  return std::move(call->result);
+  return absl::DeadlineExceededError("the device did not finish in time (it is busy)");
 }
 
 }  // namespace plx::server

@@ -1,6 +1,6 @@
 // The web viewer's view of plenoxd (web/viewer_source.h): the map store's maps and published
-// versions, the SLAM jobs' trajectory records, and renders posted to a device worker at
-// interactive priority like the Render RPC's. Read directly in the server layer, never through
+// versions, the SLAM jobs' trajectory records, and the viewer's device work (renders) posted to
+// a device worker at interactive priority like the Render RPC's. Read directly in the server layer, never through
 // gRPC to the daemon itself.
 #pragma once
 
@@ -22,9 +22,7 @@ class DaemonViewerSource final : public web::ViewerSource {
   std::vector<web::ViewerMapInfo> ListMaps() const override;
   absl::StatusOr<web::ViewerMap> Latest(const std::string& name) const override;
   absl::StatusOr<web::ViewerTrajectories> Trajectories(const std::string& name) const override;
-  absl::StatusOr<RenderedView> Render(const web::ViewerMap& map, const SE3& world_T_camera,
-                                      const PinholeIntrinsics& intrinsics,
-                                      absl::Duration timeout) override;
+  absl::Status RunOnDevice(const DeviceWork& work, absl::Duration timeout) override;
 
  private:
   DaemonState* const state_;

@@ -4,6 +4,7 @@
 
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
+#include "core/render/render_view.h"
 #include "web/json_writer.h"
 #include "web/viewer_assets.h"
 #include "web/viewer_render.h"
@@ -221,10 +222,18 @@ HttpResponse Viewer::Render(const HttpRequest& request, const std::string& map) 
     return JsonError(503, absl::StrCat("busy: ", options_.max_concurrent_renders,
                                        " renders are running; retry"));
   }
-  absl::StatusOr<RenderedView> view = source_->Render(
-      *latest, parsed->world_T_camera, parsed->intrinsics, options_.render_timeout);
+  absl::StatusOr<RenderedView> view = absl::UnknownError("not rendered");
+  const absl::Status ran = source_->RunOnDevice(
+      [&](Backend& backend, const std::function<bool()>& cancelled) {
+        RenderViewOptions options;
+        options.cancelled = cancelled;  // checked between row tiles
+        view = RenderView(backend, *latest->map, parsed->world_T_camera, parsed->intrinsics,
+                          options);
+        return view.status();
+      },
+      options_.render_timeout);
   renders_.fetch_sub(1);
-  if (!view.ok()) return ErrorResponse(view.status());
+  if (!ran.ok()) return ErrorResponse(ran);
   absl::StatusOr<ViewerImagePng> png = EncodeViewerImage(*view, parsed->image);
   if (!png.ok()) return ErrorResponse(png.status());
   HttpResponse r{200, "image/png", std::move(png->png),

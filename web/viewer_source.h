@@ -1,10 +1,12 @@
-// What the viewer (web/viewer_routes.h) reads, and from where: an interface the two programs
-// implement. plenoxd's (server/daemon_viewer_source.h) reads its map store, its SLAM streams'
-// trajectory records and renders on a device worker; `plenox view`'s (clients/plenox) holds one
-// map file and renders on its own backend. The routes never see either program.
+// What the viewer (web/viewer_routes.h) reads, and where it computes: an interface the two
+// programs implement. plenoxd's (server/daemon_viewer_source.h) reads its map store and its SLAM
+// streams' trajectory records and runs renders on a device worker; `plenox view`'s
+// (clients/plenox) holds one map file and runs them on its own backend. The routes never see
+// either program.
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -16,7 +18,7 @@
 #include "core/geometry/intrinsics.h"
 #include "core/geometry/se3.h"
 #include "core/grid/plenoxel_map.h"
-#include "core/render/render_view.h"
+#include "core/kernels/backend.h"
 
 namespace plx::web {
 
@@ -71,12 +73,14 @@ class ViewerSource {
   virtual absl::StatusOr<ViewerMap> Latest(const std::string& name) const = 0;
   // NotFound for an unknown map; a map without SLAM streams has no cameras.
   virtual absl::StatusOr<ViewerTrajectories> Trajectories(const std::string& name) const = 0;
-  // Renders `map` on the source's compute device within `timeout` (DEADLINE_EXCEEDED after it;
-  // the render then stops at its next tile). Called from HTTP pool threads; the caller has
-  // checked the view's size.
-  virtual absl::StatusOr<RenderedView> Render(const ViewerMap& map, const SE3& world_T_camera,
-                                              const PinholeIntrinsics& intrinsics,
-                                              absl::Duration timeout) = 0;
+  // Runs `work` on the source's compute device (plenoxd: a device worker at interactive
+  // priority; plenox view: its one backend, one call at a time) and returns its status, within
+  // `timeout`: DEADLINE_EXCEEDED after it, while `cancelled` turns true so the work stops at
+  // its next check (its result is then dropped). Called from HTTP pool threads; the caller
+  // bounds the work (a render's size, a mesh's triangles).
+  using DeviceWork =
+      std::function<absl::Status(Backend& backend, const std::function<bool()>& cancelled)>;
+  virtual absl::Status RunOnDevice(const DeviceWork& work, absl::Duration timeout) = 0;
 };
 
 }  // namespace plx::web

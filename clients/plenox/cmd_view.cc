@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <chrono>
 #include <mutex>
 #include <string>
 #include <utility>
@@ -59,22 +60,16 @@ class FileViewerSource final : public web::ViewerSource {
     return none;
   }
 
-  absl::StatusOr<RenderedView> Render(const web::ViewerMap& map, const SE3& world_T_camera,
-                                      const PinholeIntrinsics& intrinsics,
-                                      absl::Duration timeout) override {
+  // On this thread, one call at a time: there is one backend.
+  absl::Status RunOnDevice(const DeviceWork& work, absl::Duration timeout) override {
     const absl::Time deadline = absl::Now() + timeout;
     std::unique_lock<std::timed_mutex> lock(backend_mutex_, std::defer_lock);
     if (!lock.try_lock_for(std::chrono::microseconds(absl::ToInt64Microseconds(timeout)))) {
-      return absl::DeadlineExceededError("another render held the backend too long");
+      return absl::DeadlineExceededError("another request held the backend too long");
     }
-    RenderViewOptions options;
-    options.cancelled = [deadline] { return absl::Now() > deadline; };
-    absl::StatusOr<RenderedView> view =
-        RenderView(*backend_, *map.map, world_T_camera, intrinsics, options);
-    if (absl::IsCancelled(view.status())) {
-      return absl::DeadlineExceededError("the render did not finish in time");
-    }
-    return view;
+    const absl::Status status = work(*backend_, [deadline] { return absl::Now() > deadline; });
+    if (absl::IsCancelled(status)) return absl::DeadlineExceededError("did not finish in time");
+    return status;
   }
 
  private:

@@ -379,17 +379,37 @@
     return up.lengthSq() > 1e-9 ? up.normalize() : new THREE.Vector3(0, 0, 1);
   }
 
+  // What the view frames: the cloud, and the cameras and keyframes (which often stand outside
+  // the surfaces they look at).
+  function viewBounds() {
+    const box = new THREE.Box3();
+    if (state.cloud) box.setFromBufferAttribute(state.cloud.geometry.getAttribute('position'));
+    const t = state.trajectory;
+    if (t) {
+      for (const c of t.cameras) {
+        for (let i = 0; i + 2 < c.path.length; i += 3) {
+          box.expandByPoint(new THREE.Vector3(c.path[i], c.path[i + 1], c.path[i + 2]));
+        }
+      }
+      for (const k of t.keyframes) box.expandByPoint(new THREE.Vector3(k[0], k[1], k[2]));
+    }
+    return box.isEmpty() ? null : box.getBoundingSphere(new THREE.Sphere());
+  }
+
   function fitView() {
-    if (!state.bounds) return;
+    const bounds = viewBounds();
+    if (!bounds) return;
     const up = upVector();
     camera.up.copy(up);
-    const center = state.bounds.center;
-    const radius = Math.max(state.bounds.radius, 0.1);
+    const center = bounds.center;
+    const radius = Math.max(bounds.radius, 0.1);
     // From above and to the side, so floors and walls both show.
     const side = Math.abs(up.z) < 0.9 ? new THREE.Vector3(0, 0, 1) : new THREE.Vector3(1, 0, 0);
     side.sub(up.clone().multiplyScalar(side.dot(up))).normalize();
     const dir = side.multiplyScalar(0.8).add(up.clone().multiplyScalar(0.6)).normalize();
-    camera.position.copy(center).add(dir.multiplyScalar(radius * 2.0));
+    // The sphere just fills the view's height (slightly less: a box's sphere is loose).
+    const distance = 0.9 * radius / Math.sin((camera.fov * Math.PI) / 360);
+    camera.position.copy(center).add(dir.multiplyScalar(distance));
     camera.near = radius / 200;
     camera.far = radius * 50;
     camera.updateProjectionMatrix();
