@@ -72,11 +72,16 @@ class OpenSlamStream {
   ~OpenSlamStream() { Close(); }
 
   // Sends the next `frames` room frames one at a time, each after the previous update arrived;
-  // false when the stream broke.
+  // false when the stream broke. Past the room's last frame the camera walks back and forth
+  // along its path (time stamps keep increasing), so a stream can go on as long as a test
+  // needs.
   bool Advance(int frames) {
-    for (int i = 0; i < frames && ok_ && next_ < kFrames; ++i, ++next_) {
+    for (int i = 0; i < frames && ok_; ++i, ++next_) {
+      const int period = 2 * (kFrames - 1);
+      const int phase = next_ % period;
       pb::SlamRequest request;
-      *request.mutable_frame() = EncodeFrame(next_, false);
+      *request.mutable_frame() = EncodeFrame(phase < kFrames ? phase : period - phase, false);
+      request.mutable_frame()->set_timestamp(next_ / 30.0);
       pb::SlamUpdate update;
       ok_ = stream_->Write(request) && stream_->Read(&update);
       if (ok_) keyframes_ += update.keyframe();
