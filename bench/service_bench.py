@@ -10,6 +10,14 @@ clients together, the client-side round trip (frame sent -> estimate read; encod
 excluded) at p50 and p99, the daemon's own latency (frame decoded -> estimate sent), and the
 service's overhead: round trip p50 over the in-process tracking median. Same map, frames,
 tracker options and start pose in every run.
+
+SLAM rows (issue 12): `plenox --server slam` streams the sequence (no poses) into a new map on the
+same daemon, lock-step; alone, with 2 Track clients localising in its live map, and with 1 Track
+client on the other (loaded) map. Reported: the Slam stream's pose latency (the daemon's, frame
+received -> pose sent, and the round trip) at p50 and p99, its ATE beside in-process `plenox slam`
+of the same frames, the Track clients' latencies, lost frames. The goals of point 3: the Slam
+stream's p99 <= 1.5x its p50; the Track client on the other map keeps its p99 within 1.5x of its
+p99 without the Slam stream (the 1:off:raw row).
 """
 
 import argparse
@@ -29,7 +37,8 @@ from bench_common import (REPO, CommandError, git_commit, log, machine_line, mak
                           percentile, render_table, run_json, set_log_prefix, write_report)
 
 MAP_NAME = "bench"
-DEFAULT_SCENARIOS = "1:off:raw,1:off:png,4:off:raw,1:on:raw,4:on:raw"
+DEFAULT_SCENARIOS = "1:off:raw,1:off:png,4:off:raw,1:on:raw,4:on:raw,slam,slam+live,slam+other"
+SLAM_SCENARIOS = ("slam", "slam+live", "slam+other")
 
 
 def free_port():
@@ -54,11 +63,11 @@ def read_timings(path):
 class Daemon:
     """plenoxd on a free loopback port with `data_dir`; stop() drains it with SIGTERM."""
 
-    def __init__(self, plenoxd, plenox, data_dir, log_path):
+    def __init__(self, plenoxd, plenox, data_dir, log_path, extra_args=()):
         self.address = "127.0.0.1:%d" % free_port()
         self.plenox = plenox
         self.log = open(log_path, "w")
-        cmd = [plenoxd, "--listen", self.address, "--data-dir", data_dir]
+        cmd = [plenoxd, "--listen", self.address, "--data-dir", data_dir] + list(extra_args)
         log("plenoxd: %s" % " ".join(cmd))
         self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=self.log,
                                      stderr=subprocess.STDOUT, start_new_session=True)
@@ -131,28 +140,166 @@ class MappingLoad:
         self.thread.join(timeout=60)
 
 
-def run_clients(args, daemon, dataset, workdir, tag, clients, encoding):
-    """Starts `clients` trackers at once; returns their JSON summaries and timing files."""
+def start_trackers(args, daemon, dataset, workdir, tag, clients, encoding, map_name=MAP_NAME):
+    """Starts `clients` trackers on `map_name` at once; finish_clients() collects them."""
     procs = []
     for c in range(clients):
         traj = os.path.join(workdir, "%s_c%d.txt" % (tag, c))
         timings = os.path.join(workdir, "%s_c%d_timings.txt" % (tag, c))
-        cmd = [args.plenox, "--server", daemon.address, "track", "--map", MAP_NAME,
+        cmd = [args.plenox, "--server", daemon.address, "track", "--map", map_name,
                "--dataset", dataset, "--out", traj, "--timings", timings, "--encoding",
                encoding, "--json", "--quiet"]
         if c == 0:
             log("%s: %d x %s" % (tag, clients, " ".join(cmd)))
         procs.append((subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                        stderr=subprocess.PIPE), traj, timings))
+    return procs
+
+
+def finish_clients(args, tag, procs, what="tracking"):
+    """Waits for started clients; returns (JSON summary, trajectory, timings) of each."""
     results = []
     for proc, traj, timings in procs:
         out, err = proc.communicate(timeout=args.timeout)
         if proc.returncode != 0:
-            raise CommandError("%s: a tracking client failed (status %d): %s"
-                               % (tag, proc.returncode, err.decode("utf-8", "replace")[-600:]))
+            raise CommandError("%s: a %s client failed (status %d): %s"
+                               % (tag, what, proc.returncode,
+                                  err.decode("utf-8", "replace")[-600:]))
         lines = [l for l in out.decode().splitlines() if l.strip()]
         results.append((json.loads(lines[-1]), traj, timings))
     return results
+
+
+def run_clients(args, daemon, dataset, workdir, tag, clients, encoding):
+    """Starts `clients` trackers at once; returns their JSON summaries and timing files."""
+    return finish_clients(args, tag,
+                          start_trackers(args, daemon, dataset, workdir, tag, clients, encoding))
+
+
+def start_slam(args, daemon, dataset, workdir, tag, map_name):
+    """One `plenox --server slam` stream into a new map `map_name`, lock-step, raw frames."""
+    traj = os.path.join(workdir, "%s_slam.txt" % tag)
+    timings = os.path.join(workdir, "%s_slam_timings.txt" % tag)
+    cmd = [args.plenox, "--server", daemon.address, "slam", "--dataset", dataset, "--name",
+           map_name, "--out", traj, "--timings", timings, "--encoding", "raw", "--json",
+           "--quiet"] + slam_frame_flags(args)
+    log("%s: %s" % (tag, " ".join(cmd)))
+    return [(subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE), traj, timings)]
+
+
+def slam_frame_flags(args):
+    return ["--max-frames", str(args.slam_frames)] if args.slam_frames > 0 else []
+
+
+def wait_for_map_version(args, daemon, map_name, deadline_s=600.0):
+    """Blocks until the daemon lists `map_name` with a published version (the SLAM stream's
+    first keyframe is integrated), so Track clients have a map to localise in."""
+    deadline = time.monotonic() + deadline_s
+    while time.monotonic() < deadline:
+        probe = subprocess.run([args.plenox, "--server", daemon.address, "maps", "--json"],
+                               capture_output=True, text=True)
+        if probe.returncode == 0:
+            for line in probe.stdout.splitlines():
+                if '"%s"' % map_name in line and '"version":0' not in line.replace(" ", ""):
+                    return
+        time.sleep(0.5)
+    raise CommandError("map %s had no published version after %.0f s" % (map_name, deadline_s))
+
+
+def latency_stats(timing_files):
+    roundtrip, daemon_ms = [], []
+    for path in timing_files:
+        r, d = read_timings(path)
+        roundtrip += r
+        daemon_ms += d
+    return {"frames": len(roundtrip),
+            "rt_p50": percentile(roundtrip, 50), "rt_p99": percentile(roundtrip, 99),
+            "daemon_p50": percentile(daemon_ms, 50), "daemon_p99": percentile(daemon_ms, 99)}
+
+
+def run_slam_scenario(args, daemon, dataset, workdir, index, scenario):
+    """One Slam stream into a fresh map; with 2 Track clients on its live map (slam+live) or 1
+    Track client on the loaded map (slam+other), started once the live map has a version."""
+    tag = "s%d_%s" % (index, scenario.replace("+", "_"))
+    map_name = "slam%d" % index
+    wall0 = time.monotonic()
+    slam = start_slam(args, daemon, dataset, workdir, tag, map_name)
+    trackers = []
+    try:
+        if scenario != "slam":
+            wait_for_map_version(args, daemon, map_name)
+            if scenario == "slam+live":
+                trackers = start_trackers(args, daemon, dataset, workdir, tag, 2, "raw", map_name)
+            else:
+                trackers = start_trackers(args, daemon, dataset, workdir, tag, 1, "raw")
+        track_results = finish_clients(args, tag, trackers)
+        slam_result = finish_clients(args, tag, slam, "slam")[0]
+    except BaseException:
+        for proc, _, _ in slam + trackers:
+            if proc.poll() is None:
+                proc.kill()
+        raise
+    wall = time.monotonic() - wall0
+    summary, traj, timings = slam_result
+    row = {"scenario": scenario, "wall": wall, "slam": summary,
+           "slam_lat": latency_stats([timings]), "slam_ate": summary.get("ate_se3_m"),
+           "track_lat": latency_stats([t for _, _, t in track_results]) if trackers else None,
+           "track_lost": sum(r[0]["lost"] for r in track_results),
+           "track_fps": sum(r[0]["fps"] for r in track_results),
+           "track_frames": sum(r[0].get("frames", 0) for r in track_results)}
+    log("%s: slam %.2f fps, pose latency p50 %.0f ms p99 %.0f ms, ATE %s"
+        % (tag, summary.get("fps", 0), row["slam_lat"]["daemon_p50"],
+           row["slam_lat"]["daemon_p99"], summary.get("ate_se3_m")))
+    return row
+
+
+def slam_report(rows, ref, alone, name):
+    cols = ["scenario", "frames", "FPS", "keyframes", "pose latency p50 ms (daemon)",
+            "p99 ms (daemon)", "p99 / p50", "round trip p50 / p99 ms", "lost",
+            "ATE SE(3) cm (in-process %s)" % ("%.2f" % (100 * ref["ate_se3_m"])
+                                              if ref and ref.get("ate_se3_m") is not None
+                                              else "n/a"),
+            "Track clients: frames, p50 / p99 ms, lost"]
+    body = []
+    for r in rows:
+        s, lat = r["slam"], r["slam_lat"]
+        ratio = lat["daemon_p99"] / lat["daemon_p50"] if lat["daemon_p50"] else float("nan")
+        track = "—"
+        if r["track_lat"] is not None:
+            t = r["track_lat"]
+            track = "%d, %.0f / %.0f, %d" % (t["frames"], t["daemon_p50"], t["daemon_p99"],
+                                             r["track_lost"])
+        body.append([r["scenario"], "%d" % s.get("processed", 0), "%.2f" % s.get("fps", 0),
+                     "%d" % s.get("keyframes", 0), "%.0f" % lat["daemon_p50"],
+                     "%.0f" % lat["daemon_p99"], "%.2f" % ratio,
+                     "%.0f / %.0f" % (lat["rt_p50"], lat["rt_p99"]), "%d" % s.get("lost", 0),
+                     "%.2f" % (100 * r["slam_ate"]) if r["slam_ate"] is not None else "n/a",
+                     track])
+    header = ["", "### SLAM through plenoxd (`plenox --server slam`, lock-step, raw frames)", "",
+              "Sequence %s; in-process `plenox slam` of the same frames: %s frames/s, median %s "
+              "ms per frame, ATE SE(3) %s cm." % (
+                  name, "%.2f" % ref["fps"] if ref else "n/a",
+                  "%.0f" % ref["ms_per_frame_median"] if ref else "n/a",
+                  "%.2f" % (100 * ref["ate_se3_m"]) if ref and ref.get("ate_se3_m") is not None
+                  else "n/a")]
+    notes = ["scenarios: slam = one Slam stream alone; slam+live = with 2 Track clients "
+             "localising in its live map (started once it has a version); slam+other = with 1 "
+             "Track client on the loaded map",
+             "goal (issue 12, point 3): the Slam stream's pose latency p99 <= 1.5x its p50"]
+    for r in rows:
+        lat = r["slam_lat"]
+        met = lat["daemon_p99"] <= 1.5 * lat["daemon_p50"]
+        notes.append("%s: p99 / p50 = %.2f: %s" % (r["scenario"], lat["daemon_p99"] /
+                                                   lat["daemon_p50"],
+                                                   "met" if met else "NOT met"))
+        if r["scenario"] == "slam+other" and alone is not None and r["track_lat"]:
+            p99 = r["track_lat"]["daemon_p99"]
+            notes.append("slam+other: the Track client's p99 %.0f ms against %.0f ms without the "
+                         "Slam stream (1:off:raw): %.2fx, goal <= 1.5x: %s"
+                         % (p99, alone["daemon_p99"], p99 / alone["daemon_p99"],
+                            "met" if p99 <= 1.5 * alone["daemon_p99"] else "NOT met"))
+    return "\n" + render_table(cols, body, header, notes)
 
 
 def ate(args, traj, dataset):
@@ -164,10 +311,14 @@ def ate(args, traj, dataset):
 def parse_scenarios(text):
     out = []
     for item in text.split(","):
+        if item.strip() in SLAM_SCENARIOS:
+            out.append(item.strip())
+            continue
         parts = item.strip().split(":")
         if len(parts) != 3 or not parts[0].isdigit() or parts[1] not in ("on", "off") \
                 or parts[2] not in ("raw", "png"):
-            raise ValueError("scenario %r is not CLIENTS:on|off:raw|png" % item)
+            raise ValueError("scenario %r is not CLIENTS:on|off:raw|png or one of %s"
+                             % (item, ", ".join(SLAM_SCENARIOS)))
         out.append((int(parts[0]), parts[1] == "on", parts[2]))
     return out
 
@@ -186,6 +337,10 @@ def main():
     ap.add_argument("--scenarios", default=DEFAULT_SCENARIOS,
                     help="comma-separated CLIENTS:MAPPING:ENCODING, mapping on|off, encoding "
                          "raw|png (default %s)" % DEFAULT_SCENARIOS)
+    ap.add_argument("--slam-frames", type=int, default=0,
+                    help="frames of the sequence the SLAM rows stream (0 = all)")
+    ap.add_argument("--plenoxd-args", default="",
+                    help="extra plenoxd flags, space-separated (e.g. '--mapping-worker off')")
     ap.add_argument("--timeout", type=float, default=1800.0, help="limit per command (s)")
     ap.add_argument("--out", help="also write the markdown report to this file")
     args = ap.parse_args()
@@ -229,10 +384,23 @@ def main():
         refs = [in_process("in-process track (before)")]
         inproc_ate = ate(args, inproc_traj, dataset)
 
-        daemon = Daemon(args.plenoxd, args.plenox, data_dir, os.path.join(tmp, "plenoxd.log"))
+        slam_ref = None
+        if any(isinstance(sc, str) for sc in scenarios):
+            # The reference trajectory: in-process SLAM (concurrent mapping) of the same frames.
+            slam_ref = run_json("in-process slam",
+                                [args.plenox, "slam", "--dataset", dataset, "--out",
+                                 os.path.join(tmp, "inprocess_slam.txt"), "--json", "--quiet"]
+                                + slam_frame_flags(args), args.timeout)
+        daemon = Daemon(args.plenoxd, args.plenox, data_dir, os.path.join(tmp, "plenoxd.log"),
+                        args.plenoxd_args.split())
         rows = []
+        slam_rows = []
         try:
-            for i, (clients, mapping, encoding) in enumerate(scenarios):
+            for i, scenario in enumerate(scenarios):
+                if isinstance(scenario, str):
+                    slam_rows.append(run_slam_scenario(args, daemon, dataset, tmp, i, scenario))
+                    continue
+                clients, mapping, encoding = scenario
                 tag = "s%d_%dc_%s_%s" % (i, clients, "map" if mapping else "idle", encoding)
                 load = None
                 if mapping:
@@ -305,7 +473,14 @@ def main():
                  "daemon never drops a frame")
     notes.append("mapping job: `plenox --server map` of the same sequence into a fresh map, "
                  "restarted whenever it finishes, for the whole window")
-    write_report(render_table(cols, body, header, notes), args.out)
+    if args.plenoxd_args:
+        notes.append("plenoxd ran with %s" % args.plenoxd_args)
+    report = render_table(cols, body, header, notes) if rows else ""
+    if slam_rows:
+        alone = next((r for r in rows if r["clients"] == 1 and not r["mapping"]
+                      and r["encoding"] == "raw"), None)
+        report += slam_report(slam_rows, slam_ref, alone, name)
+    write_report(report, args.out)
 
 
 if __name__ == "__main__":

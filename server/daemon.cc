@@ -66,10 +66,29 @@ absl::StatusOr<std::vector<std::unique_ptr<DeviceWorker>>> MakeWorkers(const Dae
         "--backend cuda: ", probe.ok() ? "--gpus selects no device" : probe.status().message()));
   }
   if (gpus.empty()) {
+    if (o.mapping_nice < 0 || o.mapping_nice > 19) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("--mapping-nice must be in 0-19, got ", o.mapping_nice));
+    }
     std::unique_ptr<Backend> cpu = MakeCpuBackend(o.threads);
-    DeviceDescription device{"cpu", "cpu",
-                             absl::StrCat("cpu (", cpu->parallelism(), " threads)")};
-    workers.push_back(std::make_unique<DeviceWorker>(std::move(cpu), std::move(device)));
+    const int threads = cpu->parallelism();
+    if (!o.mapping_worker) {
+      DeviceDescription device{"cpu", "cpu", absl::StrCat("cpu (", threads, " threads)")};
+      workers.push_back(std::make_unique<DeviceWorker>(std::move(cpu), std::move(device)));
+      return workers;
+    }
+    DeviceDescription tracking{"cpu", "cpu",
+                               absl::StrCat("cpu (", threads, " threads, interactive)"),
+                               WorkerRole::kInteractive};
+    // Its own pool of as many threads, so each worker can use every core the other leaves.
+    std::unique_ptr<Backend> mapping_backend = MakeCpuBackend(threads, o.mapping_nice);
+    DeviceDescription mapping{
+        "cpu-mapping", "cpu",
+        absl::StrCat("cpu (", threads, " threads, mapping, nice +", o.mapping_nice, ")"),
+        WorkerRole::kMapping, o.mapping_nice};
+    workers.push_back(std::make_unique<DeviceWorker>(std::move(cpu), std::move(tracking)));
+    workers.push_back(
+        std::make_unique<DeviceWorker>(std::move(mapping_backend), std::move(mapping)));
     return workers;
   }
   for (int id : gpus) {

@@ -49,6 +49,12 @@ struct DaemonOptions {
   int64_t max_frame_pixels = 3840 * 2160;
   int64_t max_render_pixels = kDefaultMaxRenderPixels;  // width * height of one Render
   int threads = 0;                         // CPU backend threads (0 = all cores)
+  // The CPU backend only: a second CPU worker for mapping (Integrate, SLAM jobs, Export) beside
+  // the one for tracking and rendering, both with `threads` threads, the mapping one's at
+  // `mapping_nice` (0-19) steps lower OS priority (server/device_worker.h). Off: one worker
+  // does both, mapping in chunks between frames.
+  bool mapping_worker = true;
+  int mapping_nice = 10;
   // Compute devices, one worker each: kCpu one CPU worker; kCuda one worker per GPU in `gpus`
   // (Start fails when there is none); kAuto like kCuda when a GPU is visible, else kCpu.
   BackendKind backend = BackendKind::kAuto;

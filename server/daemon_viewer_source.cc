@@ -62,8 +62,8 @@ absl::Status DaemonViewerSource::RunOnDevice(const DeviceWork& work, absl::Durat
     absl::Status result;
   };
   auto call = std::make_shared<Call>();
-  state_->workers->Pick().Post(Priority::kInteractive, [call, &work](Backend* backend,
-                                                                    bool stopped) {
+  DeviceWorker& worker = state_->workers->Pick(Priority::kInteractive);
+  worker.Post(Priority::kInteractive, [call, &work](Backend* backend, bool stopped) {
     {
       std::lock_guard<std::mutex> lock(call->mutex);
       if (call->abandoned) return;  // the caller is gone, and so may `work` be

@@ -2,6 +2,8 @@
 
 #include <utility>
 
+#include "core/common/thread_priority.h"
+
 namespace plx::server {
 
 DeviceWorker::DeviceWorker(std::unique_ptr<Backend> backend, DeviceDescription device)
@@ -23,7 +25,22 @@ void DeviceWorker::Post(Priority priority, DeviceTask task) {
   task(backend_.get(), true);  // stopped: tell the task it will not run
 }
 
+bool RoleTakes(WorkerRole role, Priority priority) {
+  switch (role) {
+    case WorkerRole::kAll:
+      return true;
+    case WorkerRole::kInteractive:
+      return priority == Priority::kInteractive;
+    case WorkerRole::kMapping:
+      return priority == Priority::kBackground;
+  }
+  return false;
+}
+
 void DeviceWorker::Loop() {
+  // Best effort: refused, the worker competes with the interactive one as an equal, which costs
+  // tracking latency under load, not results.
+  (void)LowerCurrentThreadPriority(device_.nice);
   for (;;) {
     DeviceTask task;
     {
@@ -71,33 +88,31 @@ int DeviceWorker::queue_depth() const {
 WorkerPool::WorkerPool(std::vector<std::unique_ptr<DeviceWorker>> workers)
     : workers_(std::move(workers)) {}
 
-DeviceWorker& WorkerPool::Pick() {
+DeviceWorker& WorkerPool::Least(Priority work, bool by_streams_first) {
   // Each worker's load is read once: queues move while we look.
   DeviceWorker* best = nullptr;
   std::pair<int, int> best_load;
   for (const auto& w : workers_) {
-    const std::pair<int, int> load = {w->queue_depth(), w->streams()};
+    if (!RoleTakes(w->device().role, work)) continue;
+    const std::pair<int, int> load =
+        by_streams_first ? std::make_pair(w->streams(), w->queue_depth())
+                         : std::make_pair(w->queue_depth(), w->streams());
     if (best == nullptr || load < best_load) {
       best = w.get();
       best_load = load;
     }
   }
-  return *best;
+  // No worker has the role (a pool set up without one): any worker can run any task.
+  return best != nullptr ? *best : *workers_.front();
 }
 
-DeviceWorker& WorkerPool::AttachStream() {
+DeviceWorker& WorkerPool::Pick(Priority work) { return Least(work, /*by_streams_first=*/false); }
+
+DeviceWorker& WorkerPool::AttachStream(Priority work) {
   std::lock_guard<std::mutex> lock(attach_mutex_);  // two streams starting at once spread out
-  DeviceWorker* best = nullptr;
-  std::pair<int, int> best_load;
-  for (const auto& w : workers_) {
-    const std::pair<int, int> load = {w->streams(), w->queue_depth()};
-    if (best == nullptr || load < best_load) {
-      best = w.get();
-      best_load = load;
-    }
-  }
-  best->streams_.fetch_add(1, std::memory_order_relaxed);
-  return *best;
+  DeviceWorker& best = Least(work, /*by_streams_first=*/true);
+  best.streams_.fetch_add(1, std::memory_order_relaxed);
+  return best;
 }
 
 void WorkerPool::DetachStream(DeviceWorker& worker) {

@@ -78,7 +78,16 @@ int main(int argc, char** argv) {
            "one); auto = cuda when a GPU is visible, else one CPU worker",
            "auto")
       .Add("gpus", "all|0,1,...", "CUDA devices to use with --backend cuda or auto", "all")
-      .Add("threads", "N", "CPU threads of the CPU worker (0 = all cores)", "0")
+      .Add("threads", "N", "CPU threads of each CPU worker (0 = all cores)", "0")
+      .Add("mapping-worker", "on|off",
+           "CPU backend: a second worker for mapping (Integrate, SLAM mapping, Export) beside "
+           "the one for tracking and rendering, so frames never wait behind a mapping step; "
+           "off = one worker does both",
+           "on")
+      .Add("mapping-nice", "N",
+           "OS priority of the CPU mapping worker's threads below the tracking ones (0-19; at "
+           "10 mapping gets about a tenth of a core tracking wants, and every cycle it leaves)",
+           "10")
       .Add("drain-seconds", "S", "how long running calls may finish on SIGTERM", "5")
       .Add("stop-grace-seconds", "S",
            "after --drain-seconds, how long saving dirty maps may take; then plenoxd logs each "
@@ -110,12 +119,14 @@ int main(int argc, char** argv) {
   // Up to the largest view the API accepts (16384 x 16384).
   auto max_render_pixels = flags.GetInt("max-render-pixels", 1, 16384 * 16384);
   auto threads = flags.GetInt("threads", 0, 4096);
+  auto mapping_nice = flags.GetInt("mapping-nice", 0, 19);
   auto drain = flags.GetDouble("drain-seconds", 0.0, 3600.0);
   auto stop_grace = flags.GetDouble("stop-grace-seconds", 0.0, 86400.0);
   for (const absl::Status& s : {metrics_port.status(), max_maps.status(), max_map_mb.status(),
                                 max_streams.status(), max_message_mb.status(),
                                 max_frame_pixels.status(), max_render_pixels.status(),
-                                threads.status(), drain.status(), stop_grace.status()}) {
+                                threads.status(), mapping_nice.status(), drain.status(),
+                                stop_grace.status()}) {
     if (!s.ok()) return Usage(s);
   }
   options.metrics_port = *metrics_port;
@@ -126,6 +137,13 @@ int main(int argc, char** argv) {
   options.max_frame_pixels = *max_frame_pixels;
   options.max_render_pixels = *max_render_pixels;
   options.threads = *threads;
+  options.mapping_nice = *mapping_nice;
+  const std::string mapping_worker = flags.GetString("mapping-worker");
+  if (mapping_worker != "on" && mapping_worker != "off") {
+    return Usage(absl::InvalidArgumentError(
+        absl::StrCat("--mapping-worker must be on or off, got \"", mapping_worker, "\"")));
+  }
+  options.mapping_worker = mapping_worker == "on";
   absl::StatusOr<plx::BackendKind> backend = plx::ParseBackendKind(flags.GetString("backend"));
   if (!backend.ok()) return Usage(backend.status());
   options.backend = *backend;

@@ -93,7 +93,7 @@ class ExportReactor final : public grpc::ServerWriteReactor<pb::ExportChunk> {
     }
     const float min_density = request->min_density() > 0 ? request->min_density()
                                                           : kDefaultExportMinDensity;
-    state_->workers->Pick().Post(
+    state_->workers->Pick(Priority::kBackground).Post(
         Priority::kBackground, [this, map = *map, min_density](Backend*, bool stopped) {
           if (absl::Status queued = QueuedCallStatus(stopped, context_); !queued.ok()) {
             Done(queued);
@@ -423,7 +423,7 @@ grpc::ServerUnaryReactor* PlenoxdService::Render(grpc::CallbackServerContext* co
     Finish(reactor, "Render", status);
     return reactor;
   }
-  state_->workers->Pick().Post(
+  state_->workers->Pick(Priority::kInteractive).Post(
       Priority::kInteractive,
       [this, context, reactor, request, response, pose = *pose, k = calibration->pinhole,
        map = *map](Backend* backend, bool stopped) {

@@ -125,7 +125,7 @@ void SlamJob::Leave(const std::shared_ptr<SlamJobListener>& listener) {
 void SlamJob::ScheduleLocked() {
   if (scheduled_ || status_.finished) return;
   scheduled_ = true;
-  if (worker_ == nullptr) worker_ = &state_->workers->AttachStream();
+  if (worker_ == nullptr) worker_ = &state_->workers->AttachStream(Priority::kBackground);
   // The task holds the job: it outlives the streams and the registry entry if it must.
   worker_->Post(Priority::kBackground,
                 [self = shared_from_this()](Backend* backend, bool cancelled) {

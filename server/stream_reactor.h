@@ -191,7 +191,7 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
   template <typename Task>
   void PostLocked(Priority priority, Task task) {
     busy_ = true;
-    if (worker_ == nullptr) worker_ = &state_->workers->AttachStream();
+    if (worker_ == nullptr) worker_ = &state_->workers->AttachStream(priority);
     worker_->Post(priority, std::move(task));
   }
   void TaskDoneLocked() { busy_ = false; }

@@ -6,6 +6,7 @@
 #include <condition_variable>
 #include <iostream>
 #include <mutex>
+#include <string>
 #include <thread>
 
 #include "absl/strings/str_cat.h"
@@ -16,6 +17,7 @@
 #include "clients/plenox/slam_output.h"
 #include "core/common/percentile.h"
 #include "core/formats/trajectory_file.h"
+#include "core/io/atomic_write.h"
 
 namespace plx::cli {
 namespace {
@@ -81,6 +83,8 @@ struct Received {
   std::vector<StampedPose> trajectory;
   std::vector<double> daemon_ms;     // frame received to update sent, as the daemon measured
   std::vector<double> roundtrip_ms;  // frame sent to update read, here
+  std::vector<int> frame_index;      // the dataset's index of each update's frame
+  std::vector<std::string> state;    // each update's state (SlamStateText) and keyframe mark
   int keyframes = 0;                 // this stream's
   int ok = 0, degraded = 0, lost = 0, relocalised = 0;
   int dropped = 0;
@@ -123,6 +127,9 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
             true);
   AddSlamFlags(flags, "voxel edge in metres of a new map (for an existing map, its own or nothing)");
   flags.Add("encoding", "png|raw", "how frames travel: PNG, or raw RGB8 + uint16 (no codec)", "png")
+      .Add("timings", "FILE",
+           "also write per-frame times: frame timestamp roundtrip_ms daemon_ms state [keyframe]",
+           "")
       .AddSwitch("save", "after the last update, write the map to the daemon's data directory");
   AddJsonAndQuietSwitches(flags);
   int exit_code = 0;
@@ -143,8 +150,10 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
   const std::string map_name = flags.GetString("name");
   SlamReport report;
   report.trajectory = flags.GetString("out");
-  if (absl::Status s = CheckOutputDirectory(report.trajectory); !s.ok()) {
-    return ReportError(kCommand, s);
+  const std::string timings = flags.GetString("timings");
+  for (const std::string& path : {report.trajectory, timings}) {
+    if (path.empty()) continue;
+    if (absl::Status s = CheckOutputDirectory(path); !s.ok()) return ReportError(kCommand, s);
   }
 
   // The dataset is checked before the daemon is asked for anything: nothing is created on it
@@ -199,6 +208,9 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
       r.trajectory.push_back({update.timestamp(), *pose});
       r.daemon_ms.push_back(update.latency_ms());
       r.roundtrip_ms.push_back(absl::ToDoubleMilliseconds(now - sent[at].at));
+      r.frame_index.push_back(sent[at].index);
+      r.state.push_back(
+          absl::StrCat(SlamStateText(update.state()), update.keyframe() ? " keyframe" : ""));
       r.keyframes += update.keyframe();
       r.dropped += static_cast<int>(update.dropped());
       switch (update.state()) {
@@ -292,6 +304,17 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
       !s.ok()) {
     return ReportError(kCommand, s);
   }
+  if (!timings.empty()) {  // after the trajectory: it is the result, the timings are extra
+    std::string text = "# frame timestamp roundtrip_ms daemon_ms state [keyframe]\n";
+    for (size_t k = 0; k < received.trajectory.size(); ++k) {
+      absl::StrAppendFormat(&text, "%d %.6f %.3f %.3f %s\n", received.frame_index[k],
+                            received.trajectory[k].timestamp, received.roundtrip_ms[k],
+                            received.daemon_ms[k], received.state[k]);
+    }
+    if (absl::Status s = WriteFileAtomically(timings, text, "cannot write --timings"); !s.ok()) {
+      return ReportError(kCommand, s);
+    }
+  }
   const pb::SlamMapping& mapping = received.mapping;
   std::optional<pb::MapInfo> saved;
   if (flags.GetSwitch("save")) {
@@ -336,6 +359,8 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
   JsonObject more;
   more.Add("roundtrip_ms_median", roundtrip_median)
       .Add("roundtrip_ms_p95", roundtrip_p95)
+      .Add("roundtrip_ms_p99", Percentile(received.roundtrip_ms, 0.99))
+      .Add("ms_per_frame_p99", Percentile(received.daemon_ms, 0.99))
       .Add("encoding", flags.GetString("encoding"))
       .AddBool("deterministic", options->slam.deterministic)
       .AddBool("realtime", options->realtime)

@@ -10,9 +10,9 @@ namespace {
 
 class CpuBackend final : public Backend {
  public:
-  explicit CpuBackend(int num_threads) {
-    if (num_threads > 0) {
-      own_pool_ = std::make_unique<cpu::ThreadPool>(num_threads);
+  CpuBackend(int num_threads, int nice) {
+    if (num_threads > 0 || nice > 0) {
+      own_pool_ = std::make_unique<cpu::ThreadPool>(num_threads, nice);
       ctx_.pool = own_pool_.get();
     }
   }
@@ -84,8 +84,8 @@ class CpuBackend final : public Backend {
 
 }  // namespace
 
-std::unique_ptr<Backend> MakeCpuBackend(int num_threads) {
-  return std::make_unique<CpuBackend>(num_threads);
+std::unique_ptr<Backend> MakeCpuBackend(int num_threads, int nice) {
+  return std::make_unique<CpuBackend>(num_threads, nice);
 }
 
 }  // namespace plx

@@ -4,15 +4,24 @@
 #include <cstdlib>
 #include <string>
 
+#include "core/common/thread_priority.h"
+
 namespace plx::cpu {
 namespace {
 thread_local int tls_thread_index = 0;
 thread_local bool tls_inside_loop = false;
 }  // namespace
 
-ThreadPool::ThreadPool(int num_threads) {
+ThreadPool::ThreadPool(int num_threads, int nice) {
   if (num_threads <= 0) num_threads = std::max(1u, std::thread::hardware_concurrency());
-  for (int i = 1; i < num_threads; ++i) workers_.emplace_back([this, i] { WorkerLoop(i); });
+  for (int i = 1; i < num_threads; ++i) {
+    workers_.emplace_back([this, i, nice] {
+      // Best effort: a refused priority change leaves the worker at its creator's priority,
+      // which only costs the interactive work some cycles.
+      (void)LowerCurrentThreadPriority(nice);
+      WorkerLoop(i);
+    });
+  }
 }
 
 ThreadPool::~ThreadPool() {

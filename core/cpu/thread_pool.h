@@ -16,7 +16,9 @@ namespace plx::cpu {
 class ThreadPool {
  public:
   // num_threads <= 0 means one per hardware thread. The pool starts num_threads - 1 workers.
-  explicit ThreadPool(int num_threads = 0);
+  // `nice` (0-19) lowers the workers' CPU priority (core/common/thread_priority.h); the calling
+  // thread, which works too, keeps its own: lower it as well for a pool of background work.
+  explicit ThreadPool(int num_threads = 0, int nice = 0);
   ~ThreadPool();
   ThreadPool(const ThreadPool&) = delete;
   ThreadPool& operator=(const ThreadPool&) = delete;

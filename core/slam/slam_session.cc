@@ -1,9 +1,5 @@
 #include "core/slam/slam_session.h"
 
-#include <sys/resource.h>
-#include <sys/syscall.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <chrono>
 #include <utility>
@@ -11,6 +7,7 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
+#include "core/common/thread_priority.h"
 
 namespace plx {
 namespace {
@@ -147,9 +144,8 @@ void SlamSession::MappingLoop(const BackendFactory& make_backend,
                               std::promise<absl::Status>* started) {
   // Lower this thread's priority before the backend starts its workers: they inherit it, so
   // on a shared CPU the tracker's loops run first and mapping takes the cycles left over.
-  if (options_.mapping_nice > 0) {
-    setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), options_.mapping_nice);
-  }
+  // Best effort: refused, mapping shares the cores equally, which costs latency, not results.
+  (void)LowerCurrentThreadPriority(options_.mapping_nice);
   {
     absl::StatusOr<std::unique_ptr<Backend>> backend = make_backend();
     if (!backend.ok()) {

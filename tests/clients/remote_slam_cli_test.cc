@@ -235,15 +235,18 @@ class RemoteSlamCliTest : public ::testing::Test {
     dataset_ = &suite_->dataset();
     daemon_ = &suite_->daemon();
     trajectory_ = new std::string(suite_->root() + "/remote.txt");
+    timings_ = new std::string(suite_->root() + "/timings.txt");
     slam_run_ = new CommandResult();
     if (suite_->Ready()) {
       *slam_run_ = Remote({"slam", "--dataset", *dataset_, "--name", kMap, "--out", *trajectory_,
-                           "--deterministic", "--voxel-size", kVoxelSize, "--save", "--json"});
+                           "--deterministic", "--voxel-size", kVoxelSize, "--save", "--json",
+                           "--timings", *timings_});
     }
   }
   static void TearDownTestSuite() {
     delete slam_run_;
     delete trajectory_;
+    delete timings_;
     delete suite_;
   }
 
@@ -260,6 +263,7 @@ class RemoteSlamCliTest : public ::testing::Test {
   static const std::string* dataset_;
   static const DaemonProcess* daemon_;
   static std::string* trajectory_;
+  static std::string* timings_;
   static CommandResult* slam_run_;
 };
 
@@ -267,6 +271,7 @@ RemoteSuite* RemoteSlamCliTest::suite_ = nullptr;
 const std::string* RemoteSlamCliTest::dataset_ = nullptr;
 const DaemonProcess* RemoteSlamCliTest::daemon_ = nullptr;
 std::string* RemoteSlamCliTest::trajectory_ = nullptr;
+std::string* RemoteSlamCliTest::timings_ = nullptr;
 CommandResult* RemoteSlamCliTest::slam_run_ = nullptr;
 
 TEST_F(RemoteSlamCliTest, SlamReportsEveryFramesPoseWithinACentimetre) {
@@ -308,7 +313,24 @@ TEST_F(RemoteSlamCliTest, SlamReportsEveryFramesPoseWithinACentimetre) {
   EXPECT_GE(JsonNumber(json, "roundtrip_ms_median").value_or(-1), daemon_median);
   EXPECT_GE(JsonNumber(json, "roundtrip_ms_p95").value_or(-1),
             JsonNumber(json, "roundtrip_ms_median").value_or(0));
+  EXPECT_GE(JsonNumber(json, "roundtrip_ms_p99").value_or(-1),
+            JsonNumber(json, "roundtrip_ms_p95").value_or(0));
+  EXPECT_GE(JsonNumber(json, "ms_per_frame_p99").value_or(-1),
+            JsonNumber(json, "ms_per_frame_p95").value_or(0));
   EXPECT_GT(JsonNumber(json, "fps").value_or(0), 0.0);
+
+  // --timings: one row per frame, in order, each round trip at least the daemon's time, and
+  // the keyframes marked as many times as the summary counts them.
+  const std::vector<std::vector<std::string>> timings = ReadRows(*timings_);
+  ASSERT_EQ(timings.size(), static_cast<size_t>(kFrames));
+  int marked = 0;
+  for (size_t k = 0; k < timings.size(); ++k) {
+    ASSERT_GE(timings[k].size(), 5u);
+    EXPECT_EQ(timings[k][0], std::to_string(k));
+    EXPECT_GE(std::stod(timings[k][2]), std::stod(timings[k][3]));
+    marked += timings[k].size() == 6 && timings[k][5] == "keyframe";
+  }
+  EXPECT_EQ(marked, keyframes);
   // Measured 0.68 cm without alignment in-process at this size and voxel size.
   EXPECT_LE(JsonNumber(json, "ate_none_m").value_or(1), 0.01) << r.Describe();
   EXPECT_LE(JsonNumber(json, "ate_se3_m").value_or(1), 0.01) << r.Describe();

@@ -2,7 +2,9 @@
 // Daemon::Start makes (one CPU worker without a GPU, a clear error for --backend cuda without
 // one), how the worker pool spreads streams and one-off tasks, and where the devices are
 // reported: Prometheus metrics and GetServerInfo.
+#include <algorithm>
 #include <condition_variable>
+#include <future>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -12,6 +14,7 @@
 #include <gtest/gtest.h>
 
 #include "app/make_backend.h"
+#include "core/common/thread_priority.h"
 #include "core/cpu/cpu_backend.h"
 #include "server/device_worker.h"
 #include "tests/server/daemon_fixture.h"
@@ -65,8 +68,10 @@ TEST(BackendFlagParseTest, GpuListIdsMustExistOnce) {
 // ---------------------------------------------------------------------------------------------
 // Workers.
 
-std::unique_ptr<DeviceWorker> CpuWorker(const std::string& id) {
-  return std::make_unique<DeviceWorker>(MakeCpuBackend(1), DeviceDescription{id, "cpu", id});
+std::unique_ptr<DeviceWorker> CpuWorker(const std::string& id,
+                                        WorkerRole role = WorkerRole::kAll, int nice = 0) {
+  return std::make_unique<DeviceWorker>(MakeCpuBackend(1),
+                                        DeviceDescription{id, "cpu", id, role, nice});
 }
 
 TEST(WorkerPoolTest, StreamsSpreadOverTheWorkersAndStayBound) {
@@ -74,12 +79,12 @@ TEST(WorkerPoolTest, StreamsSpreadOverTheWorkersAndStayBound) {
   workers.push_back(CpuWorker("a"));
   workers.push_back(CpuWorker("b"));
   WorkerPool pool(std::move(workers));
-  DeviceWorker& first = pool.AttachStream();
-  DeviceWorker& second = pool.AttachStream();
+  DeviceWorker& first = pool.AttachStream(Priority::kInteractive);
+  DeviceWorker& second = pool.AttachStream(Priority::kBackground);
   EXPECT_NE(&first, &second) << "two streams on one worker while another is idle";
   EXPECT_EQ(first.streams(), 1);
   EXPECT_EQ(second.streams(), 1);
-  DeviceWorker& third = pool.AttachStream();
+  DeviceWorker& third = pool.AttachStream(Priority::kInteractive);
   EXPECT_EQ(third.streams(), 2);
   pool.DetachStream(first);
   pool.DetachStream(second);
@@ -108,13 +113,39 @@ TEST(WorkerPoolTest, OneOffTasksGoToTheWorkerWithTheShortestQueue) {
     cv.wait(lock, [&] { return started; });
   }
   EXPECT_EQ(pool.worker(0).queue_depth(), 1);
-  EXPECT_EQ(pool.Pick().device().id, "b");
+  EXPECT_EQ(pool.Pick(Priority::kInteractive).device().id, "b");
   EXPECT_EQ(pool.total_queue_depth(), 1);
   {
     std::lock_guard<std::mutex> lock(mutex);
     release = true;
     cv.notify_all();
   }
+  pool.StopAll();
+}
+
+// The CPU's split: tracking streams and renders on the interactive worker, mapping streams and
+// exports on the mapping worker, however loaded the other one is.
+TEST(WorkerPoolTest, WorkGoesToTheWorkersWhoseRoleTakesIt) {
+  std::vector<std::unique_ptr<DeviceWorker>> workers;
+  workers.push_back(CpuWorker("track", WorkerRole::kInteractive));
+  workers.push_back(CpuWorker("map", WorkerRole::kMapping, 7));
+  WorkerPool pool(std::move(workers));
+  DeviceWorker& tracker1 = pool.AttachStream(Priority::kInteractive);
+  DeviceWorker& tracker2 = pool.AttachStream(Priority::kInteractive);
+  DeviceWorker& mapper = pool.AttachStream(Priority::kBackground);
+  EXPECT_EQ(tracker1.device().id, "track");
+  EXPECT_EQ(tracker2.device().id, "track") << "a tracking stream went to the mapping worker";
+  EXPECT_EQ(mapper.device().id, "map");
+  EXPECT_EQ(pool.Pick(Priority::kInteractive).device().id, "track");
+  EXPECT_EQ(pool.Pick(Priority::kBackground).device().id, "map");
+  // The mapping worker's thread runs its tasks at its lowered priority.
+  std::promise<int> nice;
+  pool.worker(1).Post(Priority::kBackground,
+                      [&](Backend*, bool) { nice.set_value(CurrentThreadNice()); });
+  EXPECT_EQ(nice.get_future().get(), std::min(19, CurrentThreadNice() + 7));
+  pool.DetachStream(tracker1);
+  pool.DetachStream(tracker2);
+  pool.DetachStream(mapper);
   pool.StopAll();
 }
 
@@ -149,8 +180,9 @@ grpc::Status GetServerInfo(pb::Plenoxd::Stub& stub, pb::ServerInfo* info,
   return stub.GetServerInfo(&context, pb::GetServerInfoRequest(), info);
 }
 
-// auto without a GPU (and cpu anywhere): one CPU worker, reported by GetServerInfo and metrics.
-TEST(DaemonDevicesTest, TheCpuWorkerIsReportedByGetServerInfoAndMetrics) {
+// auto without a GPU (and cpu anywhere): the CPU's interactive and mapping workers, reported by
+// GetServerInfo and metrics.
+TEST(DaemonDevicesTest, TheCpuWorkersAreReportedByGetServerInfoAndMetrics) {
   DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_devices"));
   o.metrics_port = 0;
   if (CudaDeviceCount() > 0) o.backend = BackendKind::kCpu;  // else the default, auto
@@ -166,12 +198,15 @@ TEST(DaemonDevicesTest, TheCpuWorkerIsReportedByGetServerInfoAndMetrics) {
   EXPECT_EQ(info.backend(), CudaDeviceCount() > 0 ? "cpu" : "auto");
   EXPECT_EQ(info.cuda_built(), BuiltWithCuda());
   EXPECT_EQ(info.maps(), 0u);
-  ASSERT_EQ(info.devices_size(), 1);
+  ASSERT_EQ(info.devices_size(), 2);
   EXPECT_EQ(info.devices(0).id(), "cpu");
   EXPECT_EQ(info.devices(0).kind(), "cpu");
-  EXPECT_EQ(info.devices(0).name(), "cpu (2 threads)");
+  EXPECT_EQ(info.devices(0).name(), "cpu (2 threads, interactive)");
   EXPECT_EQ(info.devices(0).queue_depth(), 0u);
   EXPECT_EQ(info.devices(0).streams(), 0u);
+  EXPECT_EQ(info.devices(1).id(), "cpu-mapping");
+  EXPECT_EQ(info.devices(1).kind(), "cpu");
+  EXPECT_EQ(info.devices(1).name(), "cpu (2 threads, mapping, nice +10)");
 
   ASSERT_TRUE(CreateMap(*d.stub, "one").ok());
   ASSERT_TRUE(GetServerInfo(*d.stub, &info).ok());
@@ -181,9 +216,10 @@ TEST(DaemonDevicesTest, TheCpuWorkerIsReportedByGetServerInfoAndMetrics) {
   ASSERT_EQ(body.rfind("HTTP/1.1 200", 0), 0u) << body.substr(0, 200);
   EXPECT_THAT(body, HasSubstr("# TYPE plenoxd_device_info gauge\n"));
   EXPECT_THAT(body, HasSubstr("plenoxd_device_info{device=\"cpu\",kind=\"cpu\","
-                              "name=\"cpu (2 threads)\"} 1\n"));
+                              "name=\"cpu (2 threads, interactive)\"} 1\n"));
   EXPECT_THAT(body, HasSubstr("# TYPE plenoxd_device_queue_depth gauge\n"
-                              "plenoxd_device_queue_depth{device=\"cpu\"} 0\n"));
+                              "plenoxd_device_queue_depth{device=\"cpu\"} 0\n"
+                              "plenoxd_device_queue_depth{device=\"cpu-mapping\"} 0\n"));
   EXPECT_THAT(body, HasSubstr("# TYPE plenoxd_device_streams gauge\n"
                               "plenoxd_device_streams{device=\"cpu\"} 0\n"));
   EXPECT_THAT(body, HasSubstr("\nplenoxd_queue_depth 0\n"));
@@ -201,7 +237,30 @@ TEST(DaemonDevicesTest, GetServerInfoNeedsTheToken) {
   const grpc::Status s = GetServerInfo(*(*started)->stub, &info, "s3cret");
   ASSERT_TRUE(s.ok()) << Describe(s);
   EXPECT_EQ(info.backend(), "cpu");
+  ASSERT_EQ(info.devices_size(), 2);
+}
+
+// --mapping-worker off: one CPU worker takes both kinds of work.
+TEST(DaemonDevicesTest, WithoutTheMappingWorkerOneCpuWorkerDoesEverything) {
+  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_one_worker"));
+  o.backend = BackendKind::kCpu;
+  o.mapping_worker = false;
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(o);
+  ASSERT_TRUE(started.ok()) << started.status();
+  pb::ServerInfo info;
+  ASSERT_TRUE(GetServerInfo(*(*started)->stub, &info).ok());
   ASSERT_EQ(info.devices_size(), 1);
+  EXPECT_EQ(info.devices(0).name(), "cpu (2 threads)");
+}
+
+TEST(DaemonDevicesTest, AMappingNiceOutsideItsRangeIsRefusedAtStart) {
+  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_bad_nice"));
+  o.backend = BackendKind::kCpu;
+  o.mapping_nice = 20;
+  const absl::StatusOr<std::unique_ptr<Daemon>> d = Daemon::Start(o);
+  ASSERT_FALSE(d.ok());
+  EXPECT_EQ(d.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(d.status().message(), HasSubstr("--mapping-nice"));
 }
 
 // The metrics text escapes label values (a device name is free text).

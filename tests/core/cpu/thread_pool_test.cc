@@ -1,11 +1,16 @@
 #include "core/cpu/thread_pool.h"
 
+#include <algorithm>
 #include <atomic>
+#include <chrono>
+#include <thread>
+#include <mutex>
 #include <numeric>
 #include <vector>
 
 #include <gtest/gtest.h>
 
+#include "core/common/thread_priority.h"
 #include "core/cpu/parallel_for.h"
 
 namespace plx::cpu {
@@ -18,6 +23,33 @@ TEST(ThreadPoolTest, VisitsEveryIndexExactlyOnce) {
   ExecContext ctx{&pool};
   ParallelFor(ctx, static_cast<int64_t>(hits.size()), [&](int64_t i) { hits[i].fetch_add(1); });
   for (const auto& h : hits) ASSERT_EQ(h.load(), 1);
+}
+
+// A background pool's workers run at the lowered priority; the calling thread keeps its own.
+TEST(ThreadPoolTest, NiceLowersTheWorkersPriorityOnly) {
+  const int caller = CurrentThreadNice();
+  ThreadPool pool(3, 4);
+  std::mutex mutex;
+  std::vector<int> worker_nice, caller_nice;
+  // One slow chunk per index, so every worker takes some.
+  pool.ParallelForChunks(64, 1, [&](int64_t, int64_t) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    const int nice = CurrentThreadNice();
+    std::lock_guard<std::mutex> lock(mutex);
+    (ThreadPool::CurrentThreadIndex() == 0 ? caller_nice : worker_nice).push_back(nice);
+  });
+  ASSERT_FALSE(worker_nice.empty());
+  for (int n : worker_nice) EXPECT_EQ(n, std::min(19, caller + 4));
+  for (int n : caller_nice) EXPECT_EQ(n, caller);
+  EXPECT_EQ(CurrentThreadNice(), caller);
+}
+
+TEST(ThreadPriorityTest, OutOfRangeIsRefusedAndZeroChangesNothing) {
+  EXPECT_EQ(LowerCurrentThreadPriority(-1).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(LowerCurrentThreadPriority(20).code(), absl::StatusCode::kInvalidArgument);
+  const int before = CurrentThreadNice();
+  EXPECT_TRUE(LowerCurrentThreadPriority(0).ok());
+  EXPECT_EQ(CurrentThreadNice(), before);
 }
 
 TEST(ThreadPoolTest, UsesSeveralThreadsAndRunsNestedLoopsSerially) {
