@@ -130,6 +130,10 @@ int main(int argc, char** argv) {
     if (!s.ok()) return Usage(s);
   }
   options.metrics_port = *metrics_port;
+  if (options.viewer && options.metrics_port < 0) {
+    return Usage(absl::InvalidArgumentError(
+        "--viewer is served on the HTTP port: give --metrics-port too (0 = a free port)"));
+  }
   options.max_maps = *max_maps;
   options.max_map_bytes = int64_t{*max_map_mb} << 20;
   options.max_streams = *max_streams;

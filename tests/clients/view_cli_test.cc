@@ -205,5 +205,25 @@ TEST_F(ViewCliTest, UsageErrorsAndAMissingThreeJsEndAtOnce) {
   EXPECT_NE(r.err.find("in-process only"), std::string::npos) << r.Describe();
 }
 
+#ifdef PLENOXD_BINARY
+// plenoxd's side of the viewer's flags: documented, and a viewer it cannot serve stops it at once.
+TEST(PlenoxdViewerFlagsTest, ViewerNeedsTheHttpPortAndThreeJs) {
+  CommandResult r = RunCommand(PLENOXD_BINARY, {"--help"});
+  EXPECT_EQ(r.exit_code, 0) << r.Describe();
+  EXPECT_NE(r.out.find("--viewer "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("--viewer-three-dir"), std::string::npos) << r.out;
+  r = RunCommand(PLENOXD_BINARY, {"--listen", "127.0.0.1:0", "--viewer"});
+  EXPECT_EQ(r.exit_code, 2) << r.Describe();
+  EXPECT_NE(r.err.find("--metrics-port"), std::string::npos) << r.Describe();
+  const std::string empty = MakeTempDir("plenoxd_no_three");
+  r = RunCommand(PLENOXD_BINARY, {"--listen", "127.0.0.1:0", "--metrics-port", "0", "--viewer",
+                                  "--viewer-three-dir", empty});
+  EXPECT_EQ(r.exit_code, 1) << r.Describe();
+  EXPECT_NE(r.err.find("libjs-three"), std::string::npos) << r.Describe();
+  std::error_code ec;
+  fs::remove_all(empty, ec);
+}
+#endif
+
 }  // namespace
 }  // namespace plx::testing
