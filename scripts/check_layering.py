@@ -30,6 +30,7 @@ import sys
 # read from their CMakeLists.txt whether or not this build configures them.
 FOLDER_TARGETS = {
     "app": "plx_app",
+    "web": "plx_web",
     "cuda": "plx_cuda",
     "server": "plx_server",
     "clients/plenox": "plx_cli_lib",
@@ -46,7 +47,7 @@ TEST_HELPERS = "tests"
 
 # Include prefixes that name project folders (others, like "absl/" or generated "plenoxd/v1/",
 # are not ours to check).
-PROJECT_ROOTS = ("core", "cuda", "server", "app", "clients", "tests")
+PROJECT_ROOTS = ("core", "cuda", "server", "app", "web", "clients", "tests")
 SOURCE_EXTENSIONS = (".h", ".cc", ".cu", ".cuh", ".inc")
 SKIP_DIRS = {".git", "build", "node_modules", "__pycache__"}
 

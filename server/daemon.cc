@@ -7,13 +7,18 @@
 #include <algorithm>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "core/cpu/cpu_backend.h"
+#include "server/daemon_viewer_source.h"
 #include "server/log.h"
 #include "server/secret_files.h"
+#include "web/http_server.h"
+#include "web/viewer_routes.h"
+#include "web/viewer_source.h"
 
 #ifndef PLX_VERSION
 #define PLX_VERSION "unknown"
@@ -103,6 +108,10 @@ absl::StatusOr<std::vector<std::unique_ptr<DeviceWorker>>> MakeWorkers(const Dae
 
 std::string PlenoxdVersion() { return PLX_VERSION; }
 
+Daemon::Daemon() = default;
+
+int Daemon::metrics_port() const { return http_ ? http_->port() : -1; }
+
 absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& options) {
   // A bad certificate or key would otherwise only show as BuildAndStart failing, which reads
   // as "address in use".
@@ -112,6 +121,21 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
         !s.ok()) {
       return s;
     }
+  }
+  // The viewer's files are checked before anything starts: a daemon asked for a viewer it
+  // cannot serve says so at once.
+  std::optional<web::ThreeJsFiles> three;
+  if (options.viewer) {
+    if (options.metrics_port < 0) {
+      return absl::InvalidArgumentError(
+          "--viewer is served on the HTTP port: give --metrics-port too (0 = a free port)");
+    }
+    absl::StatusOr<web::ThreeJsFiles> files = web::LoadThreeJs(options.viewer_three_dir);
+    if (!files.ok()) {
+      return absl::Status(files.status().code(),
+                          absl::StrCat("--viewer: ", files.status().message()));
+    }
+    three = std::move(*files);
   }
   std::unique_ptr<Daemon> d(new Daemon());
   d->options_ = options;
@@ -195,12 +219,22 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   }
   d->server_->GetHealthCheckService()->SetServingStatus(true);
   if (options.metrics_port >= 0) {
-    HttpServerOptions http;
+    web::HttpServerOptions http;
     http.host = options.metrics_host;
     http.port = options.metrics_port;
-    d->http_ = std::make_unique<HttpServer>(http);
+    d->http_ = std::make_unique<web::HttpServer>(http);
     Daemon* raw = d.get();
     AddMetricsRoute(*d->http_, [raw] { return raw->RenderMetrics(); });
+    if (three) {
+      web::ViewerOptions viewer;
+      viewer.auth_token = options.auth_token;
+      viewer.max_render_pixels = std::min(viewer.max_render_pixels, options.max_render_pixels);
+      d->viewer_source_ =
+          std::make_unique<DaemonViewerSource>(&d->state_, "plenoxd " + PlenoxdVersion());
+      d->viewer_ = std::make_unique<web::Viewer>(d->viewer_source_.get(), std::move(*three),
+                                                 viewer);
+      d->viewer_->AddRoutes(*d->http_);
+    }
     if (absl::Status s = d->http_->Start(); !s.ok()) {
       return absl::UnavailableError(absl::StrCat("metrics: ", s.message()));
     }
@@ -212,7 +246,8 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
             {"maps", std::to_string(d->maps_->size())},
             {"auth", options.auth_token.empty() ? "off" : "bearer"},
             {"tls", options.tls_cert_pem.empty() ? "off" : "on"},
-            {"metrics_port", std::to_string(d->metrics_port())}});
+            {"metrics_port", std::to_string(d->metrics_port())},
+            {"viewer", options.viewer ? "on" : "off"}});
   return d;
 }
 

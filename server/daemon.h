@@ -14,10 +14,18 @@
 #include "absl/time/time.h"
 #include "app/make_backend.h"
 #include "server/daemon_state.h"
-#include "server/http_server.h"
 #include "server/metrics.h"
 #include "server/plenoxd_service.h"
 #include "server/slam_job.h"
+#include "web/three_js.h"
+
+// The HTTP side (web/): defined in daemon.cc's includes, so the daemon's users do not compile
+// the viewer's headers.
+namespace plx::web {
+class HttpServer;
+class Viewer;
+class ViewerSource;
+}  // namespace plx::web
 
 namespace plx::server {
 
@@ -28,6 +36,10 @@ struct DaemonOptions {
   std::string tls_cert_pem, tls_key_pem;   // both empty: plaintext
   int metrics_port = -1;                   // < 0: off; 0: a free port
   std::string metrics_host = "127.0.0.1";
+  // The web viewer (web/viewer_routes.h) at /viewer/ on the metrics port (which it needs);
+  // three.js is read from viewer_three_dir at Start (Debian's libjs-three).
+  bool viewer = false;
+  std::string viewer_three_dir = web::kDefaultThreeJsDir;
   int max_maps = 16;
   int64_t max_map_bytes = int64_t{4} << 30;
   int max_streams = 32;
@@ -61,7 +73,7 @@ class Daemon {
   ~Daemon();
 
   int port() const { return port_; }
-  int metrics_port() const { return http_ ? http_->port() : -1; }
+  int metrics_port() const;
 
   // Stops taking calls (health NOT_SERVING, new calls UNAVAILABLE), lets running calls finish
   // for up to `grace` and cancels the rest, stops the workers and saves every dirty map, logging
@@ -77,7 +89,7 @@ class Daemon {
   std::string RenderMetrics() const;
 
  private:
-  Daemon() = default;
+  Daemon();
 
   DaemonOptions options_;
   std::unique_ptr<MapStore> maps_;
@@ -90,7 +102,10 @@ class Daemon {
   std::unique_ptr<SlamJobs> slam_jobs_;
   std::unique_ptr<PlenoxdService> service_;
   std::unique_ptr<grpc::Server> server_;
-  std::unique_ptr<HttpServer> http_;  // --metrics-port: /metrics
+  // --viewer: what the viewer's routes use; destroyed after the HTTP server that calls them.
+  std::unique_ptr<web::ViewerSource> viewer_source_;
+  std::unique_ptr<web::Viewer> viewer_;
+  std::unique_ptr<web::HttpServer> http_;  // --metrics-port: /metrics (and --viewer: /viewer/)
   int port_ = 0;
   bool drained_ = false;
 };

@@ -51,7 +51,15 @@ int main(int argc, char** argv) {
            "serve Prometheus metrics at http://HOST:PORT/metrics (-1 = off; 16 threads, 5 s "
            "read/write and 2 s idle timeouts)",
            "-1")
-      .Add("metrics-host", "IP", "address for the metrics endpoint", "127.0.0.1")
+      .Add("metrics-host", "IP", "address for the metrics endpoint (and --viewer)", "127.0.0.1")
+      .AddSwitch("viewer",
+                 "serve the web map viewer at http://HOST:PORT/viewer/ on the --metrics-port "
+                 "(maps, SLAM cameras, renders; with --auth-token-file open "
+                 "/viewer/#token=<token>)")
+      .Add("viewer-three-dir", "DIR",
+           "where three.js is (Debian's libjs-three: three.min.js and "
+           "examples/js/controls/OrbitControls.js)",
+           plx::web::kDefaultThreeJsDir)
       .Add("max-maps", "N", "maps held at once", "16")
       .Add("max-map-mb", "MB",
            "memory per map, checked before a keyframe's bricks or a loaded map are allocated",
@@ -96,6 +104,11 @@ int main(int argc, char** argv) {
   options.listen = flags.GetString("listen");
   options.data_dir = flags.GetString("data-dir");
   options.metrics_host = flags.GetString("metrics-host");
+  options.viewer = flags.GetSwitch("viewer");
+  options.viewer_three_dir = flags.GetString("viewer-three-dir");
+  if (flags.IsSet("viewer-three-dir") && !options.viewer) {
+    return Usage(absl::InvalidArgumentError("--viewer-three-dir only applies with --viewer"));
+  }
   auto metrics_port = flags.GetInt("metrics-port", -1, 65535);
   auto max_maps = flags.GetInt("max-maps", 1, 100000);
   auto max_map_mb = flags.GetInt("max-map-mb", 1, 1 << 24);
@@ -117,6 +130,10 @@ int main(int argc, char** argv) {
     if (!s.ok()) return Usage(s);
   }
   options.metrics_port = *metrics_port;
+  if (options.viewer && options.metrics_port < 0) {
+    return Usage(absl::InvalidArgumentError(
+        "--viewer is served on the HTTP port: give --metrics-port too (0 = a free port)"));
+  }
   options.max_maps = *max_maps;
   options.max_map_bytes = int64_t{*max_map_mb} << 20;
   options.max_streams = *max_streams;
@@ -184,6 +201,10 @@ int main(int argc, char** argv) {
   std::cout << "plenoxd listening on port " << (*daemon)->port();
   if ((*daemon)->metrics_port() >= 0) std::cout << ", metrics on port " << (*daemon)->metrics_port();
   std::cout << std::endl;
+  if (options.viewer) {
+    std::cout << "viewer: http://" << options.metrics_host << ":" << (*daemon)->metrics_port()
+              << "/viewer/" << (options.auth_token.empty() ? "" : "#token=<token>") << std::endl;
+  }
 
   int signal_number = 0;
   sigwait(&stop_signals, &signal_number);

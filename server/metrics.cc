@@ -129,9 +129,9 @@ std::string Metrics::Render(const Gauges& g) const {
   return out;
 }
 
-void AddMetricsRoute(HttpServer& server, std::function<std::string()> render) {
+void AddMetricsRoute(web::HttpServer& server, std::function<std::string()> render) {
   server.Get("/metrics", [render = std::move(render)] {
-    return HttpResponse{200, "text/plain; version=0.0.4", render()};
+    return web::HttpResponse{200, "text/plain; version=0.0.4", render()};
   });
 }
 

@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "server/http_server.h"
+#include "web/http_server.h"
 
 namespace plx::server {
 
@@ -76,6 +76,6 @@ class Metrics {
 };
 
 // Serves `render()` (the Prometheus text) at GET /metrics on `server`.
-void AddMetricsRoute(HttpServer& server, std::function<std::string()> render);
+void AddMetricsRoute(web::HttpServer& server, std::function<std::string()> render);
 
 }  // namespace plx::server

@@ -23,12 +23,14 @@ void SlamJobListener::Reset() {
 }
 
 SlamJob::SlamJob(DaemonState* state, std::string map, std::string job_id,
-                 SlamMapperOptions options, bool deterministic)
+                 SlamMapperOptions options, bool deterministic,
+                 std::shared_ptr<TrajectoryRecord> trajectory)
     : state_(state),
       map_(std::move(map)),
       job_id_(std::move(job_id)),
       options_(std::move(options)),
-      deterministic_(deterministic) {
+      deterministic_(deterministic),
+      trajectory_(std::move(trajectory)) {
   status_.job_id = job_id_;
   if (absl::StatusOr<MapVersion> latest = state_->maps->Latest(map_); latest.ok()) {
     status_.map_version = latest->version;
@@ -212,6 +214,11 @@ void SlamJob::RunStep(Backend* backend, bool cancelled) {
       status_.map_bytes = p.map_bytes;
       status_.last_publish_s = p.last_publish_s;
       has_work_ = mapper_->has_work();
+      // The viewer's keyframes: copied only when one more is in the map (O(keyframes) each).
+      if (p.keyframes_integrated != keyframes_recorded_) {
+        keyframes_recorded_ = p.keyframes_integrated;
+        trajectory_->SetKeyframes(mapper_->keyframe_poses());
+      }
     }
     status_.idle = !has_work_ && early_.empty() && status_.pending_keyframes == 0;
     // Draining, every keyframe accepted is in the map: nothing more to do before the save.
@@ -297,7 +304,15 @@ absl::StatusOr<std::shared_ptr<SlamJob>> SlamJobs::Join(const std::string& map,
   PLX_RETURN_IF_ERROR(state_->maps->BeginMapping(map));
   const std::string job_id = state_->jobs->Create("slam", map);
   state_->jobs->Update(job_id, JobState::kRunning, 0.0, "waiting for keyframes");
-  auto job = std::make_shared<SlamJob>(state_, map, job_id, options, deterministic);
+  // A new job, a new record; over the bound, records of maps without a running job go first.
+  trajectories_.erase(map);
+  for (auto it = trajectories_.begin();
+       it != trajectories_.end() && trajectories_.size() >= kMaxTrajectoryMaps;) {
+    it = jobs_.count(it->first) == 0 ? trajectories_.erase(it) : std::next(it);
+  }
+  auto trajectory = std::make_shared<TrajectoryRecord>();
+  trajectories_[map] = trajectory;
+  auto job = std::make_shared<SlamJob>(state_, map, job_id, options, deterministic, trajectory);
   job->Enter(std::move(listener));
   jobs_[map] = job;
   LogEvent("info", "slam_mapping_started", {{"map", map}, {"job", job_id}});
@@ -309,6 +324,18 @@ std::vector<std::shared_ptr<SlamJob>> SlamJobs::Running() const {
   std::vector<std::shared_ptr<SlamJob>> out;
   for (const auto& [name, job] : jobs_) out.push_back(job);
   return out;
+}
+
+std::shared_ptr<SlamJob> SlamJobs::RunningOn(const std::string& map) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const auto it = jobs_.find(map);
+  return it == jobs_.end() ? nullptr : it->second;
+}
+
+std::shared_ptr<const TrajectoryRecord> SlamJobs::Trajectory(const std::string& map) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const auto it = trajectories_.find(map);
+  return it == trajectories_.end() ? nullptr : it->second;
 }
 
 bool SlamJobs::WaitForAll(absl::Duration timeout) const {

@@ -30,6 +30,7 @@
 #include "core/slam/slam_tracker.h"
 #include "server/daemon_state.h"
 #include "server/device_worker.h"
+#include "server/trajectory_record.h"
 
 namespace plx::server {
 
@@ -65,12 +66,15 @@ class SlamJobListener {
 class SlamJob : public std::enable_shared_from_this<SlamJob> {
  public:
   SlamJob(DaemonState* state, std::string map, std::string job_id, SlamMapperOptions options,
-          bool deterministic);
+          bool deterministic, std::shared_ptr<TrajectoryRecord> trajectory);
   ~SlamJob();
 
   const std::string& map() const { return map_; }
   const SlamMapperOptions& options() const { return options_; }
   bool deterministic() const { return deterministic_; }
+  // Where the job's streams record their cameras and the job its keyframes (the web viewer's
+  // view of the job); it outlives the job in the registry (SlamJobs::Trajectory).
+  TrajectoryRecord& trajectory() const { return *trajectory_; }
 
   // Queues a keyframe (any thread) and schedules mapping.
   absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k);
@@ -107,11 +111,13 @@ class SlamJob : public std::enable_shared_from_this<SlamJob> {
   const std::string job_id_;
   const SlamMapperOptions options_;
   const bool deterministic_;
+  const std::shared_ptr<TrajectoryRecord> trajectory_;
 
   // Stepped by the job's task only (one at a time).
   std::unique_ptr<SlamMapper> mapper_;
   int64_t published_mapper_version_ = 0;  // the mapper's version last given to the store
   int integrated_at_publish_ = 0;
+  int keyframes_recorded_ = 0;  // keyframes integrated when trajectory_ last got their poses
 
   mutable std::mutex mutex_;  // guards what follows
   std::vector<std::shared_ptr<SlamJobListener>> members_;    // the streams on the job
@@ -139,6 +145,13 @@ class SlamJobs {
                                                 std::shared_ptr<SlamJobListener> listener);
   // Jobs still running (for metrics and drain).
   std::vector<std::shared_ptr<SlamJob>> Running() const;
+  // The running job on `map`, or null.
+  std::shared_ptr<SlamJob> RunningOn(const std::string& map) const;
+  // The cameras and keyframes of the map's running or last SLAM job (null: none since the
+  // daemon started). Each new job on a map starts a new record; records of at most
+  // kMaxTrajectoryMaps maps are kept (ended jobs' first go).
+  std::shared_ptr<const TrajectoryRecord> Trajectory(const std::string& map) const;
+  static constexpr size_t kMaxTrajectoryMaps = 64;
   // Drain: waits until every job has ended (they only integrate what they accepted once the
   // daemon drains and their streams are gone); false when `timeout` passed first.
   bool WaitForAll(absl::Duration timeout) const;
@@ -150,6 +163,7 @@ class SlamJobs {
   DaemonState* const state_;
   mutable std::mutex mutex_;
   std::map<std::string, std::shared_ptr<SlamJob>> jobs_;
+  std::map<std::string, std::shared_ptr<TrajectoryRecord>> trajectories_;
 };
 
 }  // namespace plx::server

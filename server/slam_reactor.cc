@@ -119,6 +119,7 @@ SlamReactor::SlamReactor(DaemonState* state, grpc::CallbackServerContext* contex
 SlamReactor::~SlamReactor() {
   // First: a notification in progress finishes before the members it reaches go away.
   if (listener_) listener_->Reset();
+  if (job_ != nullptr && camera_ >= 0) job_->trajectory().Close(camera_);
 }
 
 absl::Status SlamReactor::HandleFirstMessage() {
@@ -164,6 +165,7 @@ absl::Status SlamReactor::HandleFirstMessage() {
   PLX_ASSIGN_OR_RETURN(job_, state_->slam_jobs->Join(map_name_, SlamMapperOptionsOf(slam),
                                                      mapping_set, deterministic_, listener_));
   state_->metrics->slam_streams++;
+  camera_ = job_->trajectory().AddCamera();
   LogEvent("info", "slam_stream_joined",
            {{"map", map_name_}, {"job", job_->Status().job_id},
             {"streams", absl::StrCat(job_->Status().streams)}});
@@ -261,6 +263,7 @@ void SlamReactor::LeaveJobLocked() {
   if (left_job_ || job_ == nullptr) return;
   left_job_ = true;
   job_->Leave(listener_);
+  job_->trajectory().Close(camera_);
   state_->metrics->slam_streams--;
 }
 
@@ -279,6 +282,7 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
   bool client_error = false;  // the frame's data was bad: no error log, the stream just ends
   bool retry = false;         // the map has no version yet: the frame waits for it
   SlamFrameResult result;
+  std::string camera_label;  // the frame's camera_id, for the viewer
   const absl::Status failure = CatchAllocationFailure("SLAM tracking", [&]() -> absl::Status {
     const SlamMapView view = job->View();
     // Only the bootstrap frame (the map's first, from its first camera) tracks without a
@@ -296,6 +300,7 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
     }
     const RgbdFrame& frame = decoded->frame;
     const PinholeIntrinsics& k = decoded->calibration.pinhole;
+    camera_label = decoded->camera_id;
     if (!tracker_) {
       // A camera that joins a map with content, or a job that has accepted its first keyframe
       // from another stream, finds itself in it (relocalisation from the initial pose).
@@ -332,6 +337,7 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
     AdvanceLocked();
     return;
   }
+  job_->trajectory().Record(camera_, camera_label, result.timestamp, result.pose, result.state);
   update.set_frame(processed_++);
   update.set_timestamp(result.timestamp);
   PoseToProto(result.pose, update.mutable_pose());

@@ -74,6 +74,7 @@ class SlamReactor final : public StreamReactor<plenoxd::v1::SlamRequest, plenoxd
   bool done_sent_ = false;
   std::shared_ptr<SlamJob> job_;
   std::shared_ptr<SlamJobListener> listener_;
+  int camera_ = -1;  // this stream's camera in the job's TrajectoryRecord
   uint32_t processed_ = 0;
   int keyframes_ = 0;
   std::optional<SlamState> last_state_;  // logged when it changes

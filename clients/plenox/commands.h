@@ -16,6 +16,8 @@ int RunSlam(const std::vector<std::string>& args);
 int RunSynth(const std::vector<std::string>& args);
 int RunDemo(const std::vector<std::string>& args);
 int RunExport(const std::vector<std::string>& args);
+// The web viewer for a map file (web/viewer_routes.h), served on 127.0.0.1 until Ctrl-C.
+int RunView(const std::vector<std::string>& args);
 
 // The global flags that point plenox at a daemon (given before the command). With an empty
 // `server` everything runs in-process.

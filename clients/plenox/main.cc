@@ -27,6 +27,7 @@ constexpr char kUsage[] =
     "  render     render colour and depth images of a map from a pose\n"
     "  synth      write the synthetic RGB-D sequence to a folder (TUM layout)\n"
     "  export     write a map file as a PLY point cloud or, with --mesh, a triangle mesh\n"
+    "  view       open a map file in the web viewer (a local page; plenoxd --viewer for live maps)\n"
     "\n"
     "with --server, on the daemon's maps (map/slam --name N, track/render --map N):\n"
     "  map, track, slam, render, export   as above, the work done by the daemon\n"
@@ -42,7 +43,7 @@ constexpr char kUsage[] =
 
 // Commands that only exist against a daemon, and commands that only run in-process.
 const std::set<std::string> kDaemonOnly = {"maps", "save", "load", "info"};
-const std::set<std::string> kInProcessOnly = {"demo", "eval-map", "eval-traj", "synth"};
+const std::set<std::string> kInProcessOnly = {"demo", "eval-map", "eval-traj", "synth", "view"};
 
 int UsageError(const std::string& message) {
   std::cerr << "plenox: " << message << "\n(plenox --help for usage)\n";
@@ -166,6 +167,7 @@ int main(int argc, char** argv) {
   if (command == "synth") return plx::cli::RunSynth(args);
   if (command == "export") return plx::cli::RunExport(args);
   if (command == "demo") return plx::cli::RunDemo(args);
+  if (command == "view") return plx::cli::RunView(args);
   std::cerr << "plenox: unknown command \"" << command << "\"\n\n" << kUsage;
   return 2;
 }

@@ -1,7 +1,7 @@
-// The side HTTP server (server/http_server.h) on loopback ports: routes, 404s, bounded request
+// The side HTTP server (web/http_server.h) on loopback ports: routes, 404s, bounded request
 // bodies, a busy port, and connections that sit idle: they must neither hold up a scrape nor
 // stay open past the keep-alive timeout.
-#include "server/http_server.h"
+#include "web/http_server.h"
 
 #include <unistd.h>
 
@@ -14,6 +14,10 @@
 
 namespace plx::server::testing {
 namespace {
+
+using web::HttpResponse;
+using web::HttpServer;
+using web::HttpServerOptions;
 
 // Sockets opened by a test, closed when it ends.
 struct Sockets {

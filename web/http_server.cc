@@ -1,4 +1,4 @@
-#include "server/http_server.h"
+#include "web/http_server.h"
 
 #include <sys/socket.h>
 
@@ -14,7 +14,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 
-namespace plx::server {
+namespace plx::web {
 namespace {
 
 // httplib takes seconds and microseconds.
@@ -41,8 +41,30 @@ HttpServer::~HttpServer() {
   }
 }
 
+HttpResponse TextResponse(int status, const std::string& text) {
+  return HttpResponse{status, "text/plain; charset=utf-8", text + "\n"};
+}
+
 void HttpServer::Get(const std::string& path, Handler handler) {
-  routes_[path] = std::move(handler);
+  exact_[path] = [handler = std::move(handler)](const HttpRequest&) { return handler(); };
+}
+
+void HttpServer::GetPrefix(const std::string& prefix, RequestHandler handler) {
+  prefixes_[prefix] = std::move(handler);
+}
+
+const HttpServer::RequestHandler* HttpServer::Find(const std::string& path) const {
+  if (const auto exact = exact_.find(path); exact != exact_.end()) return &exact->second;
+  const RequestHandler* best = nullptr;
+  size_t best_length = 0;
+  for (const auto& [prefix, handler] : prefixes_) {
+    if (path.size() >= prefix.size() && path.compare(0, prefix.size(), prefix) == 0 &&
+        prefix.size() >= best_length) {
+      best = &handler;
+      best_length = prefix.size();
+    }
+  }
+  return best;
 }
 
 absl::Status HttpServer::Start() {
@@ -66,20 +88,27 @@ absl::Status HttpServer::Start() {
     setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof(one));
   });
 
-  // One catch-all route: paths are matched exactly here rather than as httplib's regexes.
+  // One catch-all route: paths are matched here (exactly, or by prefix) rather than as
+  // httplib's regexes.
   std::vector<std::string> paths;
-  for (const auto& [path, handler] : routes_) paths.push_back(path);
+  for (const auto& [path, handler] : exact_) paths.push_back(path);
+  for (const auto& [prefix, handler] : prefixes_) paths.push_back(prefix + "...");
   const std::string not_found = absl::StrCat("plenoxd serves ", absl::StrJoin(paths, ", "), "\n");
   s.Get(".*", [this, not_found](const httplib::Request& request, httplib::Response& response) {
-    const auto route = routes_.find(request.path);
-    if (route == routes_.end()) {
+    const RequestHandler* handler = Find(request.path);
+    if (handler == nullptr) {
       response.status = 404;
       response.set_content(not_found, "text/plain; charset=utf-8");
       return;
     }
-    HttpResponse r = route->second();
-    response.status = r.status;
-    response.set_content(std::move(r.body), r.content_type.c_str());
+    HttpRequest r;
+    r.path = request.path;
+    for (const auto& [name, value] : request.params) r.params.emplace(name, value);
+    r.authorization = request.get_header_value("Authorization");
+    HttpResponse answer = (*handler)(r);
+    response.status = answer.status;
+    for (const auto& [name, value] : answer.headers) response.set_header(name, value);
+    response.set_content(std::move(answer.body), answer.content_type.c_str());
   });
 
   const bool bound = options_.port == 0 ? (port_ = s.bind_to_any_port(options_.host)) > 0
@@ -104,4 +133,4 @@ absl::Status HttpServer::Start() {
   return absl::OkStatus();
 }
 
-}  // namespace plx::server
+}  // namespace plx::web

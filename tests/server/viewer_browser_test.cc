@@ -1,0 +1,119 @@
+// The viewer page in a real browser: plenoxd with --viewer, a Slam stream building a map and
+// kept open, the page loaded in headless Chromium (tests/server/viewer_browser.py drives it
+// over the DevTools pipe; WebGL on SwiftShader). It must draw the map (non-background pixels in
+// the 3D view), show the stream's camera and path in its colour, follow the path as it grows
+// without a reload, and show a render when the camera is clicked. The screenshot goes to
+// $PLX_VIEWER_SCREENSHOT when set (docs/images/viewer.png is made this way).
+#include <atomic>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+#include "core/io/image_io.h"
+#include "tests/server/viewer_fixture.h"
+
+#ifndef PLX_SOURCE_DIR
+#error "PLX_SOURCE_DIR must name the source tree (tests/CMakeLists.txt)"
+#endif
+
+namespace plx::server::testing {
+namespace {
+
+// Debian's chromium, or $PLX_CHROMIUM; empty when there is none.
+std::string FindChromium() {
+  if (const char* env = std::getenv("PLX_CHROMIUM"); env != nullptr && *env != '\0') return env;
+  for (const char* path : {"/usr/bin/chromium", "/usr/bin/chromium-browser"}) {
+    if (std::filesystem::exists(path)) return path;
+  }
+  return "";
+}
+
+// Runs `command`, returning its exit status and stdout.
+int RunCommand(const std::string& command, std::string* output) {
+  FILE* pipe = popen(command.c_str(), "r");
+  if (pipe == nullptr) return -1;
+  char buffer[4096];
+  size_t n = 0;
+  while ((n = fread(buffer, 1, sizeof(buffer), pipe)) > 0) output->append(buffer, n);
+  const int status = pclose(pipe);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+// The page's colours (web/viewer_assets): the 3D view's background and the first camera's.
+constexpr int kBackground[3] = {0x15, 0x18, 0x1d};
+constexpr int kFirstCamera[3] = {0xff, 0x2b, 0xd6};
+
+bool Near(const uint8_t* rgb, const int* colour, int tolerance) {
+  return std::abs(rgb[0] - colour[0]) <= tolerance && std::abs(rgb[1] - colour[1]) <= tolerance &&
+         std::abs(rgb[2] - colour[2]) <= tolerance;
+}
+
+TEST(ViewerBrowserTest, PageDrawsTheMapAndALiveSlamCamera) {
+  PLX_SKIP_WITHOUT_THREE_JS();
+  const std::string chromium = FindChromium();
+  if (chromium.empty()) {
+    GTEST_SKIP() << "no chromium (Debian's package; scripts/install_deps.sh installs it, or set "
+                    "$PLX_CHROMIUM)";
+  }
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started =
+      StartTestDaemon(ViewerDaemonOptions("plx_srv_viewer_browser"));
+  ASSERT_TRUE(started.ok()) << started.status();
+  const int port = (*started)->daemon->metrics_port();
+  OpenSlamStream stream(*(*started)->stub, "live", ViewerSlamOptions());
+  ASSERT_TRUE(stream.Advance(12));
+  ASSERT_GE(stream.keyframes(), 1);
+  // The stream goes on while the page is open: the page must follow without a reload.
+  std::atomic<bool> stop{false};
+  std::thread walker([&] {
+    while (!stop && stream.Advance(1)) absl::SleepFor(absl::Milliseconds(300));
+  });
+
+  const std::string shot = ScratchDir("plx_srv_viewer_shot") + "/viewer.png";
+  const std::string command = absl::StrCat(
+      "/usr/bin/python3 ", PLX_SOURCE_DIR, "/tests/server/viewer_browser.py --chromium ",
+      chromium, " --url 'http://127.0.0.1:", port, "/viewer/#map=live' --out ", shot,
+      " --min-points 500 --min-cameras 1 --min-path 5 --path-grows --click-camera"
+      " --timeout 60");
+  std::string state;
+  const int status = RunCommand(command, &state);
+  stop = true;
+  walker.join();
+  const grpc::Status closed = stream.Close();
+  EXPECT_TRUE(closed.ok()) << Describe(closed);
+  ASSERT_EQ(status, 0) << "viewer_browser.py: " << state;
+  std::printf("page state: %s", state.c_str());
+
+  absl::StatusOr<cv::Mat> decoded = DecodeColorFile(shot);
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  const cv::Mat& rgb_image = *decoded;  // RGB order (core/io/image_io.h)
+  // The 3D view lies between the two panels (220 px and 260 px wide, viewer.css).
+  const int x0 = 230, x1 = rgb_image.cols - 270, y0 = 40, y1 = rgb_image.rows - 10;
+  ASSERT_GT(x1, x0);
+  int64_t drawn = 0, camera = 0, total = 0;
+  for (int y = y0; y < y1; ++y) {
+    for (int x = x0; x < x1; ++x) {
+      const cv::Vec3b& p = rgb_image.at<cv::Vec3b>(y, x);
+      const uint8_t rgb[3] = {p[0], p[1], p[2]};
+      ++total;
+      drawn += !Near(rgb, kBackground, 12);
+      camera += Near(rgb, kFirstCamera, 40);
+    }
+  }
+  std::printf("3D view: %.1f%% drawn, %lld pixels in the camera's colour\n",
+              100.0 * drawn / total, static_cast<long long>(camera));
+  EXPECT_GT(drawn, total / 20) << "the map was not drawn";
+  EXPECT_GT(camera, 30) << "the SLAM camera's marker and path are not in view";
+
+  if (const char* keep = std::getenv("PLX_VIEWER_SCREENSHOT"); keep != nullptr && *keep) {
+    std::error_code ec;
+    std::filesystem::copy_file(shot, keep, std::filesystem::copy_options::overwrite_existing, ec);
+    EXPECT_FALSE(ec) << keep << ": " << ec.message();
+  }
+}
+
+}  // namespace
+}  // namespace plx::server::testing

@@ -1,0 +1,316 @@
+// The web viewer on plenoxd's HTTP port (--viewer): the page and three.js, the map list, point
+// clouds, live SLAM trajectories and renders, authentication, and bad requests answered with
+// 4xx instead of work or a crash. Also the pieces on their own: the trajectory record's bounds
+// and the point cloud thinning.
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "core/io/image_io.h"
+#include "server/trajectory_record.h"
+#include "tests/server/viewer_fixture.h"
+#include "web/point_cloud_cache.h"
+
+namespace plx::server::testing {
+namespace {
+
+int CountOccurrences(const std::string& text, const std::string& what) {
+  int n = 0;
+  for (size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
+  return n;
+}
+
+// The number after `"key":` in a JSON text (the first occurrence), or -1.
+double JsonNumber(const std::string& json, const std::string& key) {
+  const std::string pattern = absl::StrCat("\"", key, "\":");
+  const size_t at = json.find(pattern);
+  if (at == std::string::npos) return -1;
+  return std::atof(json.c_str() + at + pattern.size());
+}
+
+// The vertex count of a PLY header, or -1.
+int64_t PlyVertices(const std::string& ply) {
+  const std::string pattern = "element vertex ";
+  const size_t at = ply.find(pattern);
+  return at == std::string::npos ? -1 : std::atoll(ply.c_str() + at + pattern.size());
+}
+
+// A render query from frame `index`'s true pose, percent-encoded.
+std::string RenderQuery(const std::string& map, int index, int width, int height,
+                        const std::string& image) {
+  const SE3 pose = GroundTruth(index);
+  const Eigen::Vector3d& t = pose.translation();
+  const Eigen::Quaterniond& q = pose.rotation();
+  return absl::StrCat("/viewer/api/render?map=", map, "&pose=", t.x(), "%2C", t.y(), "%2C", t.z(),
+                      "%2C", q.x(), "%2C", q.y(), "%2C", q.z(), "%2C", q.w(),
+                      "&width=", width, "&height=", height, "&fov=50&image=", image);
+}
+
+TEST(ViewerTest, ServesThePageTheMapsPointsAndRenders) {
+  PLX_SKIP_WITHOUT_THREE_JS();
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started =
+      StartWithMaps({"room"}, ViewerDaemonOptions("plx_srv_viewer"));
+  ASSERT_TRUE(started.ok()) << started.status();
+  const int port = (*started)->daemon->metrics_port();
+  ASSERT_GT(port, 0);
+
+  for (const char* page : {"/viewer/", "/viewer"}) {
+    const HttpAnswer html = HttpGetAnswer(port, page);
+    EXPECT_EQ(html.status, 200) << page;
+    EXPECT_NE(html.headers.find("content-type: text/html"), std::string::npos);
+    EXPECT_NE(html.body.find("/viewer/three/three.min.js"), std::string::npos);
+  }
+  for (const char* script : {"/viewer/viewer.js", "/viewer/three/three.min.js",
+                             "/viewer/three/OrbitControls.js"}) {
+    const HttpAnswer js = HttpGetAnswer(port, script);
+    EXPECT_EQ(js.status, 200) << script;
+    EXPECT_NE(js.headers.find("content-type: text/javascript"), std::string::npos) << script;
+    EXPECT_GT(js.body.size(), 1000u) << script;
+  }
+  EXPECT_NE(HttpGetAnswer(port, "/viewer/three/OrbitControls.js").body.find("OrbitControls"),
+            std::string::npos);
+  // /metrics is still served beside it.
+  EXPECT_EQ(HttpGetAnswer(port, "/metrics").status, 200);
+
+  const HttpAnswer maps = HttpGetAnswer(port, "/viewer/api/maps");
+  ASSERT_EQ(maps.status, 200) << maps.body;
+  EXPECT_NE(maps.headers.find("content-type: application/json"), std::string::npos);
+  EXPECT_NE(maps.body.find("\"name\":\"room\""), std::string::npos) << maps.body;
+  EXPECT_NE(maps.body.find("\"title\":\"plenoxd "), std::string::npos) << maps.body;
+
+  const HttpAnswer points = HttpGetAnswer(port, "/viewer/api/points?map=room");
+  ASSERT_EQ(points.status, 200) << points.body.substr(0, 200);
+  ASSERT_EQ(points.body.rfind("ply\nformat binary_little_endian 1.0\n", 0), 0u);
+  const int64_t n = PlyVertices(points.body);
+  EXPECT_GT(n, 1000);
+  EXPECT_NE(points.headers.find(absl::StrCat("x-points: ", n)), std::string::npos);
+  const size_t body_at = points.body.find("end_header\n") + 11;
+  EXPECT_EQ(points.body.size() - body_at, static_cast<size_t>(n) * 15);
+  // Asked again: the same cloud (built once per version).
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/points?map=room").body, points.body);
+
+  const HttpAnswer color = HttpGetAnswer(port, RenderQuery("room", 5, 160, 120, "color"));
+  ASSERT_EQ(color.status, 200) << color.body;
+  EXPECT_NE(color.headers.find("content-type: image/png"), std::string::npos);
+  absl::StatusOr<cv::Mat> decoded = DecodeColorBuffer(color.body, "render");
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  const ColorImage image = ColorImageFromMat(*decoded);
+  EXPECT_EQ(image.width, 160);
+  EXPECT_EQ(image.height, 120);
+  int lit = 0;
+  for (int64_t i = 0; i < image.num_pixels(); ++i) {
+    lit += image.data[3 * i] + image.data[3 * i + 1] + image.data[3 * i + 2] > 0.1f;
+  }
+  EXPECT_GT(lit, image.num_pixels() * 9 / 10) << "the room fills the view from its own path";
+  const HttpAnswer depth = HttpGetAnswer(port, RenderQuery("room", 5, 160, 120, "depth"));
+  ASSERT_EQ(depth.status, 200) << depth.body;
+  EXPECT_NE(depth.headers.find("x-depth-range: "), std::string::npos);
+  EXPECT_NE(depth.body, color.body);
+
+  // A map without SLAM has no cameras.
+  const HttpAnswer trajectory = HttpGetAnswer(port, "/viewer/api/trajectory?map=room");
+  ASSERT_EQ(trajectory.status, 200) << trajectory.body;
+  EXPECT_NE(trajectory.body.find("\"cameras\":[]"), std::string::npos) << trajectory.body;
+}
+
+TEST(ViewerTest, BadRequestsGet4xxAndTheDaemonGoesOn) {
+  PLX_SKIP_WITHOUT_THREE_JS();
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started =
+      StartWithMaps({"room"}, ViewerDaemonOptions("plx_srv_viewer_bad"));
+  ASSERT_TRUE(started.ok()) << started.status();
+  const int port = (*started)->daemon->metrics_port();
+  const std::string ok_pose = "0%2C0%2C0%2C0%2C0%2C0%2C1";
+  auto render = [&](const std::string& params) {
+    return HttpGetAnswer(port, "/viewer/api/render?map=room&" + params).status;
+  };
+  const std::string size = "&width=64&height=48&fov=50";
+  // Unknown maps and paths.
+  for (const std::string& path :
+       {std::string("/viewer/api/points?map=nope"), std::string("/viewer/api/trajectory?map=nope"),
+        absl::StrCat("/viewer/api/render?map=nope&pose=", ok_pose, size),
+        std::string("/viewer/api/nothing"), std::string("/viewer/api/"),
+        std::string("/viewer/../metrics/x"), std::string("/viewer/three/../../etc/passwd"),
+        std::string("/viewer/three/three.js"), std::string("/viewerx"), std::string("/%00"),
+        std::string("/viewer/%2e%2e/%2e%2e/etc/passwd"), std::string("/")}) {
+    const HttpAnswer a = HttpGetAnswer(port, path);
+    EXPECT_EQ(a.status, 404) << path << ": " << a.body;
+  }
+  // Missing or malformed parameters, sizes and ranges.
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/points").status, 400);
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/points?map=").status, 400);
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/points?map=" + std::string(300, 'x')).status, 400);
+  EXPECT_EQ(render(size), 400);                                             // no pose
+  EXPECT_EQ(render("pose=1%2C2%2C3" + size), 400);                          // 3 numbers
+  EXPECT_EQ(render("pose=0%2C0%2C0%2C0%2C0%2C0%2C0" + size), 400);          // zero quaternion
+  EXPECT_EQ(render("pose=nan%2C0%2C0%2C0%2C0%2C0%2C1" + size), 400);
+  EXPECT_EQ(render("pose=1e300%2C0%2C0%2C0%2C0%2C0%2C1" + size), 400);      // outside the world
+  EXPECT_EQ(render("pose=" + ok_pose + "&width=64&height=48"), 400);        // no fov
+  EXPECT_EQ(render("pose=" + ok_pose + "&width=64&height=48&fov=0"), 400);
+  EXPECT_EQ(render("pose=" + ok_pose + "&width=64&height=48&fov=180"), 400);
+  EXPECT_EQ(render("pose=" + ok_pose + "&width=0&height=48&fov=50"), 400);
+  EXPECT_EQ(render("pose=" + ok_pose + "&width=-5&height=48&fov=50"), 400);
+  EXPECT_EQ(render("pose=" + ok_pose + "&width=100000&height=100000&fov=50"), 400);
+  EXPECT_EQ(render("pose=" + ok_pose + "&width=99999999999999999999&height=4&fov=50"), 400);
+  EXPECT_EQ(render("pose=" + ok_pose + "&width=1024&height=1024&fov=50"), 400);  // > pixels
+  EXPECT_EQ(render("pose=" + ok_pose + size + "&image=normals"), 400);
+  // A request line over httplib's bound is refused before any handler.
+  const HttpAnswer huge = HttpGetAnswer(port, "/viewer/api/points?map=" + std::string(20000, 'x'));
+  EXPECT_GE(huge.status, 400);
+  EXPECT_LT(huge.status, 500);
+  // Still serving.
+  EXPECT_EQ(render("pose=" + ok_pose + size), 200);
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/maps").status, 200);
+  EXPECT_EQ(HealthCheck(*(*started)->health), kServing);
+}
+
+TEST(ViewerTest, ApiNeedsTheTokenWhenAuthIsOn) {
+  PLX_SKIP_WITHOUT_THREE_JS();
+  DaemonOptions o = ViewerDaemonOptions("plx_srv_viewer_auth");
+  o.auth_token = "s3cret-token";
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartWithMaps({"room"}, o);
+  ASSERT_TRUE(started.ok()) << started.status();
+  const int port = (*started)->daemon->metrics_port();
+  // The page carries no map data: served to anyone, and it asks for the token.
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/").status, 200);
+  const HttpAnswer none = HttpGetAnswer(port, "/viewer/api/maps");
+  EXPECT_EQ(none.status, 401);
+  EXPECT_NE(none.headers.find("www-authenticate: bearer"), std::string::npos);
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/maps", "Authorization: Bearer wrong\r\n").status,
+            401);
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/points?map=room&token=wrong").status, 401);
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/points?map=nope").status, 401)
+      << "no answer about which maps exist without the token";
+  const HttpAnswer header =
+      HttpGetAnswer(port, "/viewer/api/maps", "Authorization: Bearer s3cret-token\r\n");
+  EXPECT_EQ(header.status, 200);
+  EXPECT_NE(header.body.find("\"auth\":true"), std::string::npos);
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/maps?token=s3cret-token").status, 200);
+}
+
+TEST(ViewerTest, StartChecksTheViewersNeeds) {
+  DaemonOptions no_port = ViewerDaemonOptions("plx_srv_viewer_noport");
+  no_port.metrics_port = -1;
+  absl::StatusOr<std::unique_ptr<Daemon>> d = Daemon::Start(no_port);
+  EXPECT_EQ(d.status().code(), absl::StatusCode::kInvalidArgument) << d.status();
+  EXPECT_NE(d.status().message().find("--metrics-port"), std::string::npos) << d.status();
+
+  DaemonOptions no_three = ViewerDaemonOptions("plx_srv_viewer_nothree");
+  no_three.viewer_three_dir = ScratchDir("plx_srv_no_three");
+  d = Daemon::Start(no_three);
+  EXPECT_EQ(d.status().code(), absl::StatusCode::kNotFound) << d.status();
+  EXPECT_NE(d.status().message().find("libjs-three"), std::string::npos) << d.status();
+
+  // Off unless asked for: no /viewer/ on the metrics port.
+  DaemonOptions off = TestDaemonOptions(ScratchDir("plx_srv_viewer_off"));
+  off.metrics_port = 0;
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(off);
+  ASSERT_TRUE(started.ok()) << started.status();
+  EXPECT_EQ(HttpGetAnswer((*started)->daemon->metrics_port(), "/viewer/").status, 404);
+}
+
+// A running Slam stream shows up: its camera (pose, path), its keyframes, the live map.
+TEST(ViewerTest, TrajectoryFollowsARunningSlamStream) {
+  PLX_SKIP_WITHOUT_THREE_JS();
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started =
+      StartTestDaemon(ViewerDaemonOptions("plx_srv_viewer_slam"));
+  ASSERT_TRUE(started.ok()) << started.status();
+  const int port = (*started)->daemon->metrics_port();
+  OpenSlamStream stream(*(*started)->stub, "live", ViewerSlamOptions());
+  ASSERT_TRUE(stream.Advance(6));
+  HttpAnswer t = HttpGetAnswer(port, "/viewer/api/trajectory?map=live");
+  ASSERT_EQ(t.status, 200) << t.body;
+  EXPECT_NE(t.body.find("\"slam_running\":true"), std::string::npos) << t.body;
+  EXPECT_NE(t.body.find("\"active\":true"), std::string::npos) << t.body;
+  EXPECT_EQ(JsonNumber(t.body, "frames"), 6) << t.body;
+  EXPECT_NE(t.body.find("\"keyframes\":[["), std::string::npos) << t.body;
+  // The camera's pose is frame 5's, near the truth (lock-step tracking is mm-accurate).
+  const size_t pose_at = t.body.find("\"pose\":[");
+  ASSERT_NE(pose_at, std::string::npos);
+  const Eigen::Vector3d truth = GroundTruth(5).translation();
+  double x = 0, y = 0, z = 0;
+  ASSERT_EQ(std::sscanf(t.body.c_str() + pose_at + 8, "%lf,%lf,%lf", &x, &y, &z), 3);
+  EXPECT_LT((Eigen::Vector3d(x, y, z) - truth).norm(), 0.05) << t.body.substr(pose_at, 120);
+  // The live map has content.
+  EXPECT_GT(PlyVertices(HttpGetAnswer(port, "/viewer/api/points?map=live").body), 100);
+
+  ASSERT_TRUE(stream.Advance(4));
+  t = HttpGetAnswer(port, "/viewer/api/trajectory?map=live");
+  EXPECT_EQ(JsonNumber(t.body, "frames"), 10) << t.body;
+  const grpc::Status closed = stream.Close();
+  ASSERT_TRUE(closed.ok()) << Describe(closed);
+  // After the stream: the camera is kept, marked ended.
+  t = HttpGetAnswer(port, "/viewer/api/trajectory?map=live");
+  EXPECT_NE(t.body.find("\"active\":false"), std::string::npos) << t.body;
+  EXPECT_EQ(CountOccurrences(t.body, "\"id\":"), 1) << t.body;
+}
+
+TEST(TrajectoryRecordTest, PathsAndCamerasStayBounded) {
+  TrajectoryRecord record;
+  const int id = record.AddCamera();
+  const int frames = 3 * static_cast<int>(TrajectoryRecord::kMaxPathPoints) + 17;
+  for (int i = 0; i < frames; ++i) {
+    record.Record(id, i == 0 ? "kinect" : "", i / 30.0, SE3(Eigen::Quaterniond::Identity(),
+                                                           Eigen::Vector3d(0.001 * i, 0, 0)),
+                  SlamState::kOk);
+  }
+  std::vector<web::CameraTrack> cameras = record.Cameras();
+  ASSERT_EQ(cameras.size(), 1u);
+  const web::CameraTrack& c = cameras[0];
+  EXPECT_EQ(c.label, "kinect");
+  EXPECT_EQ(c.frames, frames);
+  EXPECT_EQ(c.state, "OK");
+  EXPECT_LE(c.path.size(), TrajectoryRecord::kMaxPathPoints + 1);
+  EXPECT_GE(c.path.size(), TrajectoryRecord::kMaxPathPoints / 2);
+  // The whole way, from the first frame to the last.
+  EXPECT_DOUBLE_EQ(c.path.front().x(), 0.0);
+  EXPECT_NEAR(c.path.back().x(), 0.001 * (frames - 1), 1e-12);
+  for (size_t i = 1; i < c.path.size(); ++i) ASSERT_GT(c.path[i].x(), c.path[i - 1].x());
+
+  for (size_t i = 0; i < 2 * TrajectoryRecord::kMaxCameras; ++i) record.Close(record.AddCamera());
+  EXPECT_EQ(record.Cameras().size(), TrajectoryRecord::kMaxCameras);
+
+  std::vector<StampedPose> keyframes(TrajectoryRecord::kMaxKeyframes + 5);
+  for (size_t i = 0; i < keyframes.size(); ++i) {
+    keyframes[i].pose = SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(i, 0, 0));
+  }
+  record.SetKeyframes(keyframes);
+  const std::vector<SE3> kept = record.Keyframes();
+  ASSERT_EQ(kept.size(), TrajectoryRecord::kMaxKeyframes);
+  EXPECT_EQ(kept.back().translation().x(), keyframes.size() - 1.0);  // the newest
+}
+
+TEST(PointCloudThinningTest, KeepsEveryKthPointAndRewritesTheCount) {
+  std::string body;
+  const int n = 1000;
+  for (int i = 0; i < n; ++i) {
+    const float xyz[3] = {static_cast<float>(i), 0.0f, 0.0f};
+    body.append(reinterpret_cast<const char*>(xyz), 12);
+    body.append("\x01\x02\x03", 3);
+  }
+  const std::string ply = absl::StrCat(
+      "ply\nformat binary_little_endian 1.0\ncomment t\nelement vertex ", n,
+      "\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\n"
+      "property uchar green\nproperty uchar blue\nend_header\n", body);
+  absl::StatusOr<web::PointCloud> thin = web::ThinPointCloudPly(ply, 300);
+  ASSERT_TRUE(thin.ok()) << thin.status();
+  EXPECT_EQ(thin->surface_points, n);
+  EXPECT_EQ(thin->points, 250);  // every 4th
+  EXPECT_EQ(PlyVertices(thin->ply), 250);
+  const size_t body_at = thin->ply.find("end_header\n") + 11;
+  ASSERT_EQ(thin->ply.size() - body_at, 250u * 15);
+  float x = 0;
+  std::memcpy(&x, thin->ply.data() + body_at + 15 * 249, 4);
+  EXPECT_EQ(x, 996.0f);
+  absl::StatusOr<web::PointCloud> all = web::ThinPointCloudPly(ply, 5000);
+  ASSERT_TRUE(all.ok());
+  EXPECT_EQ(all->ply, ply);
+  EXPECT_FALSE(web::ThinPointCloudPly(ply.substr(0, ply.size() - 1), 300).ok());
+  EXPECT_FALSE(web::ThinPointCloudPly("not a ply", 300).ok());
+}
+
+}  // namespace
+}  // namespace plx::server::testing
