@@ -54,24 +54,12 @@ absl::StatusOr<PointCloud> ThinPointCloudPly(const std::string& ply, int64_t max
 
 absl::StatusOr<std::shared_ptr<const PointCloud>> PointCloudCache::Get(const std::string& name,
                                                                         const ViewerMap& map) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  for (auto it = entries_.begin(); it != entries_.end(); ++it) {
-    if (it->name == name && it->version == map.version) {
-      entries_.splice(entries_.begin(), entries_, it);
-      return entries_.front().cloud;
-    }
-  }
-  absl::StatusOr<PlyExport> exported =
-      ExportSurfacePointsPly(*map.map, kDefaultExportMinDensity);
-  if (!exported.ok()) return exported.status();
-  absl::StatusOr<PointCloud> thinned = ThinPointCloudPly(exported->bytes, max_points_);
-  if (!thinned.ok()) return thinned.status();
-  auto cloud = std::make_shared<const PointCloud>(std::move(*thinned));
-  // An older version of the same map is no use any more.
-  entries_.remove_if([&](const Entry& e) { return e.name == name; });
-  entries_.push_front(Entry{name, map.version, cloud});
-  while (entries_.size() > kEntries) entries_.pop_back();
-  return cloud;
+  return cache_.Get(name, map.version, [&]() -> absl::StatusOr<PointCloud> {
+    absl::StatusOr<PlyExport> exported =
+        ExportSurfacePointsPly(*map.map, kDefaultExportMinDensity);
+    if (!exported.ok()) return exported.status();
+    return ThinPointCloudPly(exported->bytes, max_points_);
+  });
 }
 
 }  // namespace plx::web

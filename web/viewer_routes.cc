@@ -73,7 +73,8 @@ Viewer::Viewer(ViewerSource* source, ThreeJsFiles three, ViewerOptions options)
     : source_(source),
       three_(std::move(three)),
       options_(std::move(options)),
-      points_(options_.max_points) {}
+      points_(options_.max_points),
+      meshes_(options_.max_mesh_triangles, options_.mesh_timeout) {}
 
 void Viewer::AddRoutes(HttpServer& server) {
   server.GetPrefix("/viewer", [this](const HttpRequest& r) { return Handle(r); });
@@ -124,13 +125,15 @@ HttpResponse Viewer::Api(const HttpRequest& request) {
   if (absl::Status s = CheckToken(request); !s.ok()) return ErrorResponse(s);
   const std::string endpoint = request.path.substr(sizeof("/viewer/api/") - 1);
   if (endpoint == "maps") return Maps();
-  if (endpoint != "points" && endpoint != "trajectory" && endpoint != "render") {
+  if (endpoint != "points" && endpoint != "mesh" && endpoint != "trajectory" &&
+      endpoint != "render") {
     return JsonError(404, absl::StrCat("no such endpoint: ", request.path.substr(0, 128)));
   }
   const std::string* map = request.Param("map");
   if (map == nullptr || map->empty()) return JsonError(400, "map: missing");
   if (map->size() > kMaxMapNameBytes) return JsonError(400, "map: name too long");
   if (endpoint == "points") return Points(*map);
+  if (endpoint == "mesh") return Mesh(*map);
   if (endpoint == "trajectory") return Trajectory(*map);
   return Render(request, *map);
 }
@@ -141,6 +144,7 @@ HttpResponse Viewer::Maps() {
   json.Key("auth").Bool(!options_.auth_token.empty());
   json.Key("max_render_side").Int(kMaxViewerRenderSide);
   json.Key("max_render_pixels").Int(options_.max_render_pixels);
+  json.Key("max_mesh_triangles").Int(options_.max_mesh_triangles);
   json.Key("maps").BeginArray();
   for (const ViewerMapInfo& m : source_->ListMaps()) {
     json.BeginObject()
@@ -170,6 +174,25 @@ HttpResponse Viewer::Points(const std::string& map) {
                        {"X-Map-Version", absl::StrCat(latest->version)},
                        {"X-Points", absl::StrCat((*cloud)->points)},
                        {"X-Surface-Points", absl::StrCat((*cloud)->surface_points)}}};
+}
+
+HttpResponse Viewer::Mesh(const std::string& map) {
+  absl::StatusOr<ViewerMap> latest = source_->Latest(map);
+  if (!latest.ok()) return ErrorResponse(latest.status());
+  absl::StatusOr<std::shared_ptr<const ViewerMesh>> mesh = meshes_.Get(*source_, map, *latest);
+  if (!mesh.ok()) return ErrorResponse(mesh.status());
+  if (!(*mesh)->too_large.empty()) {
+    HttpResponse r = JsonError(413, (*mesh)->too_large);
+    r.headers.push_back({"X-Map-Version", absl::StrCat(latest->version)});
+    return r;
+  }
+  return HttpResponse{200,
+                      "application/octet-stream",
+                      (*mesh)->ply,
+                      {kNoStore,
+                       {"X-Map-Version", absl::StrCat(latest->version)},
+                       {"X-Vertices", absl::StrCat((*mesh)->vertices)},
+                       {"X-Faces", absl::StrCat((*mesh)->faces)}}};
 }
 
 HttpResponse Viewer::Trajectory(const std::string& map) {

@@ -5,14 +5,17 @@
 //   /viewer/three/OrbitControls.js  its orbit controls
 //   /viewer/api/maps              JSON: the title and the maps (name, version, bricks, ...)
 //   /viewer/api/points?map=M      PLY: M's coloured surface points (web/point_cloud_cache.h)
+//   /viewer/api/mesh?map=M        PLY: M's triangle mesh with normals and colours
+//                                 (web/viewer_mesh.h); 413 over max_mesh_triangles
 //   /viewer/api/trajectory?map=M  JSON: M's SLAM cameras (pose, path) and keyframes
 //   /viewer/api/render?map=M&...  PNG: M rendered from a pose (web/viewer_render.h)
 //
 // With a token set, every /viewer/api/ request needs "Authorization: Bearer <token>" (or
 // ?token=<token>) and gets 401 without it; the page and scripts carry no map data and are served
 // to anyone who reaches the port. Errors: 400 for bad parameters, 404 for unknown maps and
-// paths, 503 while every render slot is busy; the body is JSON {"error": "..."}. Every request's
-// work is bounded: renders by size, count and time, point clouds by count and a cache.
+// paths, 413 for a mesh over the triangle cap, 503 while every render slot is busy; the body is
+// JSON {"error": "..."}. Every request's work is bounded: renders by size, count and time, point
+// clouds by count and a cache, meshes by triangles, time and a cache.
 #pragma once
 
 #include <atomic>
@@ -24,6 +27,7 @@
 #include "absl/time/time.h"
 #include "web/http_server.h"
 #include "web/point_cloud_cache.h"
+#include "web/viewer_mesh.h"
 #include "web/three_js.h"
 #include "web/viewer_source.h"
 
@@ -37,6 +41,11 @@ struct ViewerOptions {
   int max_concurrent_renders = 2;  // more get 503 (a render holds a device worker)
   absl::Duration render_timeout = absl::Seconds(20);
   int64_t max_points = 500000;     // per point cloud (7.5 MB of PLY)
+  // Triangles per mesh, counted as marching cubes makes them (before the faces no view saw are
+  // dropped): about 27 MB of PLY at most. A larger mesh is refused with 413: a browser would
+  // not draw it smoothly, and `plenox export --mesh` writes it.
+  int64_t max_mesh_triangles = 1'000'000;
+  absl::Duration mesh_timeout = absl::Seconds(60);  // on the device, like a render's
   // Camera positions per track and keyframes per map in a trajectory answer.
   int max_track_points = 2048;
   int max_keyframes = 2048;
@@ -61,6 +70,7 @@ class Viewer {
   HttpResponse Api(const HttpRequest& request);
   HttpResponse Maps();
   HttpResponse Points(const std::string& map);
+  HttpResponse Mesh(const std::string& map);
   HttpResponse Trajectory(const std::string& map);
   HttpResponse Render(const HttpRequest& request, const std::string& map);
   absl::Status CheckToken(const HttpRequest& request) const;
@@ -69,6 +79,7 @@ class Viewer {
   const ThreeJsFiles three_;
   const ViewerOptions options_;
   PointCloudCache points_;
+  MeshCache meshes_;
   std::atomic<int> renders_{0};
 };
 

@@ -1,5 +1,5 @@
-// `plenox view MAP.plx`: starts, prints the page's URL, serves the map list, the points and
-// renders of the file's map, and stops cleanly (exit 0) on SIGINT, as Ctrl-C sends it. Its
+// `plenox view MAP.plx`: starts, prints the page's URL, serves the map list, the points, the
+// mesh and renders of the file's map, and stops cleanly (exit 0) on SIGINT, as Ctrl-C sends it. Its
 // usage errors and a missing three.js end it at once with a message.
 #include <arpa/inet.h>
 #include <fcntl.h>
@@ -19,6 +19,7 @@
 #include <gtest/gtest.h>
 
 #include "tests/clients/cli_runner.h"
+#include "tests/ply_mesh_reader.h"
 #include "tests/test_util.h"
 
 namespace plx::testing {
@@ -177,6 +178,15 @@ TEST_F(ViewCliTest, ServesTheMapUntilInterrupted) {
   EXPECT_EQ(render.rfind("HTTP/1.1 200", 0), 0u) << render.substr(0, 300);
   EXPECT_NE(render.find("Content-Type: image/png"), std::string::npos);
   EXPECT_EQ(HttpGet(port, "/viewer/api/points?map=other").rfind("HTTP/1.1 404", 0), 0u);
+  // The mesh, made on this process's backend.
+  const std::string mesh = HttpGet(port, "/viewer/api/mesh?map=tiny");
+  ASSERT_EQ(mesh.rfind("HTTP/1.1 200", 0), 0u) << mesh.substr(0, 300);
+  const size_t mesh_body = mesh.find("\r\n\r\n");
+  ASSERT_NE(mesh_body, std::string::npos);
+  absl::StatusOr<PlyMeshFile> read = ReadPlyMesh(mesh.substr(mesh_body + 4));
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_GT(read->mesh.num_triangles(), 10);
+  EXPECT_EQ(HttpGet(port, "/viewer/api/mesh?map=other").rfind("HTTP/1.1 404", 0), 0u);
   // No SLAM without a daemon: an empty camera list.
   EXPECT_NE(HttpGet(port, "/viewer/api/trajectory?map=tiny").find("\"cameras\":[]"),
             std::string::npos);

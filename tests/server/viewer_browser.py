@@ -3,8 +3,9 @@
 
 Drives Chromium over the DevTools protocol on --remote-debugging-pipe (fd 3: commands in, fd 4:
 answers out, each message JSON ended by a NUL byte), so no port is opened. Polls the page's
-state, which viewer.js keeps in document.body.dataset (points, cameras, pathPoints, keyframes,
-framesDrawn), until the conditions given hold, then captures the viewport as PNG.
+state, which viewer.js keeps in document.body.dataset (points, faces, mode, cameras, pathPoints,
+keyframes, framesDrawn), until the conditions given hold, then captures the viewport as PNG.
+With --mesh it then clicks the page's Mesh toggle and waits for the mesh to be drawn first.
 
 Prints the page's last state as one JSON line on stdout. Exit codes: 0 the conditions held and
 the screenshot was written; 1 they did not hold before --timeout (the state and any page errors
@@ -138,6 +139,9 @@ def main():
                              "updates without reloading)")
     parser.add_argument("--click-camera", action="store_true",
                         help="then click the first camera of the list and wait for its render")
+    parser.add_argument("--mesh", action="store_true",
+                        help="then switch the page to Mesh and wait for --min-faces triangles")
+    parser.add_argument("--min-faces", type=int, default=1)
     parser.add_argument("--timeout", type=float, default=45.0)
     args = parser.parse_args()
 
@@ -178,6 +182,20 @@ def main():
                     browser.call("Runtime.evaluate", {
                         "expression": "document.querySelector('#cameras li[style]').click()"},
                         session=session)
+                if args.mesh:
+                    browser.call("Runtime.evaluate", {
+                        "expression": "document.getElementById('show-mesh').click()"},
+                        session=session)
+                    while time.monotonic() < deadline and not (
+                            state.get("mode") == "mesh" and
+                            number(state, "faces") >= args.min_faces):
+                        time.sleep(0.1)
+                        result = browser.call("Runtime.evaluate",
+                                              {"expression": STATE_JS, "returnByValue": True},
+                                              session=session)
+                        state = json.loads(result.get("result", {}).get("value") or "{}")
+                    if number(state, "faces") < args.min_faces:
+                        break
                 # Two more frames, so the newest trajectory is drawn too (and the render shown).
                 drawn = number(state, "framesDrawn")
                 while time.monotonic() < deadline and (

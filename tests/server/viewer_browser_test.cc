@@ -3,7 +3,8 @@
 // over the DevTools pipe; WebGL on SwiftShader). It must draw the map (non-background pixels in
 // the 3D view), show the stream's camera and path in its colour, follow the path as it grows
 // without a reload, and show a render when the camera is clicked. The screenshot goes to
-// $PLX_VIEWER_SCREENSHOT when set (docs/images/viewer.png is made this way).
+// $PLX_VIEWER_SCREENSHOT when set (docs/images/viewer.png is made this way). A second test
+// clicks the page's Mesh toggle on a saved map and checks that the mesh is drawn.
 #include <atomic>
 #include <cstdio>
 #include <cstdlib>
@@ -113,6 +114,47 @@ TEST(ViewerBrowserTest, PageDrawsTheMapAndALiveSlamCamera) {
     std::filesystem::copy_file(shot, keep, std::filesystem::copy_options::overwrite_existing, ec);
     EXPECT_FALSE(ec) << keep << ": " << ec.message();
   }
+}
+
+// The Points / Mesh toggle: the page fetches /viewer/api/mesh and draws it (lit, vertex colours)
+// in place of the points.
+TEST(ViewerBrowserTest, MeshToggleDrawsTheMesh) {
+  PLX_SKIP_WITHOUT_THREE_JS();
+  const std::string chromium = FindChromium();
+  if (chromium.empty()) GTEST_SKIP() << "no chromium";
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started =
+      StartWithMaps({"room"}, ViewerDaemonOptions("plx_srv_viewer_browser_mesh"));
+  ASSERT_TRUE(started.ok()) << started.status();
+  const int port = (*started)->daemon->metrics_port();
+  const std::string shot = ScratchDir("plx_srv_viewer_mesh_shot") + "/mesh.png";
+  const std::string command = absl::StrCat(
+      "/usr/bin/python3 ", PLX_SOURCE_DIR, "/tests/server/viewer_browser.py --chromium ",
+      chromium, " --url 'http://127.0.0.1:", port, "/viewer/#map=room' --out ", shot,
+      " --min-points 500 --mesh --min-faces 1000 --timeout 40");
+  std::string state;
+  const int status = RunCommand(command, &state);
+  ASSERT_EQ(status, 0) << "viewer_browser.py: " << state;
+  std::printf("page state: %s", state.c_str());
+  EXPECT_NE(state.find("\"mode\": \"mesh\""), std::string::npos) << state;
+  EXPECT_NE(state.find("\"points\": \"0\""), std::string::npos)
+      << "the points were replaced by the mesh: " << state;
+
+  absl::StatusOr<cv::Mat> decoded = DecodeColorFile(shot);
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  const cv::Mat& rgb_image = *decoded;
+  const int x0 = 230, x1 = rgb_image.cols - 270, y0 = 40, y1 = rgb_image.rows - 10;
+  ASSERT_GT(x1, x0);
+  int64_t drawn = 0, total = 0;
+  for (int y = y0; y < y1; ++y) {
+    for (int x = x0; x < x1; ++x) {
+      const cv::Vec3b& p = rgb_image.at<cv::Vec3b>(y, x);
+      const uint8_t rgb[3] = {p[0], p[1], p[2]};
+      ++total;
+      drawn += !Near(rgb, kBackground, 12);
+    }
+  }
+  std::printf("3D view (mesh): %.1f%% drawn\n", 100.0 * drawn / total);
+  EXPECT_GT(drawn, total / 10) << "the mesh was not drawn";
 }
 
 }  // namespace

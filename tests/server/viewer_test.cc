@@ -1,7 +1,7 @@
 // The web viewer on plenoxd's HTTP port (--viewer): the page and three.js, the map list, point
 // clouds, live SLAM trajectories and renders, authentication, and bad requests answered with
-// 4xx instead of work or a crash. Also the pieces on their own: the trajectory record's bounds
-// and the point cloud thinning.
+// 4xx instead of work or a crash. Also the pieces on their own: the trajectory record's bounds,
+// the point cloud thinning and the mesh endpoint's triangle cap and cache.
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -10,10 +10,15 @@
 
 #include <gtest/gtest.h>
 
+#include "app/make_backend.h"
+#include "core/formats/map_file.h"
 #include "core/io/image_io.h"
 #include "server/trajectory_record.h"
+#include "tests/ply_mesh_reader.h"
 #include "tests/server/viewer_fixture.h"
 #include "web/point_cloud_cache.h"
+#include "web/viewer_mesh.h"
+#include "web/viewer_routes.h"
 
 namespace plx::server::testing {
 namespace {
@@ -93,6 +98,33 @@ TEST(ViewerTest, ServesThePageTheMapsPointsAndRenders) {
   // Asked again: the same cloud (built once per version).
   EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/points?map=room").body, points.body);
 
+  // The mesh: a PLY with normals, colours and triangles over the room's surfaces.
+  const HttpAnswer mesh = HttpGetAnswer(port, "/viewer/api/mesh?map=room");
+  ASSERT_EQ(mesh.status, 200) << mesh.body.substr(0, 200);
+  EXPECT_NE(mesh.headers.find("content-type: application/octet-stream"), std::string::npos);
+  absl::StatusOr<plx::testing::PlyMeshFile> read = plx::testing::ReadPlyMesh(mesh.body);
+  ASSERT_TRUE(read.ok()) << read.status();
+  const TriangleMesh& m = read->mesh;
+  EXPECT_GT(m.num_triangles(), 1000);
+  EXPECT_NE(mesh.headers.find(absl::StrCat("x-faces: ", m.num_triangles())), std::string::npos)
+      << mesh.headers;
+  EXPECT_NE(mesh.headers.find("x-map-version: "), std::string::npos);
+  const int64_t vertices = static_cast<int64_t>(m.positions.size() / 3);
+  int64_t unit_normals = 0, coloured = 0;
+  for (int64_t v = 0; v < vertices; ++v) {
+    const float* n3 = &m.normals[3 * v];
+    unit_normals += std::abs(std::sqrt(n3[0] * n3[0] + n3[1] * n3[1] + n3[2] * n3[2]) - 1) < 1e-3;
+    coloured += m.colors[3 * v] + m.colors[3 * v + 1] + m.colors[3 * v + 2] > 0;
+  }
+  EXPECT_GT(unit_normals, vertices * 99 / 100);
+  EXPECT_GT(coloured, vertices * 9 / 10);
+  for (int32_t index : m.triangles) {
+    ASSERT_GE(index, 0);
+    ASSERT_LT(index, vertices);
+  }
+  // Asked again: the same mesh (built once per version).
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/mesh?map=room").body, mesh.body);
+
   const HttpAnswer color = HttpGetAnswer(port, RenderQuery("room", 5, 160, 120, "color"));
   ASSERT_EQ(color.status, 200) << color.body;
   EXPECT_NE(color.headers.find("content-type: image/png"), std::string::npos);
@@ -131,6 +163,7 @@ TEST(ViewerTest, BadRequestsGet4xxAndTheDaemonGoesOn) {
   // Unknown maps and paths.
   for (const std::string& path :
        {std::string("/viewer/api/points?map=nope"), std::string("/viewer/api/trajectory?map=nope"),
+        std::string("/viewer/api/mesh?map=nope"),
         absl::StrCat("/viewer/api/render?map=nope&pose=", ok_pose, size),
         std::string("/viewer/api/nothing"), std::string("/viewer/api/"),
         std::string("/viewer/../metrics/x"), std::string("/viewer/three/../../etc/passwd"),
@@ -143,6 +176,7 @@ TEST(ViewerTest, BadRequestsGet4xxAndTheDaemonGoesOn) {
   EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/points").status, 400);
   EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/points?map=").status, 400);
   EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/points?map=" + std::string(300, 'x')).status, 400);
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/mesh").status, 400);
   EXPECT_EQ(render(size), 400);                                             // no pose
   EXPECT_EQ(render("pose=1%2C2%2C3" + size), 400);                          // 3 numbers
   EXPECT_EQ(render("pose=0%2C0%2C0%2C0%2C0%2C0%2C0" + size), 400);          // zero quaternion
@@ -184,6 +218,12 @@ TEST(ViewerTest, ApiNeedsTheTokenWhenAuthIsOn) {
   EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/points?map=room&token=wrong").status, 401);
   EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/points?map=nope").status, 401)
       << "no answer about which maps exist without the token";
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/mesh?map=room").status, 401);
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/mesh?map=room&token=wrong").status, 401);
+  const HttpAnswer mesh =
+      HttpGetAnswer(port, "/viewer/api/mesh?map=room", "Authorization: Bearer s3cret-token\r\n");
+  EXPECT_EQ(mesh.status, 200) << mesh.body.substr(0, 200);
+  EXPECT_TRUE(plx::testing::ReadPlyMesh(mesh.body).ok());
   const HttpAnswer header =
       HttpGetAnswer(port, "/viewer/api/maps", "Authorization: Bearer s3cret-token\r\n");
   EXPECT_EQ(header.status, 200);
@@ -310,6 +350,108 @@ TEST(PointCloudThinningTest, KeepsEveryKthPointAndRewritesTheCount) {
   EXPECT_EQ(all->ply, ply);
   EXPECT_FALSE(web::ThinPointCloudPly(ply.substr(0, ply.size() - 1), 300).ok());
   EXPECT_FALSE(web::ThinPointCloudPly("not a ply", 300).ok());
+}
+
+// One map file on this process's CPU backend, counting the device calls: what the mesh cache
+// saves is visible.
+class CountingSource final : public web::ViewerSource {
+ public:
+  CountingSource(std::shared_ptr<const PlenoxelMap> map, std::unique_ptr<Backend> backend)
+      : map_(std::move(map)), backend_(std::move(backend)) {}
+  std::string Title() const override { return "test"; }
+  std::vector<web::ViewerMapInfo> ListMaps() const override { return {}; }
+  absl::StatusOr<web::ViewerMap> Latest(const std::string& name) const override {
+    if (name != "room") return absl::NotFoundError("no map " + name);
+    return web::ViewerMap{map_, version};
+  }
+  absl::StatusOr<web::ViewerTrajectories> Trajectories(const std::string&) const override {
+    return web::ViewerTrajectories{};
+  }
+  absl::Status RunOnDevice(const DeviceWork& work, absl::Duration) override {
+    ++device_calls;
+    return work(*backend_, [] { return false; });
+  }
+  uint64_t version = 1;
+  int device_calls = 0;
+
+ private:
+  std::shared_ptr<const PlenoxelMap> map_;
+  std::unique_ptr<Backend> backend_;
+};
+
+web::HttpRequest MeshRequest(const std::string& map) {
+  web::HttpRequest r;
+  r.path = "/viewer/api/mesh";
+  r.params["map"] = map;
+  return r;
+}
+
+TEST(ViewerMeshTest, OverTheTriangleCapIs413AndEachVersionIsBuiltOnce) {
+  const std::string& file = CachedRoomMapFile();
+  ASSERT_FALSE(file.empty());
+  absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(file);
+  ASSERT_TRUE(map.ok()) << map.status();
+  absl::StatusOr<std::unique_ptr<Backend>> backend = MakeBackend(BackendKind::kCpu, 0, 2);
+  ASSERT_TRUE(backend.ok()) << backend.status();
+  CountingSource source(std::shared_ptr<const PlenoxelMap>(std::move(*map)),
+                        std::move(*backend));
+
+  // Big enough: the mesh, once per version.
+  web::Viewer roomy(&source, web::ThreeJsFiles{}, web::ViewerOptions{});
+  web::HttpResponse ok = roomy.Handle(MeshRequest("room"));
+  ASSERT_EQ(ok.status, 200) << ok.body.substr(0, 200);
+  absl::StatusOr<plx::testing::PlyMeshFile> read = plx::testing::ReadPlyMesh(ok.body);
+  ASSERT_TRUE(read.ok()) << read.status();
+  const int64_t triangles = read->mesh.num_triangles();
+  ASSERT_GT(triangles, 100);
+  EXPECT_EQ(source.device_calls, 1);
+  EXPECT_EQ(roomy.Handle(MeshRequest("room")).body, ok.body);
+  EXPECT_EQ(source.device_calls, 1) << "the same version is served from the cache";
+  source.version = 2;
+  EXPECT_EQ(roomy.Handle(MeshRequest("room")).status, 200);
+  EXPECT_EQ(source.device_calls, 2) << "a new version is built again";
+  EXPECT_EQ(roomy.Handle(MeshRequest("nope")).status, 404);
+  EXPECT_EQ(source.device_calls, 2);
+
+  // One triangle under the mesh's count (the cap bounds the triangles marching cubes makes,
+  // which are at least those served): 413 with the reason, remembered for the version.
+  web::ViewerOptions tight;
+  tight.max_mesh_triangles = triangles - 1;
+  web::Viewer capped(&source, web::ThreeJsFiles{}, tight);
+  const web::HttpResponse refused = capped.Handle(MeshRequest("room"));
+  EXPECT_EQ(refused.status, 413) << refused.body;
+  EXPECT_EQ(refused.content_type, "application/json");
+  EXPECT_NE(refused.body.find(absl::StrCat("more than ", triangles - 1, " triangles")),
+            std::string::npos)
+      << refused.body;
+  EXPECT_EQ(source.device_calls, 3);
+  EXPECT_EQ(capped.Handle(MeshRequest("room")).status, 413);
+  EXPECT_EQ(source.device_calls, 3) << "a refused version is not built again";
+}
+
+TEST(MapVersionCacheTest, KeepsTheNewestEntriesAndDropsOldVersionsAndFailures) {
+  web::MapVersionCache<int> cache(2);
+  int builds = 0;
+  auto build = [&](int value) {
+    return [&builds, value]() -> absl::StatusOr<int> {
+      ++builds;
+      return value;
+    };
+  };
+  EXPECT_EQ(**cache.Get("a", 1, build(10)), 10);
+  EXPECT_EQ(**cache.Get("a", 1, build(99)), 10);
+  EXPECT_EQ(builds, 1);
+  EXPECT_EQ(**cache.Get("a", 2, build(20)), 20);  // replaces a@1
+  EXPECT_EQ(cache.size(), 1u);
+  EXPECT_EQ(**cache.Get("b", 1, build(30)), 30);
+  EXPECT_EQ(**cache.Get("c", 1, build(40)), 40);  // drops a@2, the oldest used
+  EXPECT_EQ(cache.size(), 2u);
+  EXPECT_EQ(**cache.Get("a", 2, build(21)), 21);
+  EXPECT_EQ(builds, 5);
+  const absl::StatusOr<std::shared_ptr<const int>> failed =
+      cache.Get("d", 1, [] { return absl::StatusOr<int>(absl::UnavailableError("busy")); });
+  EXPECT_EQ(failed.status().code(), absl::StatusCode::kUnavailable);
+  EXPECT_EQ(**cache.Get("d", 1, build(50)), 50) << "a failure is not kept";
 }
 
 }  // namespace

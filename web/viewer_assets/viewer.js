@@ -2,8 +2,8 @@
 // THREE.OrbitControls from its examples), loaded by index.html from the same server.
 //
 // It polls the server's JSON (web/viewer_routes.h): the map list every 2 s, the selected map's
-// SLAM cameras and keyframes every 0.5 s, and fetches the map's point cloud (PLY) again only when
-// its version changed. Cameras follow OpenCV's convention (x right, y down, z forward);
+// SLAM cameras and keyframes every 0.5 s, and fetches the map's point cloud or mesh (PLY, as the
+// Points / Mesh toggle says) again only when its version changed. Cameras follow OpenCV's convention (x right, y down, z forward);
 // three.js cameras look down -z with y up, so the two differ by a half turn about x.
 (function () {
   'use strict';
@@ -13,6 +13,7 @@
   const MAPS_EVERY_MS = 2000;
   const TRAJECTORY_EVERY_MS = 500;
   const POINTS_MIN_INTERVAL_MS = 1500;  // while a map grows, at most one cloud per 1.5 s
+  const MESH_MIN_INTERVAL_MS = 5000;    // and one mesh per 5 s (marching cubes on the device)
   const RENDER_WIDTH = 320, RENDER_HEIGHT = 240, RENDER_FOV = 50;
   // OpenCV camera -> three.js camera: a half turn about x.
   const CV_TO_GL = new THREE.Quaternion(1, 0, 0, 0);
@@ -184,10 +185,12 @@
     maps: [],
     selected: null,       // map name
     voxel: 0.02,
-    loadedVersion: -1,    // version of the cloud shown
+    mode: 'points',       // what the map is shown as: 'points' or 'mesh'
+    loadedVersion: -1,    // version of the cloud or mesh shown (or refused as too large)
+    loadedMode: null,     // what loadedVersion was loaded as
     loadingPoints: false,
     lastPointsAt: 0,
-    cloud: null,          // THREE.Points
+    cloud: null,          // THREE.Points or THREE.Mesh: the map as shown
     fitted: false,        // the view was framed on this map's cloud
     bounds: null,         // THREE.Sphere of the cloud
     trajectory: null,
@@ -234,6 +237,7 @@
     state.cloud = null;
     body.dataset.map = name;
     body.dataset.points = '0';
+    body.dataset.faces = '0';
     const hash = new URLSearchParams(location.hash.slice(1));
     hash.set('map', name);
     history.replaceState(null, '', location.pathname + location.search + '#' + hash);
@@ -309,13 +313,23 @@
 
   async function maybeLoadPoints(info) {
     const now = performance.now();
-    if (state.loadingPoints || info.version === state.loadedVersion) return;
-    if (state.loadedVersion >= 0 && now - state.lastPointsAt < POINTS_MIN_INTERVAL_MS) return;
+    const mode = state.mode;
+    if (state.loadingPoints) return;
+    if (info.version === state.loadedVersion && mode === state.loadedMode) return;
+    const interval = mode === 'mesh' ? MESH_MIN_INTERVAL_MS : POINTS_MIN_INTERVAL_MS;
+    if (state.loadedVersion >= 0 && mode === state.loadedMode &&
+        now - state.lastPointsAt < interval) {
+      return;
+    }
     state.loadingPoints = true;
     const name = info.name;
     try {
+      if (mode === 'mesh') {
+        await loadMesh(info);
+        return;
+      }
       const ply = parsePly(await get(api('points', { map: name }), 'buffer'));
-      if (name !== state.selected) return;
+      if (name !== state.selected || state.mode !== mode) return;
       const v = ply.vertex || { count: 0, cols: {} };
       const n = v.count;
       const positions = new Float32Array(3 * n);
@@ -338,8 +352,11 @@
       state.cloud = new THREE.Points(geometry, material);
       mapGroup.add(state.cloud);
       state.loadedVersion = info.version;
+      state.loadedMode = 'points';
       state.lastPointsAt = performance.now();
+      body.dataset.mode = 'points';
       body.dataset.points = String(n);
+      body.dataset.faces = '0';
       body.dataset.version = String(info.version);
       if (n > 0) {
         state.bounds = geometry.boundingSphere.clone();
@@ -353,9 +370,86 @@
     }
   }
 
+  // The mesh: marching cubes on the server (/viewer/api/mesh), drawn with its vertex colours
+  // and normals under the scene's ambient and directional lights. Both sides are lit: walls
+  // are seen from inside rooms and from outside. A map over the server's triangle cap answers
+  // 413; that version is not asked for again, and the status line says why nothing shows.
+  async function loadMesh(info) {
+    const name = info.name;
+    let buffer;
+    try {
+      buffer = await get(api('mesh', { map: name }), 'buffer');
+    } catch (e) {
+      if (!(e instanceof HttpError) || e.status !== 413) throw e;
+      if (name !== state.selected || state.mode !== 'mesh') return;
+      clearGroup(mapGroup);
+      state.cloud = null;
+      state.loadedVersion = info.version;
+      state.loadedMode = 'mesh';
+      state.lastPointsAt = performance.now();
+      body.dataset.mode = 'mesh';
+      body.dataset.faces = '0';
+      setStatus('mesh: ' + e.message + ' (showing nothing; switch to points)', true);
+      return;
+    }
+    const ply = parsePly(buffer);
+    if (name !== state.selected || state.mode !== 'mesh') return;
+    const v = ply.vertex || { count: 0, cols: {} };
+    const n = v.count;
+    const indices = ply.face ? ply.face.cols.indices : [];
+    const positions = new Float32Array(3 * n);
+    const normals = new Float32Array(3 * n);
+    const colors = new Uint8Array(3 * n);
+    for (let i = 0; i < n; ++i) {
+      positions[3 * i] = v.cols.x[i];
+      positions[3 * i + 1] = v.cols.y[i];
+      positions[3 * i + 2] = v.cols.z[i];
+      normals[3 * i] = v.cols.nx[i];
+      normals[3 * i + 1] = v.cols.ny[i];
+      normals[3 * i + 2] = v.cols.nz[i];
+      colors[3 * i] = v.cols.red[i];
+      colors[3 * i + 1] = v.cols.green[i];
+      colors[3 * i + 2] = v.cols.blue[i];
+    }
+    const geometry = new THREE.BufferGeometry();
+    geometry.setAttribute('position', new THREE.BufferAttribute(positions, 3));
+    geometry.setAttribute('normal', new THREE.BufferAttribute(normals, 3));
+    geometry.setAttribute('color', new THREE.BufferAttribute(colors, 3, true));
+    geometry.setIndex(new THREE.BufferAttribute(Uint32Array.from(indices), 1));
+    geometry.computeBoundingSphere();
+    const material = new THREE.MeshLambertMaterial({ vertexColors: THREE.VertexColors,
+                                                     side: THREE.DoubleSide });
+    clearGroup(mapGroup);
+    state.cloud = new THREE.Mesh(geometry, material);
+    mapGroup.add(state.cloud);
+    state.loadedVersion = info.version;
+    state.loadedMode = 'mesh';
+    state.lastPointsAt = performance.now();
+    body.dataset.mode = 'mesh';
+    body.dataset.faces = String(indices.length / 3);
+    body.dataset.points = '0';
+    body.dataset.version = String(info.version);
+    if (n > 0) {
+      state.bounds = geometry.boundingSphere.clone();
+      if (!state.fitted) fitView();
+    }
+    updateStatus();
+  }
+
   $('point-size').addEventListener('input', () => {
-    if (state.cloud) state.cloud.material.size = pointSize();
+    if (state.cloud && state.cloud.isPoints) state.cloud.material.size = pointSize();
   });
+
+  // Points / Mesh: the other form of the same version is fetched at once (the view stays).
+  function setMode(mode) {
+    if (state.mode === mode) return;
+    state.mode = mode;
+    const current = state.maps.find((m) => m.name === state.selected);
+    if (current) maybeLoadPoints(current);
+  }
+  for (const id of ['show-points', 'show-mesh']) {
+    $(id).addEventListener('change', (e) => { if (e.target.checked) setMode(e.target.value); });
+  }
 
   // ---------------------------------------------------------------------------------------
   // Orientation: which world axis points up. "auto": opposite the cameras' mean y axis (people
@@ -547,7 +641,8 @@
     const parts = [];
     if (state.selected !== null) parts.push(state.selected);
     if (state.loadedVersion >= 0) parts.push('version ' + state.loadedVersion);
-    if (state.cloud) parts.push(body.dataset.points + ' points');
+    if (state.cloud && state.cloud.isPoints) parts.push(body.dataset.points + ' points');
+    if (state.cloud && state.cloud.isMesh) parts.push(body.dataset.faces + ' triangles');
     const t = state.trajectory;
     if (t && (t.cameras.length || t.keyframes.length)) {
       parts.push((t.slam_running ? 'SLAM running: ' : 'SLAM: ') + t.cameras.length +
@@ -619,6 +714,10 @@
   // ---------------------------------------------------------------------------------------
   // Start.
   body.dataset.points = '0';
+  body.dataset.faces = '0';
+  // A reloaded page may keep the radio button it had.
+  state.mode = $('show-mesh').checked ? 'mesh' : 'points';
+  body.dataset.mode = state.mode;
   body.dataset.cameras = '0';
   body.dataset.pathPoints = '0';
   body.dataset.keyframes = '0';

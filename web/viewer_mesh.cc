@@ -1,0 +1,58 @@
+#include "web/viewer_mesh.h"
+
+#include <utility>
+
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+#include "core/formats/ply_mesh.h"
+#include "core/mesh/iso_surface.h"
+
+namespace plx::web {
+
+absl::StatusOr<ViewerMesh> BuildViewerMesh(ViewerSource& source, const ViewerMap& map,
+                                           int64_t max_triangles, absl::Duration timeout) {
+  if (max_triangles <= 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("max_mesh_triangles: must be > 0, got ", max_triangles));
+  }
+  MeshOptions options;  // the Export RPC's defaults: iso-level 50/m, DC colours, seen faces
+  options.max_triangles = max_triangles;
+  absl::StatusOr<TriangleMesh> mesh = absl::UnknownError("not built");
+  const absl::Status ran = source.RunOnDevice(
+      [&](Backend& backend, const std::function<bool()>& cancelled) {
+        mesh = ExtractMesh(map.map->grid, backend, options, cancelled);
+        return mesh.status();
+      },
+      timeout);
+  ViewerMesh out;
+  if (!ran.ok()) {
+    // ExtractMesh stops as soon as a slice would pass the cap (before building it), so a map too
+    // large for the viewer costs one partial pass. Its over-cap errors say "the mesh has more
+    // than" (triangles, or 2^31 vertices); out of memory is RESOURCE_EXHAUSTED too, but a
+    // passing condition, so it is returned (503) and not kept.
+    if (absl::IsResourceExhausted(ran) &&
+        absl::StartsWith(ran.message(), "the mesh has more than")) {
+      out.too_large = absl::StrCat(
+          "the mesh of this map version has more than ", max_triangles,
+          " triangles, the viewer's limit; export it instead (plenox export --mesh)");
+      return out;
+    }
+    return ran;
+  }
+  absl::StatusOr<PlyMesh> ply = EncodePlyMesh(*mesh, map.map->source);
+  if (!ply.ok()) return ply.status();
+  out.ply = std::move(ply->bytes);
+  out.vertices = ply->vertices;
+  out.faces = ply->faces;
+  return out;
+}
+
+absl::StatusOr<std::shared_ptr<const ViewerMesh>> MeshCache::Get(ViewerSource& source,
+                                                                 const std::string& name,
+                                                                 const ViewerMap& map) {
+  return cache_.Get(name, map.version, [&] {
+    return BuildViewerMesh(source, map, max_triangles_, timeout_);
+  });
+}
+
+}  // namespace plx::web
