@@ -135,7 +135,7 @@ int RunRemoteInfo(const RemoteOptions& remote, const std::vector<std::string>& a
                                info->cuda_built() ? "" : " (built without CUDA)", info->maps(),
                                info->devices_size());
   for (const pb::Device& d : info->devices()) {
-    std::cout << absl::StrFormat("  %-8s %-5s %s  (queue %d, streams %d)\n", d.id(), d.kind(),
+    std::cout << absl::StrFormat("  %-11s %-5s %s  (queue %d, streams %d)\n", d.id(), d.kind(),
                                  d.name(), d.queue_depth(), d.streams());
   }
   return kExitOk;

@@ -569,7 +569,8 @@ TEST(PlenoxdSecretFlagsTest, BadTlsOrTokenFilesAreNamed) {
       << token.Describe();
 }
 
-// `plenox --server ... info`: the daemon's version and its one CPU worker (--backend cpu).
+// `plenox --server ... info`: the daemon's version and its CPU workers (--backend cpu): the
+// interactive one and the mapping one.
 TEST(RemoteCliInfoTest, InfoListsTheDevices) {
   ScopedTempDir work("plenox_remote_info");
   DaemonProcess daemon(work.path(), {"--backend", "cpu"});
@@ -579,27 +580,33 @@ TEST(RemoteCliInfoTest, InfoListsTheDevices) {
   ASSERT_EQ(text.exit_code, kExitOk) << text.Describe();
   EXPECT_THAT(text.out, AllOf(StartsWith("plenoxd "), HasSubstr("on " + daemon.address()),
                               HasSubstr("backend cpu"), HasSubstr("0 maps"),
-                              HasSubstr("1 devices"), HasSubstr("cpu (2 threads)")))
+                              HasSubstr("2 devices"), HasSubstr("cpu (2 threads, interactive)"),
+                              HasSubstr("cpu (2 threads, mapping, nice +10)")))
       << text.Describe();
 
   const CommandResult json = RunPlenox({"--server", daemon.address(), "info", "--json"});
   ASSERT_EQ(json.exit_code, kExitOk) << json.Describe();
   std::istringstream lines(json.out);
-  std::string server_line, device_line, extra;
+  std::string server_line, tracking_line, mapping_line, extra;
   std::getline(lines, server_line);
-  std::getline(lines, device_line);
+  std::getline(lines, tracking_line);
+  std::getline(lines, mapping_line);
   EXPECT_FALSE(std::getline(lines, extra)) << json.Describe();
   const std::optional<FlatJson> server = ParseFlatJson(server_line);
   ASSERT_TRUE(server.has_value()) << json.Describe();
   EXPECT_EQ(server->at("backend").text, "cpu");
   EXPECT_EQ(JsonNumber(*server, "maps"), 0.0);
-  EXPECT_EQ(JsonNumber(*server, "devices"), 1.0);
+  EXPECT_EQ(JsonNumber(*server, "devices"), 2.0);
   EXPECT_FALSE(server->at("version").text.empty());
-  const std::optional<FlatJson> device = ParseFlatJson(device_line);
-  ASSERT_TRUE(device.has_value()) << json.Describe();
-  EXPECT_EQ(device->at("device").text, "cpu");
-  EXPECT_EQ(device->at("kind").text, "cpu");
-  EXPECT_EQ(device->at("name").text, "cpu (2 threads)");
+  const std::optional<FlatJson> tracking = ParseFlatJson(tracking_line);
+  ASSERT_TRUE(tracking.has_value()) << json.Describe();
+  EXPECT_EQ(tracking->at("device").text, "cpu");
+  EXPECT_EQ(tracking->at("kind").text, "cpu");
+  EXPECT_EQ(tracking->at("name").text, "cpu (2 threads, interactive)");
+  const std::optional<FlatJson> mapping = ParseFlatJson(mapping_line);
+  ASSERT_TRUE(mapping.has_value()) << json.Describe();
+  EXPECT_EQ(mapping->at("device").text, "cpu-mapping");
+  EXPECT_EQ(mapping->at("name").text, "cpu (2 threads, mapping, nice +10)");
   EXPECT_EQ(daemon.Stop(), 0) << daemon.Log();
 }
 
