@@ -75,6 +75,18 @@
     float32: ['getFloat32', 4], double: ['getFloat64', 8], float64: ['getFloat64', 8],
   };
 
+  // Interleaves PLY vertex columns (x, y, z or red, green, blue) into one typed array, as a
+  // three.js BufferAttribute wants them.
+  function interleave(vertex, names, ArrayType) {
+    const n = vertex.count, k = names.length;
+    const out = new ArrayType(k * n);
+    names.forEach((name, j) => {
+      const column = vertex.cols[name];
+      for (let i = 0; i < n; ++i) out[k * i + j] = column[i];
+    });
+    return out;
+  }
+
   function parsePly(buffer) {
     const bytes = new Uint8Array(buffer);
     const marker = 'end_header\n';
@@ -331,17 +343,8 @@
       const ply = parsePly(await get(api('points', { map: name }), 'buffer'));
       if (name !== state.selected || state.mode !== mode) return;
       const v = ply.vertex || { count: 0, cols: {} };
-      const n = v.count;
-      const positions = new Float32Array(3 * n);
-      const colors = new Uint8Array(3 * n);
-      for (let i = 0; i < n; ++i) {
-        positions[3 * i] = v.cols.x[i];
-        positions[3 * i + 1] = v.cols.y[i];
-        positions[3 * i + 2] = v.cols.z[i];
-        colors[3 * i] = v.cols.red[i];
-        colors[3 * i + 1] = v.cols.green[i];
-        colors[3 * i + 2] = v.cols.blue[i];
-      }
+      const positions = interleave(v, ['x', 'y', 'z'], Float32Array);
+      const colors = interleave(v, ['red', 'green', 'blue'], Uint8Array);
       const geometry = new THREE.BufferGeometry();
       geometry.setAttribute('position', new THREE.BufferAttribute(positions, 3));
       geometry.setAttribute('color', new THREE.BufferAttribute(colors, 3, true));
@@ -355,10 +358,10 @@
       state.loadedMode = 'points';
       state.lastPointsAt = performance.now();
       body.dataset.mode = 'points';
-      body.dataset.points = String(n);
+      body.dataset.points = String(v.count);
       body.dataset.faces = '0';
       body.dataset.version = String(info.version);
-      if (n > 0) {
+      if (v.count > 0) {
         state.bounds = geometry.boundingSphere.clone();
         if (!state.fitted) fitView();
       }
@@ -395,22 +398,10 @@
     const ply = parsePly(buffer);
     if (name !== state.selected || state.mode !== 'mesh') return;
     const v = ply.vertex || { count: 0, cols: {} };
-    const n = v.count;
     const indices = ply.face ? ply.face.cols.indices : [];
-    const positions = new Float32Array(3 * n);
-    const normals = new Float32Array(3 * n);
-    const colors = new Uint8Array(3 * n);
-    for (let i = 0; i < n; ++i) {
-      positions[3 * i] = v.cols.x[i];
-      positions[3 * i + 1] = v.cols.y[i];
-      positions[3 * i + 2] = v.cols.z[i];
-      normals[3 * i] = v.cols.nx[i];
-      normals[3 * i + 1] = v.cols.ny[i];
-      normals[3 * i + 2] = v.cols.nz[i];
-      colors[3 * i] = v.cols.red[i];
-      colors[3 * i + 1] = v.cols.green[i];
-      colors[3 * i + 2] = v.cols.blue[i];
-    }
+    const positions = interleave(v, ['x', 'y', 'z'], Float32Array);
+    const normals = interleave(v, ['nx', 'ny', 'nz'], Float32Array);
+    const colors = interleave(v, ['red', 'green', 'blue'], Uint8Array);
     const geometry = new THREE.BufferGeometry();
     geometry.setAttribute('position', new THREE.BufferAttribute(positions, 3));
     geometry.setAttribute('normal', new THREE.BufferAttribute(normals, 3));
@@ -429,7 +420,7 @@
     body.dataset.faces = String(indices.length / 3);
     body.dataset.points = '0';
     body.dataset.version = String(info.version);
-    if (n > 0) {
+    if (v.count > 0) {
       state.bounds = geometry.boundingSphere.clone();
       if (!state.fitted) fitView();
     }
