@@ -455,25 +455,17 @@ def main():
                         load.stop()
                 if load is not None and load.failures:
                     notes.append("%s: the mapping job failed: %s" % (tag, load.failures[0]))
-                roundtrip, daemon_ms = [], []
-                for _, _, timings in results:
-                    r, d = read_timings(timings)
-                    roundtrip += r
-                    daemon_ms += d
-                frames = len(roundtrip)
-                rows.append({
+                row = latency_stats([timings for _, _, timings in results])
+                row.update({
                     "clients": clients, "mapping": mapping, "encoding": encoding,
-                    "frames": frames,
                     # Sum of each client's rate: every client streams for the whole window.
                     "fps": sum(r[0]["fps"] for r in results),
-                    "rt_p50": percentile(roundtrip, 50), "rt_p99": percentile(roundtrip, 99),
-                    "daemon_p50": percentile(daemon_ms, 50),
-                    "daemon_p99": percentile(daemon_ms, 99),
                     "lost": sum(r[0]["lost"] for r in results),
                     "ate": ate(args, results[0][1], dataset),
                     "wall": wall,
                     "map_jobs": load.jobs_finished if load else None,
                 })
+                rows.append(row)
                 if load is not None:
                     notes.append("%s: %d mapping jobs completed during the %.0f s window"
                                  % (tag, load.jobs_finished, wall))

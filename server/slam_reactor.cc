@@ -93,16 +93,8 @@ absl::StatusOr<SlamOptions> SlamOptionsFromProto(const pb::SlamOptions& o, float
   }
   s.deterministic = o.deterministic();
   if (o.has_max_pending_keyframes()) {
-    if (o.max_pending_keyframes() > static_cast<uint32_t>(kMaxPendingKeyframes)) {
-      return absl::InvalidArgumentError(absl::StrCat("options.max_pending_keyframes: at most ",
-                                                     kMaxPendingKeyframes, ", got ",
-                                                     o.max_pending_keyframes()));
-    }
-    if (o.deterministic() && o.max_pending_keyframes() > 0) {
-      return absl::InvalidArgumentError(
-          "options.max_pending_keyframes: must be 0 with deterministic (lock-step waits for "
-          "each keyframe)");
-    }
+    // Checked with the rest below (ValidateSlamOptions: range, lock-step); a value past int's
+    // range becomes negative here and is refused there.
     s.max_pending_keyframes = static_cast<int>(o.max_pending_keyframes());
   }
   if (absl::Status st = ValidateSlamOptions(s); !st.ok()) {

@@ -63,10 +63,6 @@ absl::StatusOr<SlamDatasetOptions> SlamOptionsFromFlags(const FlagSet& flags) {
   s.deterministic = flags.GetSwitch("deterministic");
   PLX_ASSIGN_OR_RETURN(s.max_pending_keyframes,
                        flags.GetInt("max-pending-keyframes", 0, kMaxPendingKeyframes));
-  if (s.deterministic && s.max_pending_keyframes > 0) {
-    return absl::InvalidArgumentError(
-        "--max-pending-keyframes must be 0 with --deterministic (lock-step waits for mapping)");
-  }
   o.realtime = flags.GetSwitch("realtime");
   PLX_ASSIGN_OR_RETURN(o.speed, flags.GetDouble("speed", 0.01, 100));
   PLX_ASSIGN_OR_RETURN(o.max_frames, flags.GetInt("max-frames", 0, 1 << 30));

@@ -351,25 +351,32 @@
       geometry.computeBoundingSphere();
       const material = new THREE.PointsMaterial({ size: pointSize(),
                                                   vertexColors: THREE.VertexColors });
-      clearGroup(mapGroup);
-      state.cloud = new THREE.Points(geometry, material);
-      mapGroup.add(state.cloud);
-      state.loadedVersion = info.version;
-      state.loadedMode = 'points';
-      state.lastPointsAt = performance.now();
-      body.dataset.mode = 'points';
-      body.dataset.points = String(v.count);
-      body.dataset.faces = '0';
-      body.dataset.version = String(info.version);
-      if (v.count > 0) {
-        state.bounds = geometry.boundingSphere.clone();
-        if (!state.fitted) fitView();
-      }
+      showMapObject(new THREE.Points(geometry, material), info, 'points', v.count, 0);
       updateStatus();
     } catch (e) {
       handleError(e, 'points');
     } finally {
       state.loadingPoints = false;
+    }
+  }
+
+  // Puts the map's points or mesh (or nothing: null) in the scene as version info.version,
+  // records what is loaded and reports it in the body's data attributes (the browser test
+  // reads them); the view is framed on the first map with content.
+  function showMapObject(object, info, mode, points, faces) {
+    clearGroup(mapGroup);
+    state.cloud = object;
+    if (object) mapGroup.add(object);
+    state.loadedVersion = info.version;
+    state.loadedMode = mode;
+    state.lastPointsAt = performance.now();
+    body.dataset.mode = mode;
+    body.dataset.points = String(points);
+    body.dataset.faces = String(faces);
+    body.dataset.version = String(info.version);
+    if (object && points + faces > 0) {
+      state.bounds = object.geometry.boundingSphere.clone();
+      if (!state.fitted) fitView();
     }
   }
 
@@ -385,13 +392,7 @@
     } catch (e) {
       if (!(e instanceof HttpError) || e.status !== 413) throw e;
       if (name !== state.selected || state.mode !== 'mesh') return;
-      clearGroup(mapGroup);
-      state.cloud = null;
-      state.loadedVersion = info.version;
-      state.loadedMode = 'mesh';
-      state.lastPointsAt = performance.now();
-      body.dataset.mode = 'mesh';
-      body.dataset.faces = '0';
+      showMapObject(null, info, 'mesh', 0, 0);
       setStatus('mesh: ' + e.message + ' (showing nothing; switch to points)', true);
       return;
     }
@@ -410,20 +411,7 @@
     geometry.computeBoundingSphere();
     const material = new THREE.MeshLambertMaterial({ vertexColors: THREE.VertexColors,
                                                      side: THREE.DoubleSide });
-    clearGroup(mapGroup);
-    state.cloud = new THREE.Mesh(geometry, material);
-    mapGroup.add(state.cloud);
-    state.loadedVersion = info.version;
-    state.loadedMode = 'mesh';
-    state.lastPointsAt = performance.now();
-    body.dataset.mode = 'mesh';
-    body.dataset.faces = String(indices.length / 3);
-    body.dataset.points = '0';
-    body.dataset.version = String(info.version);
-    if (v.count > 0) {
-      state.bounds = geometry.boundingSphere.clone();
-      if (!state.fitted) fitView();
-    }
+    showMapObject(new THREE.Mesh(geometry, material), info, 'mesh', 0, indices.length / 3);
     updateStatus();
   }
 
