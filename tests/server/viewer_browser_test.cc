@@ -53,6 +53,27 @@ bool Near(const uint8_t* rgb, const int* colour, int tolerance) {
          std::abs(rgb[2] - colour[2]) <= tolerance;
 }
 
+// Pixels of the screenshot's 3D view (between the two panels, 220 px and 260 px wide,
+// viewer.css): all, those not of the background, those of the first camera's colour.
+struct ViewPixels {
+  int64_t total = 0, drawn = 0, camera = 0;
+};
+
+ViewPixels CountViewPixels(const cv::Mat& rgb_image) {  // RGB order (core/io/image_io.h)
+  ViewPixels count;
+  const int x0 = 230, x1 = rgb_image.cols - 270, y0 = 40, y1 = rgb_image.rows - 10;
+  for (int y = y0; y < y1; ++y) {
+    for (int x = x0; x < x1; ++x) {
+      const cv::Vec3b& p = rgb_image.at<cv::Vec3b>(y, x);
+      const uint8_t rgb[3] = {p[0], p[1], p[2]};
+      ++count.total;
+      count.drawn += !Near(rgb, kBackground, 12);
+      count.camera += Near(rgb, kFirstCamera, 40);
+    }
+  }
+  return count;
+}
+
 TEST(ViewerBrowserTest, PageDrawsTheMapAndALiveSlamCamera) {
   PLX_SKIP_WITHOUT_THREE_JS();
   const std::string chromium = FindChromium();
@@ -90,20 +111,9 @@ TEST(ViewerBrowserTest, PageDrawsTheMapAndALiveSlamCamera) {
 
   absl::StatusOr<cv::Mat> decoded = DecodeColorFile(shot);
   ASSERT_TRUE(decoded.ok()) << decoded.status();
-  const cv::Mat& rgb_image = *decoded;  // RGB order (core/io/image_io.h)
-  // The 3D view lies between the two panels (220 px and 260 px wide, viewer.css).
-  const int x0 = 230, x1 = rgb_image.cols - 270, y0 = 40, y1 = rgb_image.rows - 10;
-  ASSERT_GT(x1, x0);
-  int64_t drawn = 0, camera = 0, total = 0;
-  for (int y = y0; y < y1; ++y) {
-    for (int x = x0; x < x1; ++x) {
-      const cv::Vec3b& p = rgb_image.at<cv::Vec3b>(y, x);
-      const uint8_t rgb[3] = {p[0], p[1], p[2]};
-      ++total;
-      drawn += !Near(rgb, kBackground, 12);
-      camera += Near(rgb, kFirstCamera, 40);
-    }
-  }
+  const ViewPixels view = CountViewPixels(*decoded);
+  ASSERT_GT(view.total, 0);
+  const int64_t drawn = view.drawn, camera = view.camera, total = view.total;
   std::printf("3D view: %.1f%% drawn, %lld pixels in the camera's colour\n",
               100.0 * drawn / total, static_cast<long long>(camera));
   EXPECT_GT(drawn, total / 20) << "the map was not drawn";
@@ -141,18 +151,9 @@ TEST(ViewerBrowserTest, MeshToggleDrawsTheMesh) {
 
   absl::StatusOr<cv::Mat> decoded = DecodeColorFile(shot);
   ASSERT_TRUE(decoded.ok()) << decoded.status();
-  const cv::Mat& rgb_image = *decoded;
-  const int x0 = 230, x1 = rgb_image.cols - 270, y0 = 40, y1 = rgb_image.rows - 10;
-  ASSERT_GT(x1, x0);
-  int64_t drawn = 0, total = 0;
-  for (int y = y0; y < y1; ++y) {
-    for (int x = x0; x < x1; ++x) {
-      const cv::Vec3b& p = rgb_image.at<cv::Vec3b>(y, x);
-      const uint8_t rgb[3] = {p[0], p[1], p[2]};
-      ++total;
-      drawn += !Near(rgb, kBackground, 12);
-    }
-  }
+  const ViewPixels view = CountViewPixels(*decoded);
+  ASSERT_GT(view.total, 0);
+  const int64_t drawn = view.drawn, total = view.total;
   std::printf("3D view (mesh): %.1f%% drawn\n", 100.0 * drawn / total);
   EXPECT_GT(drawn, total / 10) << "the mesh was not drawn";
 }
