@@ -37,6 +37,7 @@ FOLDER_TARGETS = {
     "tests/core": "plx_core_tests",
     "tests/backends": "plx_backend_tests",
     "tests/app": "plx_app_tests",
+    "tests/web": "plx_web_tests",
     "tests/clients": "plx_client_tests",
     "tests/server": "plx_server_tests",
 }

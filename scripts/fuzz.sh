@@ -14,7 +14,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-harnesses_all=(fuzz_image fuzz_frame_proto fuzz_map_file fuzz_text_files fuzz_tum_lists)
+harnesses_all=(fuzz_image fuzz_frame_proto fuzz_map_file fuzz_text_files fuzz_tum_lists
+               fuzz_http_request)
 seeds=0
 seconds=60
 runs=0

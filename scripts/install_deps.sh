@@ -13,7 +13,7 @@ packages=(cmake ninja-build g++ pkg-config ccache
           libgrpc++-dev libgrpc-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
           grpc-proto python3-grpcio python3-grpc-tools python3-protobuf python3-numpy
           # The daemon's metrics HTTP server; OpenSSL to check TLS files before serving.
-          libcpp-httplib-dev libssl-dev
+          libssl-dev
           # The web viewer (plenoxd --viewer, plenox view) runs on Debian's three.js; its
           # browser test loads the page in headless Chromium (WebGL on SwiftShader).
           libjs-three chromium)

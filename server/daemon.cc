@@ -269,6 +269,7 @@ std::string Daemon::RenderMetrics() const {
     g.devices.push_back({w.device().id, w.device().kind, w.device().name, w.queue_depth(),
                          w.streams()});
   }
+  if (http_ != nullptr) g.http = http_->stats();
   return metrics_registry_->Render(g);
 }
 

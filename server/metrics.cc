@@ -126,6 +126,18 @@ std::string Metrics::Render(const Gauges& g) const {
                   absl::StrFormat("%.6f", g.slam_last_publish_s), "\n");
   slam_latency_.Render("plenoxd_slam_latency_seconds",
                        "Time from receiving a Slam frame to its update.", &out);
+  // The HTTP port's bounds at work: a rising refusal or timeout count is a client (or an
+  // attacker) the port turned away.
+  gauge("plenoxd_http_connections_open", "Open connections to the metrics/viewer port.",
+        g.http.connections_open);
+  counter("plenoxd_http_connections_refused_total",
+          "Connections refused over the per-client or total connection limit.",
+          g.http.connections_refused);
+  counter("plenoxd_http_requests_busy_total",
+          "HTTP requests answered 503 because every handler thread was busy and the queue full.",
+          g.http.requests_refused_busy);
+  counter("plenoxd_http_timeouts_total",
+          "HTTP connections closed by the request, idle or send deadline.", g.http.timeouts);
   return out;
 }
 

@@ -66,6 +66,8 @@ class Metrics {
       int64_t streams = 0;
     };
     std::vector<Device> devices;
+    // The metrics/viewer port itself (web/http_server.h): what its bounds turned away.
+    web::HttpServerStats http;
   };
   std::string Render(const Gauges& gauges) const;
 

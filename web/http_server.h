@@ -1,11 +1,28 @@
 // The programs' side HTTP server: plenoxd's Prometheus /metrics and web viewer, and `plenox view`.
-// cpp-httplib serves it from a fixed thread pool with read, write and keep-alive timeouts, so
-// idle or slow connections hold one pool thread for a bounded time and never queue a scrape
-// behind them the way a one-connection-at-a-time loop did. httplib stays behind this header:
-// handlers see an HttpRequest and return an HttpResponse.
+//
+// The port is reachable by anyone who reaches the host (the page and /metrics need no token), so
+// what one client can cost is bounded here, whatever it sends:
+//   - One event-loop thread owns every socket (epoll, non-blocking): an idle or trickling
+//     connection costs a few KiB and no thread, so it cannot hold up a scrape.
+//   - Deadlines, measured by the server, not by the client's pace: a request head must be
+//     complete within `request_timeout` of the connection's accept (or of the previous answer's
+//     end), whatever it trickles; a connection with no request starts within
+//     `keep_alive_timeout` is closed; an answer that makes no progress for `send_timeout` is
+//     dropped.
+//   - The head is bounded in bytes and in header count (web/http_request.h); no request body is
+//     read.
+//   - At most `max_connections` open, `max_connections_per_client` from one address; more are
+//     answered 503 and closed at once.
+//   - Handlers run on `threads` threads with at most `max_queued_requests` waiting; a request
+//     beyond that is answered 503 with Retry-After, never queued without bound.
+//   - An answer is held once: a cached body (shared_body) is sent from the cache's copy, and a
+//     Range header gets at most one part (web/http_request.h: several ranges collapse to the
+//     span that covers them), so no request can make an answer larger than its body.
+// Handlers see an HttpRequest and return an HttpResponse; sockets stay behind this header.
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <map>
 #include <memory>
@@ -13,33 +30,35 @@
 #include <utility>
 #include <vector>
 
-#include "absl/status/statusor.h"
+#include "absl/status/status.h"
 #include "absl/time/time.h"
+#include "web/http_request.h"
 
 namespace plx::web {
 
 struct HttpServerOptions {
   std::string host = "127.0.0.1";  // an address or name to bind; 0.0.0.0 for all interfaces
   int port = 0;                    // 0 picks a free port (HttpServer::port)
-  // Connections served at once: each open connection holds one thread while it is read,
-  // handled, written or kept alive; more wait their turn.
-  int threads = 16;
-  // Longest wait for the next bytes of a request / to send response bytes.
-  absl::Duration read_timeout = absl::Seconds(5);
-  absl::Duration write_timeout = absl::Seconds(5);
-  // How long a connection may sit idle (before its first request, or between requests) before
-  // it is closed and its thread freed; and how many requests one connection may make.
+  int threads = 8;                 // handler threads (a render or a mesh holds one for seconds)
+  int max_queued_requests = 64;    // requests waiting for a handler thread; more get 503
+  // Open connections in all, and from one client address. Both are also kept under half the
+  // process's open-file limit.
+  int max_connections = 512;
+  int max_connections_per_client = 32;
+  // The whole request head, from accept (or from the end of the previous answer on the same
+  // connection) to its last byte; a client too slow gets 408 and is closed.
+  absl::Duration request_timeout = absl::Seconds(5);
+  // How long a connection may wait before its request starts (first, or next on keep-alive).
   absl::Duration keep_alive_timeout = absl::Seconds(2);
-  int keep_alive_max_requests = 16;
-  // Request bodies larger than this get 413 (GET routes need none; httplib would otherwise
-  // buffer any body a client declares).
-  size_t max_body_bytes = 64 << 10;
+  // An answer whose bytes the client stops taking for this long is dropped.
+  absl::Duration send_timeout = absl::Seconds(5);
+  int keep_alive_max_requests = 16;  // requests per connection
+  HttpHeadLimits head_limits;
 };
 
-// What a handler sees of a GET request. httplib has already bounded the request line and
-// headers (8 KiB each, 414/400 beyond) and decoded the query's percent escapes.
+// What a handler sees of a GET (or HEAD) request.
 struct HttpRequest {
-  std::string path;  // without the query
+  std::string path;  // percent-decoded, without the query
   // The query's parameters; a name given twice keeps its first value.
   std::map<std::string, std::string> params;
   std::string authorization;  // the Authorization header, empty when absent
@@ -56,19 +75,39 @@ struct HttpResponse {
   std::string content_type = "text/plain; charset=utf-8";
   std::string body;  // bytes: text or binary
   std::vector<std::pair<std::string, std::string>> headers = {};  // extra response headers
+  // When set, sent instead of `body` and never copied: an answer kept in a cache (a point
+  // cloud, a mesh, three.js) exists once however many clients are being sent it.
+  std::shared_ptr<const std::string> shared_body = nullptr;
+
+  const std::string& Body() const { return shared_body ? *shared_body : body; }
 };
 
 // A plain-text response with a trailing newline (errors, mostly).
 HttpResponse TextResponse(int status, const std::string& text);
 
+// `text`, which must outlive every answer that carries it (a static, or a member of an object
+// that outlives the server), as a shared body without a copy.
+std::shared_ptr<const std::string> UnownedBody(const std::string& text);
+
+// Counters since Start, for tests and /metrics.
+struct HttpServerStats {
+  int64_t connections_open = 0;
+  int64_t connections_accepted = 0;
+  int64_t connections_refused = 0;  // over max_connections or max_connections_per_client
+  int64_t requests = 0;             // complete heads handled (any status)
+  int64_t requests_refused_busy = 0;  // 503: every handler thread busy and the queue full
+  int64_t timeouts = 0;  // closed by request_timeout, keep_alive_timeout or send_timeout
+};
+
 class HttpServer {
  public:
-  // Handlers run on pool threads, so they must be thread-safe.
+  // Handlers run on the handler threads, so they must be thread-safe.
   using Handler = std::function<HttpResponse()>;
   using RequestHandler = std::function<HttpResponse(const HttpRequest&)>;
 
   explicit HttpServer(HttpServerOptions options);
-  ~HttpServer();  // stops serving and joins the pool (at most about keep_alive_timeout)
+  // Stops accepting, closes every connection, and waits for the handlers that are running.
+  ~HttpServer();
   HttpServer(const HttpServer&) = delete;
   HttpServer& operator=(const HttpServer&) = delete;
 
@@ -83,6 +122,7 @@ class HttpServer {
   absl::Status Start();
 
   int port() const { return port_; }
+  HttpServerStats stats() const;
 
  private:
   struct Impl;

@@ -103,19 +103,22 @@ HttpResponse Viewer::Handle(const HttpRequest& request) {
   auto asset = [&](const char* name, const char* type) {
     const auto it = assets.find(name);
     if (it == assets.end()) return JsonError(500, "the page was not built in");
-    return HttpResponse{200, type, it->second, {kRevalidate}};
+    return HttpResponse{200, type, {}, {kRevalidate}, UnownedBody(it->second)};
   };
   if (path == "/viewer" || path == "/viewer/" || path == "/viewer/index.html") {
     return asset("index.html", "text/html; charset=utf-8");
   }
   if (path == "/viewer/viewer.js") return asset("viewer.js", "text/javascript; charset=utf-8");
   if (path == "/viewer/viewer.css") return asset("viewer.css", "text/css; charset=utf-8");
+  // The viewer outlives the server that sends these (viewer_routes.h), so they are sent from
+  // the viewer's one copy.
   if (path == "/viewer/three/three.min.js") {
-    return HttpResponse{200, "text/javascript; charset=utf-8", three_.three, {kRevalidate}};
+    return HttpResponse{200, "text/javascript; charset=utf-8", {}, {kRevalidate},
+                        UnownedBody(three_.three)};
   }
   if (path == "/viewer/three/OrbitControls.js") {
-    return HttpResponse{200, "text/javascript; charset=utf-8", three_.orbit_controls,
-                        {kRevalidate}};
+    return HttpResponse{200, "text/javascript; charset=utf-8", {}, {kRevalidate},
+                        UnownedBody(three_.orbit_controls)};
   }
   if (absl::StartsWith(path, "/viewer/api/")) return Api(request);
   return JsonError(404, absl::StrCat("no such page: ", path.substr(0, 128)));
@@ -167,13 +170,15 @@ HttpResponse Viewer::Points(const std::string& map) {
   if (!latest.ok()) return ErrorResponse(latest.status());
   absl::StatusOr<std::shared_ptr<const PointCloud>> cloud = points_.Get(map, *latest);
   if (!cloud.ok()) return ErrorResponse(cloud.status());
+  // Sent from the cache's copy (it stays alive while being sent, even when evicted).
   return HttpResponse{200,
                       "application/octet-stream",
-                      (*cloud)->ply,
+                      {},
                       {kNoStore,
                        {"X-Map-Version", absl::StrCat(latest->version)},
                        {"X-Points", absl::StrCat((*cloud)->points)},
-                       {"X-Surface-Points", absl::StrCat((*cloud)->surface_points)}}};
+                       {"X-Surface-Points", absl::StrCat((*cloud)->surface_points)}},
+                      std::shared_ptr<const std::string>(*cloud, &(*cloud)->ply)};
 }
 
 HttpResponse Viewer::Mesh(const std::string& map) {
@@ -188,11 +193,12 @@ HttpResponse Viewer::Mesh(const std::string& map) {
   }
   return HttpResponse{200,
                       "application/octet-stream",
-                      (*mesh)->ply,
+                      {},
                       {kNoStore,
                        {"X-Map-Version", absl::StrCat(latest->version)},
                        {"X-Vertices", absl::StrCat((*mesh)->vertices)},
-                       {"X-Faces", absl::StrCat((*mesh)->faces)}}};
+                       {"X-Faces", absl::StrCat((*mesh)->faces)}},
+                      std::shared_ptr<const std::string>(*mesh, &(*mesh)->ply)};
 }
 
 HttpResponse Viewer::Trajectory(const std::string& map) {

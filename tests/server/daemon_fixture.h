@@ -40,6 +40,7 @@
 #include "plenoxd/v1/plenoxd.grpc.pb.h"
 #include "proto/pose_codec.h"
 #include "server/daemon.h"
+#include "tests/loopback_http.h"
 #include "tests/test_util.h"
 
 namespace plx::server::testing {
@@ -518,48 +519,16 @@ inline double TranslationRmse(const std::vector<pb::PoseEstimate>& estimates,
 // ---------------------------------------------------------------------------------------------
 // HTTP and TCP.
 
-// A TCP connection to 127.0.0.1:`port` whose reads give up after `timeout`; -1 on failure.
-inline int ConnectLoopback(int port, absl::Duration timeout = absl::Seconds(5)) {
-  const int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  if (fd < 0) return -1;
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_port = htons(static_cast<uint16_t>(port));
-  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  const int64_t micros = absl::ToInt64Microseconds(timeout);
-  timeval tv{static_cast<time_t>(micros / 1000000), static_cast<suseconds_t>(micros % 1000000)};
-  setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
-  if (connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
-    close(fd);
-    return -1;
-  }
-  return fd;
-}
-
-// Sends `request` verbatim to 127.0.0.1:`port` and reads until the server closes (or 5 s pass
-// without a byte): the whole response, headers and body, or empty on a connection error.
-inline std::string HttpExchange(int port, const std::string& request) {
-  const int fd = ConnectLoopback(port);
-  if (fd < 0) return "";
-  if (send(fd, request.data(), request.size(), MSG_NOSIGNAL) != static_cast<ssize_t>(request.size())) {
-    close(fd);
-    return "";
-  }
-  std::string response;
-  char buffer[4096];
-  for (;;) {
-    const ssize_t n = recv(fd, buffer, sizeof(buffer), 0);
-    if (n <= 0) break;
-    response.append(buffer, static_cast<size_t>(n));
-  }
-  close(fd);
-  return response;
-}
-
-// GET `path` over HTTP/1.0 (the server closes after answering).
-inline std::string HttpGet(int port, const std::string& path) {
-  return HttpExchange(port, absl::StrCat("GET ", path, " HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n"));
-}
+// Raw HTTP over loopback: tests/loopback_http.h.
+using plx::testing::ConnectLoopback;
+using plx::testing::ConnectLoopbackFrom;
+using plx::testing::HttpAnswer;
+using plx::testing::HttpExchange;
+using plx::testing::HttpGet;
+using plx::testing::HttpGetAnswer;
+using plx::testing::ParseHttpAnswer;
+using plx::testing::SendAll;
+using plx::testing::Sockets;
 
 // A loopback TCP proxy to 127.0.0.1:`target_port`. CutAll() drops every connection at once
 // (both sockets closed): to the daemon, its client has vanished without a word.

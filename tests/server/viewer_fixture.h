@@ -1,5 +1,5 @@
-// Helpers of the web viewer's tests: HTTP requests with headers and a parsed answer, a daemon
-// with the viewer on, and a Slam stream kept open while a test looks at the viewer.
+// Helpers of the web viewer's tests (HTTP requests: tests/loopback_http.h): a daemon with the
+// viewer on, and a Slam stream kept open while a test looks at the viewer.
 #pragma once
 
 #include <cstdlib>
@@ -16,24 +16,15 @@
 
 namespace plx::server::testing {
 
-struct HttpAnswer {
-  int status = 0;  // 0: no answer
-  std::string headers;  // the raw header block (lower-cased), for find()
-  std::string body;
-};
-
-// GET `path` (already percent-encoded) with extra header lines ("Name: value\r\n" each).
-inline HttpAnswer HttpGetAnswer(int port, const std::string& path,
-                                const std::string& extra_headers = "") {
-  const std::string raw = HttpExchange(
-      port, absl::StrCat("GET ", path, " HTTP/1.0\r\nHost: 127.0.0.1\r\n", extra_headers, "\r\n"));
-  HttpAnswer answer;
-  const size_t split = raw.find("\r\n\r\n");
-  if (raw.rfind("HTTP/1.1 ", 0) != 0 || split == std::string::npos) return answer;
-  if (!absl::SimpleAtoi(raw.substr(9, 3), &answer.status)) answer.status = 0;
-  answer.headers = absl::AsciiStrToLower(raw.substr(0, split));
-  answer.body = raw.substr(split + 4);
-  return answer;
+// A render query from frame `index`'s true pose, percent-encoded.
+inline std::string RenderQuery(const std::string& map, int index, int width, int height,
+                        const std::string& image) {
+  const SE3 pose = GroundTruth(index);
+  const Eigen::Vector3d& t = pose.translation();
+  const Eigen::Quaterniond& q = pose.rotation();
+  return absl::StrCat("/viewer/api/render?map=", map, "&pose=", t.x(), "%2C", t.y(), "%2C", t.z(),
+                      "%2C", q.x(), "%2C", q.y(), "%2C", q.z(), "%2C", q.w(),
+                      "&width=", width, "&height=", height, "&fov=50&image=", image);
 }
 
 // Options of a daemon with the viewer on a free HTTP port.

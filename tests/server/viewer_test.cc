@@ -44,17 +44,6 @@ int64_t PlyVertices(const std::string& ply) {
   return at == std::string::npos ? -1 : std::atoll(ply.c_str() + at + pattern.size());
 }
 
-// A render query from frame `index`'s true pose, percent-encoded.
-std::string RenderQuery(const std::string& map, int index, int width, int height,
-                        const std::string& image) {
-  const SE3 pose = GroundTruth(index);
-  const Eigen::Vector3d& t = pose.translation();
-  const Eigen::Quaterniond& q = pose.rotation();
-  return absl::StrCat("/viewer/api/render?map=", map, "&pose=", t.x(), "%2C", t.y(), "%2C", t.z(),
-                      "%2C", q.x(), "%2C", q.y(), "%2C", q.z(), "%2C", q.w(),
-                      "&width=", width, "&height=", height, "&fov=50&image=", image);
-}
-
 TEST(ViewerTest, ServesThePageTheMapsPointsAndRenders) {
   PLX_SKIP_WITHOUT_THREE_JS();
   absl::StatusOr<std::unique_ptr<TestDaemon>> started =
@@ -191,7 +180,7 @@ TEST(ViewerTest, BadRequestsGet4xxAndTheDaemonGoesOn) {
   EXPECT_EQ(render("pose=" + ok_pose + "&width=99999999999999999999&height=4&fov=50"), 400);
   EXPECT_EQ(render("pose=" + ok_pose + "&width=1024&height=1024&fov=50"), 400);  // > pixels
   EXPECT_EQ(render("pose=" + ok_pose + size + "&image=normals"), 400);
-  // A request line over httplib's bound is refused before any handler.
+  // A request line over the server's 8 KiB bound is refused (414) before any handler.
   const HttpAnswer huge = HttpGetAnswer(port, "/viewer/api/points?map=" + std::string(20000, 'x'));
   EXPECT_GE(huge.status, 400);
   EXPECT_LT(huge.status, 500);
@@ -399,13 +388,13 @@ TEST(ViewerMeshTest, OverTheTriangleCapIs413AndEachVersionIsBuiltOnce) {
   // Big enough: the mesh, once per version.
   web::Viewer roomy(&source, web::ThreeJsFiles{}, web::ViewerOptions{});
   web::HttpResponse ok = roomy.Handle(MeshRequest("room"));
-  ASSERT_EQ(ok.status, 200) << ok.body.substr(0, 200);
-  absl::StatusOr<plx::testing::PlyMeshFile> read = plx::testing::ReadPlyMesh(ok.body);
+  ASSERT_EQ(ok.status, 200) << ok.Body().substr(0, 200);
+  absl::StatusOr<plx::testing::PlyMeshFile> read = plx::testing::ReadPlyMesh(ok.Body());
   ASSERT_TRUE(read.ok()) << read.status();
   const int64_t triangles = read->mesh.num_triangles();
   ASSERT_GT(triangles, 100);
   EXPECT_EQ(source.device_calls, 1);
-  EXPECT_EQ(roomy.Handle(MeshRequest("room")).body, ok.body);
+  EXPECT_EQ(roomy.Handle(MeshRequest("room")).Body(), ok.Body());
   EXPECT_EQ(source.device_calls, 1) << "the same version is served from the cache";
   source.version = 2;
   EXPECT_EQ(roomy.Handle(MeshRequest("room")).status, 200);
@@ -419,11 +408,11 @@ TEST(ViewerMeshTest, OverTheTriangleCapIs413AndEachVersionIsBuiltOnce) {
   tight.max_mesh_triangles = triangles - 1;
   web::Viewer capped(&source, web::ThreeJsFiles{}, tight);
   const web::HttpResponse refused = capped.Handle(MeshRequest("room"));
-  EXPECT_EQ(refused.status, 413) << refused.body;
+  EXPECT_EQ(refused.status, 413) << refused.Body();
   EXPECT_EQ(refused.content_type, "application/json");
-  EXPECT_NE(refused.body.find(absl::StrCat("more than ", triangles - 1, " triangles")),
+  EXPECT_NE(refused.Body().find(absl::StrCat("more than ", triangles - 1, " triangles")),
             std::string::npos)
-      << refused.body;
+      << refused.Body();
   EXPECT_EQ(source.device_calls, 3);
   EXPECT_EQ(capped.Handle(MeshRequest("room")).status, 413);
   EXPECT_EQ(source.device_calls, 3) << "a refused version is not built again";
