@@ -3,6 +3,7 @@
 #include <atomic>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <string>
 
 #include <unistd.h>
@@ -36,6 +37,15 @@ std::string MakeTempDir(const std::string& prefix) {
   fs::remove_all(dir);
   fs::create_directories(dir);
   return dir.string();
+}
+
+int64_t ResidentBytes() {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line)) {
+    if (line.rfind("VmRSS:", 0) == 0) return std::atoll(line.c_str() + 6) * 1024;  // in kB
+  }
+  return -1;
 }
 
 }  // namespace plx::testing

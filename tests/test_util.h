@@ -1,6 +1,7 @@
 // Shared test helpers: where the dev datasets live, and scratch directories.
 #pragma once
 
+#include <cstdint>
 #include <string>
 
 namespace plx::testing {
@@ -14,5 +15,9 @@ std::string SharedSequence(const std::string& name);
 
 // A fresh, empty directory under the system temp dir, unique per call.
 std::string MakeTempDir(const std::string& prefix);
+
+// This process's resident memory in bytes (VmRSS of /proc/self/status), -1 when unreadable: what
+// a test of an in-process server reads to bound the memory a request costs.
+int64_t ResidentBytes();
 
 }  // namespace plx::testing

@@ -4,34 +4,17 @@
 // server's own tests are tests/web/http_server_test.cc).
 #include <atomic>
 #include <cstdlib>
-#include <fstream>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
 
-#include "absl/strings/ascii.h"
-#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "tests/server/viewer_fixture.h"
 
 namespace plx::server::testing {
 namespace {
-
-// The daemon's resident memory (it runs in this process), from /proc/self/status.
-int64_t ResidentBytes() {
-  std::ifstream status("/proc/self/status");
-  std::string line;
-  while (std::getline(status, line)) {
-    int64_t kib = 0;
-    if (line.rfind("VmRSS:", 0) == 0 &&
-        absl::SimpleAtoi(absl::StripAsciiWhitespace(line.substr(6, line.size() - 9)), &kib)) {
-      return kib * 1024;
-    }
-  }
-  return -1;
-}
 
 // Times one GET; its status.
 int TimedGet(int port, const std::string& path, absl::Duration* took) {
@@ -110,7 +93,7 @@ TEST(HttpServerTest, RangesOnEveryEndpointGiveOnePartAtMost) {
   const std::vector<std::string> ranges = {overlapping, scattered,
                                            "bytes=0-18446744073709551616",
                                            "bytes=-1,-2,-3,0-", "bytes=999999999-"};
-  const int64_t rss_before = ResidentBytes();
+  const int64_t rss_before = plx::testing::ResidentBytes();
   for (const std::string& path : endpoints) {
     const HttpAnswer whole = HttpGetAnswer(port, path);
     ASSERT_EQ(whole.status, 200) << path;
@@ -125,7 +108,7 @@ TEST(HttpServerTest, RangesOnEveryEndpointGiveOnePartAtMost) {
     // Past the end: 416 (every body here is under 999 999 999 bytes).
     EXPECT_EQ(HttpGetAnswer(port, path, "Range: bytes=999999999-\r\n").status, 416) << path;
   }
-  EXPECT_LT(ResidentBytes() - rss_before, int64_t{200} << 20);
+  EXPECT_LT(plx::testing::ResidentBytes() - rss_before, int64_t{200} << 20);
 }
 
 }  // namespace

@@ -10,7 +10,6 @@
 
 #include <atomic>
 #include <condition_variable>
-#include <fstream>
 #include <functional>
 #include <mutex>
 #include <string>
@@ -19,11 +18,10 @@
 
 #include <gtest/gtest.h>
 
-#include "absl/strings/ascii.h"
-#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/time/clock.h"
 #include "tests/loopback_http.h"
+#include "tests/test_util.h"
 
 namespace plx::web {
 namespace {
@@ -49,21 +47,6 @@ bool Eventually(const std::function<bool()>& condition, absl::Duration limit = a
     absl::SleepFor(absl::Milliseconds(10));
   }
   return condition();
-}
-
-// This process's resident memory, from /proc/self/status.
-int64_t ResidentBytes() {
-  std::ifstream status("/proc/self/status");
-  std::string line;
-  while (std::getline(status, line)) {
-    if (line.rfind("VmRSS:", 0) == 0) {
-      int64_t kib = 0;
-      if (absl::SimpleAtoi(absl::StripAsciiWhitespace(line.substr(6, line.size() - 9)), &kib)) {
-        return kib * 1024;
-      }
-    }
-  }
-  return -1;
 }
 
 TEST(HttpServerTest, ServesItsRoutesAndAnswersOtherPaths404) {
@@ -356,14 +339,14 @@ TEST(HttpServerTest, RangesNeverMakeAnAnswerLargerThanItsBody) {
   std::string amplifier = "Range: bytes=0-850572";
   for (int i = 0; i < 700; ++i) amplifier += ",0-850572";
   amplifier += "\r\n";
-  const int64_t rss_before = ResidentBytes();
+  const int64_t rss_before = plx::testing::ResidentBytes();
   std::vector<HttpAnswer> answers(8);
   std::vector<std::thread> clients;
   for (HttpAnswer& a : answers) {
     clients.emplace_back([&] { a = HttpGetAnswer(port, "/three.min.js", amplifier); });
   }
   for (std::thread& t : clients) t.join();
-  const int64_t rss_after = ResidentBytes();
+  const int64_t rss_after = plx::testing::ResidentBytes();
   for (const HttpAnswer& a : answers) {
     EXPECT_EQ(a.status, 206);
     EXPECT_NE(a.headers.find("content-range: bytes 0-850572/850573"), std::string::npos);
