@@ -99,7 +99,7 @@ bool ParsePosition(absl::string_view digits, uint64_t* value) {
     if (c < '0' || c > '9') return false;
     const uint64_t d = static_cast<uint64_t>(c - '0');
     v = v > (std::numeric_limits<uint64_t>::max() - d) / 10 ? std::numeric_limits<uint64_t>::max()
-                                                             : v * 10 + d;
+                                                            : v * 10 + d;
   }
   *value = v;
   return true;

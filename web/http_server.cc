@@ -65,9 +65,8 @@ Answer MakeAnswer(HttpResponse response, bool head_only, bool keep_alive,
                   const std::string* range) {
   Answer a;
   a.close = !keep_alive;
-  a.body = response.shared_body
-               ? std::move(response.shared_body)
-               : std::make_shared<const std::string>(std::move(response.body));
+  a.body = response.shared_body ? std::move(response.shared_body)
+                                : std::make_shared<const std::string>(std::move(response.body));
   int status = response.status;
   const uint64_t size = a.body->size();
   a.end = a.body->size();
@@ -232,8 +231,8 @@ void HttpServer::Impl::Accept() {
   for (;;) {
     sockaddr_storage addr{};
     socklen_t len = sizeof(addr);
-    const int fd = accept4(listen_fd, reinterpret_cast<sockaddr*>(&addr), &len,
-                           SOCK_NONBLOCK | SOCK_CLOEXEC);
+    const int fd =
+        accept4(listen_fd, reinterpret_cast<sockaddr*>(&addr), &len, SOCK_NONBLOCK | SOCK_CLOEXEC);
     if (fd < 0) {
       if (errno == EMFILE || errno == ENFILE || errno == ENOBUFS || errno == ENOMEM) {
         // The pending connection would make the listening socket readable for ever: stop
@@ -310,8 +309,9 @@ void HttpServer::Impl::Dispatch(uint64_t id, Connection& c, const HttpRequestHea
       head.keep_alive && c.requests < options.keep_alive_max_requests && !stopping;
   const bool head_only = head.method == "HEAD";
   if (head.method != "GET" && !head_only) {
-    return StartSending(id, c, ErrorAnswer(405, "only GET and HEAD are served here", false,
-                                           keep_alive, {{"Allow", "GET, HEAD"}}));
+    return StartSending(id, c,
+                        ErrorAnswer(405, "only GET and HEAD are served here", false, keep_alive,
+                                    {{"Allow", "GET, HEAD"}}));
   }
   const RequestHandler* handler = owner->Find(head.path);
   if (handler == nullptr) {
@@ -338,13 +338,13 @@ void HttpServer::Impl::Dispatch(uint64_t id, Connection& c, const HttpRequestHea
     } catch (...) {
       response = TextResponse(500, "internal error");
     }
-    Finished(id, MakeAnswer(std::move(response), head_only, keep_alive,
-                            range ? &*range : nullptr));
+    Finished(id, MakeAnswer(std::move(response), head_only, keep_alive, range ? &*range : nullptr));
   });
   if (!queued) {
     ++busy;
-    StartSending(id, c, ErrorAnswer(503, "busy: every handler thread is taken; retry", head_only,
-                                    keep_alive, {{"Retry-After", "1"}}));
+    StartSending(id, c,
+                 ErrorAnswer(503, "busy: every handler thread is taken; retry", head_only,
+                             keep_alive, {{"Retry-After", "1"}}));
   }
 }
 
@@ -438,8 +438,7 @@ void HttpServer::Impl::Sweep(Clock::time_point now) {
   for (const uint64_t id : slow_head) {
     Connection& c = connections[id];
     c.in.clear();
-    StartSending(id, c,
-                 ErrorAnswer(408, "the request head did not arrive in time", false, false));
+    StartSending(id, c, ErrorAnswer(408, "the request head did not arrive in time", false, false));
   }
 }
 
@@ -553,9 +552,9 @@ absl::Status HttpServer::Start() {
   sockaddr_storage bound{};
   socklen_t len = sizeof(bound);
   getsockname(impl.listen_fd, reinterpret_cast<sockaddr*>(&bound), &len);
-  port_ = ntohs(bound.ss_family == AF_INET6
-                    ? reinterpret_cast<const sockaddr_in6*>(&bound)->sin6_port
-                    : reinterpret_cast<const sockaddr_in*>(&bound)->sin_port);
+  port_ =
+      ntohs(bound.ss_family == AF_INET6 ? reinterpret_cast<const sockaddr_in6*>(&bound)->sin6_port
+                                        : reinterpret_cast<const sockaddr_in*>(&bound)->sin_port);
 
   // Each connection is a file descriptor; half the process's limit leaves the rest to gRPC and
   // the map files.
@@ -573,8 +572,8 @@ absl::Status HttpServer::Start() {
   impl.epoll_fd = epoll_create1(EPOLL_CLOEXEC);
   impl.wake_fd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
   if (impl.epoll_fd < 0 || impl.wake_fd < 0) {
-    return absl::UnavailableError(absl::StrCat("cannot serve on ", where, ": ",
-                                               std::strerror(errno)));
+    return absl::UnavailableError(
+        absl::StrCat("cannot serve on ", where, ": ", std::strerror(errno)));
   }
   epoll_event ev{};
   ev.events = EPOLLIN;

@@ -73,7 +73,7 @@ struct HttpRequest {
 struct HttpResponse {
   int status = 200;
   std::string content_type = "text/plain; charset=utf-8";
-  std::string body;  // bytes: text or binary
+  std::string body;                                               // bytes: text or binary
   std::vector<std::pair<std::string, std::string>> headers = {};  // extra response headers
   // When set, sent instead of `body` and never copied: an answer kept in a cache (a point
   // cloud, a mesh, three.js) exists once however many clients are being sent it.
@@ -93,8 +93,8 @@ std::shared_ptr<const std::string> UnownedBody(const std::string& text);
 struct HttpServerStats {
   int64_t connections_open = 0;
   int64_t connections_accepted = 0;
-  int64_t connections_refused = 0;  // over max_connections or max_connections_per_client
-  int64_t requests = 0;             // complete heads handled (any status)
+  int64_t connections_refused = 0;    // over max_connections or max_connections_per_client
+  int64_t requests = 0;               // complete heads handled (any status)
   int64_t requests_refused_busy = 0;  // 503: every handler thread busy and the queue full
   int64_t timeouts = 0;  // closed by request_timeout, keep_alive_timeout or send_timeout
 };

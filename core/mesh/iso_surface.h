@@ -18,9 +18,8 @@ namespace plx {
 
 // Density (1/m) of the surface when the caller names none. Depth-guided initialisation puts a
 // fused surface at sigma_max / 2 = 100/m, and optimisation moves it; on a mapped synthetic room
-// (4 cm voxels) 50/m gave the best precision and recall at 2 cm of 5, 10, 25, 50 and 100/m:
-// 0.58 / 0.78, against 0.44 / 0.58 at the point export's 5/m, whose surface sits in the soft
-// front of the density ramp (docs/BENCHMARKS.md, "Mesh export").
+// 50/m scored best of the levels tried, well above the point export's 5/m, whose surface sits
+// in the soft front of the density ramp (the numbers: docs/BENCHMARKS.md, "Mesh export").
 inline constexpr float kDefaultMeshIsoLevel = 50.0f;
 // Enough for a large room at 1 cm (about 10 M triangles); each costs about 60 bytes while it
 // is built.

@@ -81,17 +81,22 @@ TEST(HttpServerTest, RangesOnEveryEndpointGiveOnePartAtMost) {
       StartWithMaps({"room"}, ViewerDaemonOptions("plx_srv_http_ranges"));
   ASSERT_TRUE(started.ok()) << started.status();
   const int port = (*started)->daemon->metrics_port();
-  const std::vector<std::string> endpoints = {
-      "/metrics", "/viewer/", "/viewer/viewer.js", "/viewer/viewer.css",
-      "/viewer/three/three.min.js", "/viewer/three/OrbitControls.js", "/viewer/api/maps",
-      "/viewer/api/points?map=room", "/viewer/api/mesh?map=room",
-      "/viewer/api/trajectory?map=room", RenderQuery("room", 5, 64, 48, "color")};
+  const std::vector<std::string> endpoints = {"/metrics",
+                                              "/viewer/",
+                                              "/viewer/viewer.js",
+                                              "/viewer/viewer.css",
+                                              "/viewer/three/three.min.js",
+                                              "/viewer/three/OrbitControls.js",
+                                              "/viewer/api/maps",
+                                              "/viewer/api/points?map=room",
+                                              "/viewer/api/mesh?map=room",
+                                              "/viewer/api/trajectory?map=room",
+                                              RenderQuery("room", 5, 64, 48, "color")};
   std::string overlapping = "bytes=0-99999999";
   for (int i = 0; i < 700; ++i) overlapping += ",0-99999999";
   std::string scattered = "bytes=0-0";
   for (int i = 1; i < 700; ++i) absl::StrAppend(&scattered, ",", i * 7, "-", i * 7 + 3);
-  const std::vector<std::string> ranges = {overlapping, scattered,
-                                           "bytes=0-18446744073709551616",
+  const std::vector<std::string> ranges = {overlapping, scattered, "bytes=0-18446744073709551616",
                                            "bytes=-1,-2,-3,0-", "bytes=999999999-"};
   const int64_t rss_before = plx::testing::ResidentBytes();
   for (const std::string& path : endpoints) {
@@ -100,7 +105,8 @@ TEST(HttpServerTest, RangesOnEveryEndpointGiveOnePartAtMost) {
     for (const std::string& range : ranges) {
       const HttpAnswer a = HttpGetAnswer(port, path, "Range: " + range + "\r\n");
       const std::string what = absl::StrCat(path, " with ", range.substr(0, 40));
-      EXPECT_TRUE(a.status == 200 || a.status == 206 || a.status == 416) << what << ": " << a.status;
+      EXPECT_TRUE(a.status == 200 || a.status == 206 || a.status == 416)
+          << what << ": " << a.status;
       EXPECT_EQ(a.headers.find("multipart"), std::string::npos) << what;
       // Renders and metrics change between calls; their sizes only bound each other.
       EXPECT_LE(a.body.size(), whole.body.size() + 4096) << what;

@@ -81,21 +81,21 @@ TEST(HttpRequestTest, RefusesMalformedRequestsAndBodies) {
     const char* bytes;
     int status;
   } cases[] = {
-      {"GET /\r\n\r\n", 400},                                   // no version
-      {"GET  / HTTP/1.1\r\n\r\n", 400},                         // two spaces
-      {"G(T / HTTP/1.1\r\n\r\n", 400},                          // not a token
-      {"GET http://x/ HTTP/1.1\r\n\r\n", 400},                  // absolute form: not a proxy
+      {"GET /\r\n\r\n", 400},                   // no version
+      {"GET  / HTTP/1.1\r\n\r\n", 400},         // two spaces
+      {"G(T / HTTP/1.1\r\n\r\n", 400},          // not a token
+      {"GET http://x/ HTTP/1.1\r\n\r\n", 400},  // absolute form: not a proxy
       {"GET * HTTP/1.1\r\n\r\n", 400},
       {"GET / HTTP/2.0\r\n\r\n", 505},
-      {"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n", 505},                // an HTTP/2 preface
+      {"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n", 505},  // an HTTP/2 preface
       {"GET / FTP/1.1\r\n\r\n", 400},
-      {"GET /%zz HTTP/1.1\r\n\r\n", 400},                       // bad escape
-      {"GET /a%00b HTTP/1.1\r\n\r\n", 400},                     // NUL
+      {"GET /%zz HTTP/1.1\r\n\r\n", 400},    // bad escape
+      {"GET /a%00b HTTP/1.1\r\n\r\n", 400},  // NUL
       {"GET /?x=%4 HTTP/1.1\r\n\r\n", 400},
       {"GET / HTTP/1.1\r\nNo colon\r\n\r\n", 400},
       {"GET / HTTP/1.1\r\nBad name: v\r\n\r\n", 400},
       {"GET / HTTP/1.1\r\nA: v\r\n folded\r\n\r\n", 400},
-      {"GET / HTTP/1.1\r\nA: v\rw\r\n\r\n", 400},               // a bare CR inside a value
+      {"GET / HTTP/1.1\r\nA: v\rw\r\n\r\n", 400},  // a bare CR inside a value
       {"GET / HTTP/1.1\r\nContent-Length: 5\r\n\r\nhello", 413},
       {"GET / HTTP/1.1\r\nContent-Length: x\r\n\r\n", 400},
       {"POST / HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n", 413},
@@ -107,9 +107,9 @@ TEST(HttpRequestTest, RefusesMalformedRequestsAndBodies) {
     EXPECT_FALSE(p.reason.empty());
   }
   // An empty body is no body.
-  EXPECT_EQ(ParseRequestHead("GET / HTTP/1.1\r\nContent-Length: 0\r\n\r\n", HttpHeadLimits{})
-                .outcome,
-            Outcome::kComplete);
+  EXPECT_EQ(
+      ParseRequestHead("GET / HTTP/1.1\r\nContent-Length: 0\r\n\r\n", HttpHeadLimits{}).outcome,
+      Outcome::kComplete);
 }
 
 TEST(HttpRequestTest, ARangeIsAtMostOnePartOfTheBody) {

@@ -100,8 +100,9 @@ TEST(HttpServerTest, RequestBodiesAreRefused) {
                                   std::string(2048, 'x'))));
   EXPECT_EQ(r.status, 413);
   EXPECT_LT(absl::Now() - start, absl::Seconds(2)) << "the server waited for the body";
-  EXPECT_EQ(ParseHttpAnswer(HttpExchange(server.port(), "GET /metrics HTTP/1.1\r\n"
-                                                        "Transfer-Encoding: chunked\r\n\r\n"))
+  EXPECT_EQ(ParseHttpAnswer(HttpExchange(server.port(),
+                                         "GET /metrics HTTP/1.1\r\n"
+                                         "Transfer-Encoding: chunked\r\n\r\n"))
                 .status,
             413);
   EXPECT_EQ(calls.load(), 0);
@@ -285,8 +286,7 @@ TEST(HttpServerTest, AnAnswerThatStallsIsDropped) {
   ASSERT_EQ(connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)), 0);
   ASSERT_TRUE(SendAll(fd, "GET /big HTTP/1.1\r\n\r\n"));
   EXPECT_TRUE(Eventually([&] { return server.stats().connections_open == 1; }));
-  EXPECT_TRUE(Eventually([&] { return server.stats().connections_open == 0; },
-                         absl::Seconds(5)))
+  EXPECT_TRUE(Eventually([&] { return server.stats().connections_open == 0; }, absl::Seconds(5)))
       << "a stalled answer should be dropped after about a second";
   EXPECT_GE(server.stats().timeouts, 1);
   close(fd);
@@ -300,9 +300,10 @@ TEST(HttpServerTest, KeepAliveServesPipelinedRequestsInOrderUpToTheCap) {
   server.Get("/n", [&] { return Text(absl::StrCat("n=", ++n, "\n")); });
   ASSERT_TRUE(server.Start().ok());
   // Four requests in one write: three answers, the third closing the connection.
-  const std::string raw = HttpExchange(
-      server.port(), "GET /n HTTP/1.1\r\n\r\nGET /n HTTP/1.1\r\n\r\nGET /n HTTP/1.1\r\n\r\n"
-                     "GET /n HTTP/1.1\r\n\r\n");
+  const std::string raw =
+      HttpExchange(server.port(),
+                   "GET /n HTTP/1.1\r\n\r\nGET /n HTTP/1.1\r\n\r\nGET /n HTTP/1.1\r\n\r\n"
+                   "GET /n HTTP/1.1\r\n\r\n");
   const size_t one = raw.find("n=1\n"), two = raw.find("n=2\n"), three = raw.find("n=3\n");
   ASSERT_NE(one, std::string::npos) << raw;
   ASSERT_NE(two, std::string::npos) << raw;
@@ -379,8 +380,8 @@ TEST(HttpServerTest, RangesNeverMakeAnAnswerLargerThanItsBody) {
   a = HttpGetAnswer(port, "/three.min.js", "Range: bytes=0-1\r\nIf-Range: \"v1\"\r\n");
   EXPECT_EQ(a.status, 200);
   // HEAD with a range: the part's head, no body.
-  const HttpAnswer head = ParseHttpAnswer(HttpExchange(
-      port, "HEAD /three.min.js HTTP/1.0\r\nRange: bytes=0-9,20-29\r\n\r\n"));
+  const HttpAnswer head = ParseHttpAnswer(
+      HttpExchange(port, "HEAD /three.min.js HTTP/1.0\r\nRange: bytes=0-9,20-29\r\n\r\n"));
   EXPECT_EQ(head.status, 206);
   EXPECT_NE(head.headers.find("content-length: 30"), std::string::npos) << head.headers;
   EXPECT_TRUE(head.body.empty());
@@ -390,7 +391,8 @@ TEST(HttpServerTest, RangesNeverMakeAnAnswerLargerThanItsBody) {
 TEST(HttpServerTest, HeadersThatWouldSplitTheHeadAreDropped) {
   HttpServer server(HttpServerOptions{});
   server.Get("/h", [] {
-    return HttpResponse{200, "text/plain", "ok\n", {{"X-Good", "1"}, {"X-Bad", "a\r\nSet-Cookie: x"}}};
+    return HttpResponse{
+        200, "text/plain", "ok\n", {{"X-Good", "1"}, {"X-Bad", "a\r\nSet-Cookie: x"}}};
   });
   ASSERT_TRUE(server.Start().ok());
   const HttpAnswer a = HttpGetAnswer(server.port(), "/h");

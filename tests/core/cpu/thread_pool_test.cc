@@ -57,6 +57,8 @@ TEST(ThreadPoolTest, UsesSeveralThreadsAndRunsNestedLoopsSerially) {
   std::atomic<int> max_index{0};
   std::atomic<int64_t> inner_sum{0};
   pool.ParallelForChunks(64, 1, [&](int64_t, int64_t) {
+    // A slow chunk, so the worker takes some before the caller has done them all.
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
     int idx = ThreadPool::CurrentThreadIndex();
     int prev = max_index.load();
     while (idx > prev && !max_index.compare_exchange_weak(prev, idx)) {
@@ -64,6 +66,7 @@ TEST(ThreadPoolTest, UsesSeveralThreadsAndRunsNestedLoopsSerially) {
     // A nested loop must not deadlock.
     pool.ParallelForChunks(10, 3, [&](int64_t b, int64_t e) { inner_sum += e - b; });
   });
+  EXPECT_EQ(max_index.load(), 1) << "the pool's worker ran no chunk";
   EXPECT_EQ(inner_sum.load(), 640);
 }
 
