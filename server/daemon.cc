@@ -187,6 +187,7 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   d->state_.config.max_streams = options.max_streams;
   d->state_.config.max_frame_pixels = options.max_frame_pixels;
   d->state_.config.max_render_pixels = options.max_render_pixels;
+  d->state_.config.max_message_bytes = options.max_message_bytes;
   d->state_.config.version = PlenoxdVersion();
   d->state_.config.backend = BackendKindText(options.backend);
   d->state_.config.cuda_built = BuiltWithCuda();

@@ -30,6 +30,9 @@ struct DaemonConfig {
   // image is decoded (DaemonOptions::max_frame_pixels).
   int64_t max_frame_pixels = 3840 * 2160;
   int64_t max_render_pixels = kDefaultMaxRenderPixels;  // per Render call
+  // The largest message sent or received (--max-message-mb): a Render whose response could be
+  // larger is refused before it renders (proto/render_size.h).
+  int64_t max_message_bytes = 64 << 20;
   // For GetServerInfo.
   std::string version;      // plenoxd's version (PLX_VERSION)
   std::string backend;      // --backend: "cpu", "cuda" or "auto"

@@ -12,6 +12,7 @@
 #include "core/geometry/world_pose.h"
 #include "core/mapping/mapper.h"
 #include "core/render/render_view.h"
+#include "proto/render_size.h"
 #include "server/export_request.h"
 #include "server/grpc_status.h"
 #include "server/integrate_reactor.h"
@@ -409,6 +410,14 @@ grpc::ServerUnaryReactor* PlenoxdService::Render(grpc::CallbackServerContext* co
         !s.ok()) {
       status = absl::Status(s.code(),
                             absl::StrCat("intrinsics: ", s.message(), " (--max-render-pixels)"));
+    }
+  }
+  if (status.ok()) {
+    // An answer gRPC could not send is refused before the render, not after seconds of work.
+    if (absl::Status s = CheckRenderResponseSize(*request, state_->config.max_message_bytes);
+        !s.ok()) {
+      status = absl::Status(s.code(),
+                            absl::StrCat("intrinsics: ", s.message(), " (--max-message-mb)"));
     }
   }
   if (status.ok()) {
