@@ -443,6 +443,11 @@ grpc::ServerUnaryReactor* PlenoxdService::Render(grpc::CallbackServerContext* co
                  options.cancelled = [context] { return context->IsCancelled(); };
                  PLX_ASSIGN_OR_RETURN(const RenderedView view,
                                       RenderView(*backend, *map.map, pose, k, options));
+                 // Encoding a large view takes seconds too; nobody would read it.
+                 if (context->IsCancelled()) {
+                   return absl::CancelledError("the call was cancelled before its images were "
+                                               "encoded");
+                 }
                  int64_t rendered = 0;
                  for (float o : view.opacity.data) rendered += o >= kRenderedOpacity;
                  response->set_coverage(static_cast<double>(rendered) /
