@@ -110,7 +110,7 @@ class ExportReactor final : public grpc::ServerWriteReactor<pb::ExportChunk> {
 
   void OnWriteDone(bool ok) override {
     if (!ok) {
-      Done(absl::CancelledError("client gone"));
+      Done(CancelledCallStatus(*state_, context_, "client gone"));
       return;
     }
     WriteNext();
