@@ -8,7 +8,8 @@
 set -euo pipefail
 
 packages=(cmake ninja-build g++ pkg-config ccache
-          libeigen3-dev libopencv-dev libabsl-dev libgtest-dev libgmock-dev libbenchmark-dev
+          # libpng-dev: PNG frames are decoded with libpng itself (core/io/png_decode.h).
+          libeigen3-dev libopencv-dev libpng-dev libabsl-dev libgtest-dev libgmock-dev libbenchmark-dev
           # The daemon (gRPC + Protobuf, health/reflection protos) and the Python client.
           libgrpc++-dev libgrpc-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
           grpc-proto python3-grpcio python3-grpc-tools python3-protobuf python3-numpy

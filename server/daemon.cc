@@ -187,6 +187,7 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   d->state_.config.max_streams = options.max_streams;
   d->state_.config.max_frame_pixels = options.max_frame_pixels;
   d->state_.config.max_render_pixels = options.max_render_pixels;
+  d->state_.config.max_message_bytes = options.max_message_bytes;
   d->state_.config.version = PlenoxdVersion();
   d->state_.config.backend = BackendKindText(options.backend);
   d->state_.config.cuda_built = BuiltWithCuda();
@@ -277,11 +278,14 @@ absl::Status Daemon::Drain(absl::Duration grace) {
   if (drained_) return absl::OkStatus();
   drained_ = true;
   LogEvent("info", "draining", {{"grace_s", absl::StrCat(absl::ToDoubleSeconds(grace))}});
+  // Running calls get `grace` to finish; then gRPC cancels them, and they say so
+  // (CancelledCallStatus).
+  const absl::Time deadline = absl::Now() + grace;
+  state_.drain_deadline_ns = absl::ToUnixNanos(deadline);
   state_.draining = true;
   server_->GetHealthCheckService()->SetServingStatus(false);
-  // Running calls get `grace` to finish; then gRPC cancels them. Workers keep running until the
-  // server is down, so queued frames and mapping chunks complete or see their stream cancelled.
-  const absl::Time deadline = absl::Now() + grace;
+  // Workers keep running until the server is down, so queued frames and mapping chunks complete
+  // or see their stream cancelled.
   server_->Shutdown(std::chrono::system_clock::now() +
                     std::chrono::milliseconds(absl::ToInt64Milliseconds(grace)));
   // SLAM jobs integrate the keyframes their streams handed them (not the rest of their

@@ -1,6 +1,8 @@
 #include "server/daemon_state.h"
 
 #include "absl/strings/str_cat.h"
+#include "absl/time/clock.h"
+#include "absl/time/time.h"
 
 namespace plx::server {
 namespace {
@@ -30,6 +32,23 @@ absl::Status CheckCall(const DaemonState& state, const grpc::CallbackServerConte
     return absl::UnauthenticatedError("invalid bearer token");
   }
   return absl::OkStatus();
+}
+
+absl::Status CancelledCallStatus(const DaemonState& state,
+                                 const grpc::CallbackServerContext* context,
+                                 const char* otherwise) {
+  // gRPC cancels the calls left at the drain's deadline, never before it; the margin covers
+  // the clocks' rounding.
+  const absl::Time now = absl::Now();
+  if (state.draining.load() &&
+      now >= absl::FromUnixNanos(state.drain_deadline_ns.load()) - absl::Milliseconds(10)) {
+    return absl::CancelledError(
+        "cancelled: plenoxd is shutting down (the drain's grace period ended)");
+  }
+  if (absl::FromChrono(context->deadline()) <= now) {
+    return absl::CancelledError("cancelled: the call's deadline passed");
+  }
+  return absl::CancelledError(otherwise);
 }
 
 absl::Status AcquireStreamSlot(DaemonState& state, const grpc::CallbackServerContext* context) {

@@ -4,6 +4,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <limits>
 #include <string>
 
 #include <grpcpp/server_context.h>
@@ -30,6 +31,9 @@ struct DaemonConfig {
   // image is decoded (DaemonOptions::max_frame_pixels).
   int64_t max_frame_pixels = 3840 * 2160;
   int64_t max_render_pixels = kDefaultMaxRenderPixels;  // per Render call
+  // The largest message sent or received (--max-message-mb): a Render whose response could be
+  // larger is refused before it renders (proto/render_size.h).
+  int64_t max_message_bytes = 64 << 20;
   // For GetServerInfo.
   std::string version;      // plenoxd's version (PLX_VERSION)
   std::string backend;      // --backend: "cpu", "cuda" or "auto"
@@ -45,11 +49,21 @@ struct DaemonState {
   SlamJobs* slam_jobs = nullptr;  // the maps' running SLAM mapping jobs
   DaemonConfig config;
   std::atomic<bool> draining{false};
+  // When a drain's grace ends and gRPC cancels the calls still running (absl::ToUnixNanos);
+  // set before `draining`. Tells the daemon's own cancellations from its clients'.
+  std::atomic<int64_t> drain_deadline_ns{std::numeric_limits<int64_t>::max()};
 };
 
 // Every plenoxd.v1 call starts here: UNAVAILABLE while draining, UNAUTHENTICATED without the
 // bearer token (metadata "authorization: Bearer <token>") when auth is on.
 absl::Status CheckCall(const DaemonState& state, const grpc::CallbackServerContext* context);
+
+// Why gRPC cancelled a call, for its status and log line: CANCELLED "cancelled: plenoxd is
+// shutting down ..." when the drain's grace ended (the daemon cancelled it), "cancelled: the
+// call's deadline passed" when it had, else `otherwise` (the client cancelled or went away).
+absl::Status CancelledCallStatus(const DaemonState& state,
+                                 const grpc::CallbackServerContext* context,
+                                 const char* otherwise = "cancelled by the client");
 
 // For streams: CheckCall plus the concurrent-stream limit; on OK the caller owns one stream slot
 // and must ReleaseStreamSlot when the stream ends.

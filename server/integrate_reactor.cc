@@ -53,7 +53,7 @@ absl::Status IntegrateReactor::HandleFirstMessage() {
   if (absl::Status s = ValidateMappingSessionOptions(options_); !s.ok()) {
     return absl::InvalidArgumentError(absl::StrCat("options: ", s.message()));
   }
-  if (absl::Status s = state_->maps->BeginMapping(map_name_); !s.ok()) return s;
+  if (absl::Status s = state_->maps->BeginMapping(map_name_, MappingJobKind::kIntegrate); !s.ok()) return s;
   lease_ = true;
   job_id_ = state_->jobs->Create("integrate", map_name_);
   state_->jobs->Update(job_id_, JobState::kRunning, 0.0, "waiting for keyframes");

@@ -15,6 +15,14 @@
 #include "server/proto_convert.h"
 
 namespace plx::server {
+namespace {
+
+// The lease holder as the client knows it.
+const char* HolderText(MappingJobKind kind) {
+  return kind == MappingJobKind::kSlam ? "its SLAM job (Slam streams)" : "an Integrate stream";
+}
+
+}  // namespace
 
 MapStore::MapStore(MapStoreOptions options) : options_(std::move(options)) {}
 
@@ -117,8 +125,11 @@ absl::Status MapStore::Delete(const std::string& name) {
   std::lock_guard<std::mutex> lock(mutex_);
   PLX_ASSIGN_OR_RETURN(Entry * e, Find(name));
   if (e->mapping) {
-    return absl::FailedPreconditionError(
-        absl::StrCat("map \"", name, "\" is being mapped; cancel the Integrate stream first"));
+    return absl::FailedPreconditionError(absl::StrCat(
+        "map \"", name, "\" is being mapped by ", HolderText(e->mapping_kind), "; ",
+        e->mapping_kind == MappingJobKind::kSlam
+            ? "end its Slam streams first (the job ends after the last one)"
+            : "cancel that stream (or let it finish) first"));
   }
   // The file first: a map whose file stays would come back at the next start.
   if (!e->file.empty() && ::unlink(e->file.c_str()) != 0) {
@@ -229,14 +240,17 @@ std::vector<StaleTempFile> MapStore::RemoveStaleTempFiles() {
   return plx::RemoveStaleTempFiles(options_.data_dir, ".plx");
 }
 
-absl::Status MapStore::BeginMapping(const std::string& name) {
+absl::Status MapStore::BeginMapping(const std::string& name, MappingJobKind kind) {
   std::lock_guard<std::mutex> lock(mutex_);
   PLX_ASSIGN_OR_RETURN(Entry * e, Find(name));
   if (e->mapping) {
-    return absl::FailedPreconditionError(
-        absl::StrCat("map \"", name, "\" already has a mapping job (one writer per map)"));
+    return absl::FailedPreconditionError(absl::StrCat("map \"", name,
+                                                      "\" already has a mapping job, ",
+                                                      HolderText(e->mapping_kind),
+                                                      " (one writer per map)"));
   }
   e->mapping = true;
+  e->mapping_kind = kind;
   return absl::OkStatus();
 }
 

@@ -45,6 +45,10 @@ struct MapStatus {
   std::string source;
 };
 
+// What holds a map's mapping lease: errors about a busy map name it, so the client knows what to
+// stop (an Integrate stream it opened, or the Slam streams feeding the map's SLAM job).
+enum class MappingJobKind { kIntegrate, kSlam };
+
 // A published map: immutable, shared by every reader, its occupancy exact.
 struct MapVersion {
   std::shared_ptr<const PlenoxelMap> map;
@@ -80,8 +84,9 @@ class MapStore {
   std::vector<std::string> DirtyNames() const;
   int64_t max_map_bytes() const { return options_.max_map_bytes; }
 
-  // One mapping job per map: FAILED_PRECONDITION when another holds the lease.
-  absl::Status BeginMapping(const std::string& name);
+  // One mapping job per map: FAILED_PRECONDITION naming the holder when another holds the
+  // lease.
+  absl::Status BeginMapping(const std::string& name, MappingJobKind kind);
   void EndMapping(const std::string& name);
   // Publishes a new version from the lease holder; RESOURCE_EXHAUSTED over the memory limit.
   absl::StatusOr<uint64_t> Publish(const std::string& name,
@@ -97,6 +102,7 @@ class MapStore {
     int keyframes = 0;
     bool dirty = false;
     bool mapping = false;
+    MappingJobKind mapping_kind = MappingJobKind::kIntegrate;  // when `mapping`
     std::string file;  // the file this store loaded the map from or saved it to; empty: none
   };
   MapStatus StatusOf(const std::string& name, const Entry& e) const;

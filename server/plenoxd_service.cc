@@ -12,6 +12,7 @@
 #include "core/geometry/world_pose.h"
 #include "core/mapping/mapper.h"
 #include "core/render/render_view.h"
+#include "proto/render_size.h"
 #include "server/export_request.h"
 #include "server/grpc_status.h"
 #include "server/integrate_reactor.h"
@@ -109,7 +110,7 @@ class ExportReactor final : public grpc::ServerWriteReactor<pb::ExportChunk> {
 
   void OnWriteDone(bool ok) override {
     if (!ok) {
-      Done(absl::CancelledError("client gone"));
+      Done(CancelledCallStatus(*state_, context_, "client gone"));
       return;
     }
     WriteNext();
@@ -412,6 +413,14 @@ grpc::ServerUnaryReactor* PlenoxdService::Render(grpc::CallbackServerContext* co
     }
   }
   if (status.ok()) {
+    // An answer gRPC could not send is refused before the render, not after seconds of work.
+    if (absl::Status s = CheckRenderResponseSize(*request, state_->config.max_message_bytes);
+        !s.ok()) {
+      status = absl::Status(s.code(),
+                            absl::StrCat("intrinsics: ", s.message(), " (--max-message-mb)"));
+    }
+  }
+  if (status.ok()) {
     map = state_->maps->Latest(request->map());
     status = map.status();
   }
@@ -434,6 +443,11 @@ grpc::ServerUnaryReactor* PlenoxdService::Render(grpc::CallbackServerContext* co
                  options.cancelled = [context] { return context->IsCancelled(); };
                  PLX_ASSIGN_OR_RETURN(const RenderedView view,
                                       RenderView(*backend, *map.map, pose, k, options));
+                 // Encoding a large view takes seconds too; nobody would read it.
+                 if (context->IsCancelled()) {
+                   return absl::CancelledError("the call was cancelled before its images were "
+                                               "encoded");
+                 }
                  int64_t rendered = 0;
                  for (float o : view.opacity.data) rendered += o >= kRenderedOpacity;
                  response->set_coverage(static_cast<double>(rendered) /

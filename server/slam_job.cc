@@ -301,7 +301,7 @@ absl::StatusOr<std::shared_ptr<SlamJob>> SlamJobs::Join(const std::string& map,
     job->Enter(std::move(listener));
     return job;
   }
-  PLX_RETURN_IF_ERROR(state_->maps->BeginMapping(map));
+  PLX_RETURN_IF_ERROR(state_->maps->BeginMapping(map, MappingJobKind::kSlam));
   const std::string job_id = state_->jobs->Create("slam", map);
   state_->jobs->Update(job_id, JobState::kRunning, 0.0, "waiting for keyframes");
   // A new job, a new record; over the bound, records of maps without a running job go first.

@@ -34,6 +34,12 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
     reading_ = false;
     if (phase_ != Phase::kOpen) return;
     if (!ok) {
+      // A read fails on a cancelled call as on a half-close (OnCancel may come later): a
+      // cancelled stream must not end as if its input were complete.
+      if (context_->IsCancelled()) {
+        FailLocked(CancelledCallStatus(*state_, context_));
+        return;
+      }
       if (first_) {
         FailLocked(absl::InvalidArgumentError(
             absl::StrCat("empty stream: the first ", request_name_, " must name the map")));
@@ -76,7 +82,7 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
       // The client went away; nothing more can be delivered.
       outbox_.clear();
       write_in_flight_ = false;
-      FailLocked(absl::CancelledError("client gone"));
+      FailLocked(CancelledCallStatus(*state_, context_, "client gone"));
       return;
     }
     if (!outbox_.empty()) {
@@ -89,17 +95,19 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
 
   void OnCancel() final {
     std::lock_guard<std::mutex> lock(mutex_);
-    FailLocked(absl::CancelledError("cancelled by the client"));
+    // Also how a drain's deadline ends the streams still open: the status says which.
+    FailLocked(CancelledCallStatus(*state_, context_));
   }
 
   void OnDone() final {
-    if (holds_slot_) ReleaseStreamSlot(*state_);
-    if (worker_ != nullptr) state_->workers->DetachStream(*worker_);
     std::vector<LogField> fields = {{"method", method_}};
     for (LogField& field : LogFields()) fields.push_back(std::move(field));
     fields.emplace_back("status", std::to_string(final_status_.error_code()));
     if (!final_status_.ok()) fields.emplace_back("message", final_status_.error_message());
     LogEvent(final_status_.ok() ? "info" : "warning", "rpc", fields);
+    // After the log line: whoever waits for the stream count to drop sees the stream's line.
+    if (holds_slot_) ReleaseStreamSlot(*state_);
+    if (worker_ != nullptr) state_->workers->DetachStream(*worker_);
     delete this;
   }
 
@@ -201,7 +209,7 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
   bool StartTaskLocked(bool cancelled) {
     // A cancelled call stops before its next step (OnCancel may not have run yet).
     if (!cancelled && !failed() && context_->IsCancelled()) {
-      FailLocked(absl::CancelledError("cancelled by the client"));
+      FailLocked(CancelledCallStatus(*state_, context_));
     }
     if (!cancelled && !finished() && !failed()) return true;
     TaskDoneLocked();

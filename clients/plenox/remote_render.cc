@@ -1,6 +1,7 @@
 // plenox --server HOST:PORT render: colour and depth images of a map on the daemon (Render).
 #include <iostream>
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
@@ -8,6 +9,7 @@
 #include "clients/plenox/render_flags.h"
 #include "core/formats/pose_text.h"
 #include "core/io/atomic_write.h"
+#include "proto/render_size.h"
 
 namespace plx::cli {
 
@@ -25,14 +27,20 @@ int RunRemoteRender(const RemoteOptions& remote, const std::vector<std::string>&
   if (!target) return exit_code;
   const PinholeIntrinsics& k = target->intrinsics;
 
-  std::unique_ptr<RemoteClient> client = ConnectOrReport(kCommand, remote, &exit_code);
-  if (!client) return exit_code;
   pb::RenderRequest request;
   request.set_map(flags.GetString("map"));
   PoseToProto(target->pose, request.mutable_pose());
   IntrinsicsToProto(k, /*depth_scale=*/0.0, request.mutable_intrinsics());
   request.set_color_encoding(pb::COLOR_ENCODING_PNG);
   request.set_depth_encoding(pb::DEPTH_ENCODING_PNG16);
+  // Whatever the daemon's --max-message-mb, this client receives at most
+  // kRemoteMaxMessageBytes: an answer that may be larger is not asked for (the daemon's rule).
+  if (absl::Status s = CheckRenderResponseSize(request, kRemoteMaxMessageBytes); !s.ok()) {
+    return ReportError(kCommand, absl::Status(s.code(), absl::StrCat("--intrinsics: ", s.message(),
+                                                                     " plenox receives")));
+  }
+  std::unique_ptr<RemoteClient> client = ConnectOrReport(kCommand, remote, &exit_code);
+  if (!client) return exit_code;
   absl::StatusOr<pb::RenderResponse> response = client->Render(request);
   if (!response.ok()) return ReportError(kCommand, response.status());
   if (response->width() != static_cast<uint32_t>(k.width) ||

@@ -15,6 +15,7 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
 #include "core/io/image_header.h"
+#include "core/io/png_decode.h"
 
 namespace plx {
 namespace {
@@ -129,8 +130,10 @@ std::atomic<int64_t> buffers_decoded{0};
 absl::StatusOr<cv::Mat> DecodeBuffer(const std::string& bytes, const std::string& what) {
   // Bytes from the network reach only OpenCV's PNG and JPEG codecs, whose headers callers can
   // check first (image_header.h); imdecode alone would try every format it was built with.
-  PLX_RETURN_IF_ERROR(ReadImageHeader(bytes, what).status());
+  PLX_ASSIGN_OR_RETURN(const ImageHeader header, ReadImageHeader(bytes, what));
   buffers_decoded.fetch_add(1, std::memory_order_relaxed);
+  // PNGs go to libpng directly, whose errors then come back here instead of to stderr.
+  if (header.format == ImageFormat::kPng) return DecodePng(bytes, what);
   cv::Mat image;
   try {
     const cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8UC1,
@@ -140,8 +143,7 @@ absl::StatusOr<cv::Mat> DecodeBuffer(const std::string& bytes, const std::string
     return absl::InvalidArgumentError(absl::StrCat(what, ": cannot decode image: ", e.what()));
   }
   if (image.empty()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(what, ": cannot decode image (corrupt or not a PNG/JPEG)"));
+    return absl::InvalidArgumentError(absl::StrCat(what, ": cannot decode image (corrupt JPEG)"));
   }
   return image;
 }

@@ -385,5 +385,64 @@ TEST(DrainTest, HealthNewCallsOpenStreamsAndSaving) {
   EXPECT_FALSE(loaded.dirty());
 }
 
+// An open Track stream with its first estimate read.
+template <typename Stream>
+void StartTracking(Stream& stream) {
+  pb::TrackRequest r;
+  r.set_map("room");
+  *r.mutable_options() = FastTrackOptions();
+  *r.mutable_initial_pose() = ToProto(GroundTruth(0));
+  *r.mutable_frame() = EncodeFrame(0, false);
+  ASSERT_TRUE(stream->Write(r));
+  pb::PoseEstimate e;
+  ASSERT_TRUE(stream->Read(&e));
+}
+
+// The streams a drain cancels at its deadline used to be logged "cancelled by the client",
+// sending an operator after clients that did nothing. Only a client's own cancel says that.
+TEST(DrainTest, StreamsTheDrainCancelsSaySoAndOnlyAClientCancelBlamesTheClient) {
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartWithMaps({"room"});
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+  const auto streams_closed = [&] {
+    return d.daemon->state().metrics->active_streams.load() == 0;
+  };
+  ::testing::internal::CaptureStderr();
+  {
+    grpc::ClientContext context;
+    Prepare(&context);
+    auto stream = d.stub->Track(&context);
+    StartTracking(stream);
+    context.TryCancel();
+    EXPECT_EQ(ReadToEnd<pb::PoseEstimate>(stream).error_code(), grpc::StatusCode::CANCELLED);
+    // The stream's log line is written before its slot is released.
+    EXPECT_TRUE(WaitFor(streams_closed));
+  }
+  const std::string client_log = ::testing::internal::GetCapturedStderr();
+
+  ::testing::internal::CaptureStderr();
+  grpc::ClientContext context;
+  Prepare(&context);  // its deadline is far beyond the drain's
+  auto idle = d.stub->Track(&context);
+  StartTracking(idle);
+  const absl::Status drained = d.daemon->Drain(absl::Milliseconds(300));
+  const grpc::Status idle_status = ReadToEnd<pb::PoseEstimate>(idle);
+  EXPECT_TRUE(WaitFor(streams_closed));
+  const std::string drain_log = ::testing::internal::GetCapturedStderr();
+  EXPECT_TRUE(drained.ok()) << drained;
+  // The client gets gRPC's own status for a call the server cancelled (UNAVAILABLE, "Cancelling
+  // all calls"); the daemon's side is in its log line.
+  EXPECT_FALSE(idle_status.ok());
+
+  EXPECT_NE(client_log.find("method=Track"), std::string::npos) << client_log;
+  EXPECT_NE(client_log.find("cancelled by the client"), std::string::npos) << client_log;
+  EXPECT_EQ(client_log.find("shutting down"), std::string::npos) << client_log;
+  EXPECT_NE(drain_log.find("cancelled: plenoxd is shutting down (the drain's grace period "
+                           "ended)"),
+            std::string::npos)
+      << drain_log;
+  EXPECT_EQ(drain_log.find("by the client"), std::string::npos) << drain_log;
+}
+
 }  // namespace
 }  // namespace plx::server::testing

@@ -100,6 +100,29 @@ TEST(DataDirTest, DeleteMapRemovesOnlyItsOwnFileAndReportsFailure) {
   EXPECT_FALSE(fs::exists(own));
 }
 
+// A map file that is corrupt or cut short is DATA_LOSS (the API documents it for LoadMap):
+// the bytes are there but are not a map any more, unlike a file that is not a map at all.
+TEST(DataDirTest, ACorruptOrTruncatedMapFileIsDataLoss) {
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartWithMaps({"room"});
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+  std::string bytes;
+  {
+    std::ifstream in(d.data_dir + "/room.plx", std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  ASSERT_GT(bytes.size(), 1000u);
+  std::string flipped = bytes;
+  flipped[flipped.size() / 2] ^= 0x40;  // in the payload: the checksum no longer matches
+  std::ofstream(d.data_dir + "/flipped.plx", std::ios::binary) << flipped;
+  std::ofstream(d.data_dir + "/cut.plx", std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+  for (const std::string name : {"flipped", "cut"}) {
+    const grpc::Status s = LoadMapCall(*d.stub, name);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::DATA_LOSS) << name << ": " << Describe(s);
+    EXPECT_NE(s.error_message().find(name + ".plx"), std::string::npos) << Describe(s);
+  }
+}
+
 #ifdef PLENOXD_BINARY
 
 // A FIFO named like a map used to block the daemon's start in open() (it never listened), and

@@ -4,11 +4,14 @@
 // only worker for 127 s after its client's 3 s deadline; a Track stream waited all that time.
 #include <atomic>
 #include <chrono>
+#include <random>
 #include <string>
 #include <thread>
 
 #include <gtest/gtest.h>
 
+#include "core/io/image_io.h"
+#include "proto/render_size.h"
 #include "tests/server/daemon_fixture.h"
 
 namespace plx::server::testing {
@@ -89,7 +92,8 @@ TEST(RenderBoundsTest, ARenderCancelledWhileQueuedNeverRuns) {
 
 // A 4096 x 3072 render takes about 28 s on two CPU threads; its client's deadline passes after
 // 1 s. The worker stops within a row tile, so the next call on it is served at once instead of
-// waiting for the whole view.
+// waiting for the whole view. Raw images (63 MB) fit the 64 MiB message limit; PNGs' worst case
+// would not, and the render would be refused before it starts.
 TEST(RenderBoundsTest, ARenderPastItsDeadlineStopsBetweenTiles) {
   DaemonOptions o = TestDaemonOptions("");
   o.max_render_pixels = 4096 * 3072;
@@ -100,7 +104,10 @@ TEST(RenderBoundsTest, ARenderPastItsDeadlineStopsBetweenTiles) {
     grpc::ClientContext context;
     Prepare(&context, "", absl::Seconds(1));
     pb::RenderResponse response;
-    const grpc::Status late = d.stub->Render(&context, RenderOfSize(4096, 3072), &response);
+    pb::RenderRequest request = RenderOfSize(4096, 3072);
+    request.set_color_encoding(pb::COLOR_ENCODING_RAW_RGB8);
+    request.set_depth_encoding(pb::DEPTH_ENCODING_RAW_U16);
+    const grpc::Status late = d.stub->Render(&context, request, &response);
     EXPECT_EQ(late.error_code(), grpc::StatusCode::DEADLINE_EXCEEDED) << Describe(late);
   }
   grpc::ClientContext context;
@@ -109,6 +116,63 @@ TEST(RenderBoundsTest, ARenderPastItsDeadlineStopsBetweenTiles) {
   const grpc::Status next = d.stub->Render(&context, RenderRequestAt("room", 10), &response);
   EXPECT_TRUE(next.ok()) << Describe(next) << " (the worker was still rendering the large view)";
   EXPECT_EQ(d.daemon->state().metrics->renders.load(), 1);
+}
+
+// A response gRPC could not send used to be found out after the render (seconds of a worker for
+// a large view); now the request's size and encodings refuse it first, naming the size and the
+// flag.
+TEST(RenderBoundsTest, ARenderWhoseAnswerCannotBeSentIsRefusedBeforeRendering) {
+  DaemonOptions o = TestDaemonOptions("");
+  o.max_message_bytes = 900 << 10;
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartWithMaps({"room"}, o);
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+  pb::RenderRequest request = RenderOfSize(512, 384);  // raw: 512 * 384 * 5 = 960 KiB
+  request.set_color_encoding(pb::COLOR_ENCODING_RAW_RGB8);
+  request.set_depth_encoding(pb::DEPTH_ENCODING_RAW_U16);
+  pb::RenderResponse response;
+  const grpc::Status refused = Render(*d.stub, request, &response);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << Describe(refused);
+  EXPECT_EQ(refused.error_message(),
+            absl::StrCat("intrinsics: a 512 x 384 render with RAW_RGB8 colour and RAW_U16 depth "
+                         "may take up to ",
+                         RenderResponseBytesBound(512, 384, pb::COLOR_ENCODING_RAW_RGB8,
+                                                  pb::DEPTH_ENCODING_RAW_U16),
+                         " bytes, over the largest message of ", 900 << 10,
+                         " bytes (--max-message-mb)"));
+  // Refused before the worker saw it: no render ran (the counter counts renders done).
+  EXPECT_EQ(d.daemon->state().metrics->renders.load(), 0);
+  EXPECT_EQ(d.daemon->state().workers->Pick(Priority::kInteractive).queue_depth(), 0);
+
+  request = RenderOfSize(256, 192);
+  request.set_color_encoding(pb::COLOR_ENCODING_RAW_RGB8);
+  request.set_depth_encoding(pb::DEPTH_ENCODING_RAW_U16);
+  const grpc::Status ok = Render(*d.stub, request, &response);
+  EXPECT_TRUE(ok.ok()) << Describe(ok);
+  EXPECT_EQ(d.daemon->state().metrics->renders.load(), 1);
+}
+
+// The bound the refusal uses is a worst case: images of noise, which no codec compresses, still
+// encode within it (PNG and PNG16; JPEG colour beside raw depth).
+TEST(RenderBoundsTest, TheResponseBoundHoldsForIncompressibleImages) {
+  constexpr int kW = 301, kH = 203;  // not multiples of the codecs' blocks
+  std::mt19937 random(7);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  ColorImage color(kW, kH, 3);
+  for (float& c : color.data) c = unit(random);
+  DepthImage depth(kW, kH, 1);
+  for (float& z : depth.data) z = 65.0f * unit(random);
+  absl::StatusOr<std::string> png = EncodeColorImage(color, ".png");
+  absl::StatusOr<std::string> jpeg = EncodeColorImage(color, ".jpg");
+  absl::StatusOr<std::string> png16 = EncodeDepthImage(depth, 1000.0);
+  ASSERT_TRUE(png.ok() && jpeg.ok() && png16.ok());
+  const int64_t pngs = static_cast<int64_t>(png->size() + png16->size());
+  EXPECT_LE(pngs,
+            RenderResponseBytesBound(kW, kH, pb::COLOR_ENCODING_PNG, pb::DEPTH_ENCODING_PNG16));
+  EXPECT_LE(static_cast<int64_t>(jpeg->size()) + 2 * kW * kH,
+            RenderResponseBytesBound(kW, kH, pb::COLOR_ENCODING_JPEG, pb::DEPTH_ENCODING_RAW_U16));
+  // Noise is the worst case in earnest: the PNGs are not much smaller than the raw images.
+  EXPECT_GT(pngs, 4 * kW * kH);
 }
 
 }  // namespace

@@ -3,7 +3,10 @@
 // that gives up stops the render within a tile (a daemon's worker is not held for the rest).
 #include "core/render/render_view.h"
 
+#include <unistd.h>
+
 #include <cstring>
+#include <fstream>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -67,6 +70,63 @@ TEST(RenderViewTest, ACancelledRenderStopsBetweenTiles) {
   EXPECT_EQ(view.status().code(), absl::StatusCode::kCancelled) << view.status();
   EXPECT_THAT(view.status().message(), ::testing::HasSubstr("after 20 of 60 rows"));
   EXPECT_EQ(asked, 3);
+}
+
+// This process's resident memory (/proc/self/statm): what a render has touched so far. The
+// images of a large view are fresh mappings of the allocator, so they count only once written.
+int64_t ResidentBytes() {
+  std::ifstream statm("/proc/self/statm");
+  int64_t size = 0, resident = 0;
+  statm >> size >> resident;
+  return resident * sysconf(_SC_PAGESIZE);
+}
+
+// A 4096 x 3072 view's three images are 252 MB. They used to be allocated and zeroed before the
+// first cancellation check (for 8192^2, 1.3 GB: seconds of a worker after its caller gave up).
+// What a render has touched when it is asked is the work it did, without timing anything: far
+// less than the images when it is asked before its first tile, and only about a tile (2^18
+// pixels, ~12 MB of buffers and image rows) when asked after it.
+constexpr PinholeIntrinsics kLargeView{3000, 3000, 2048, 1536, 4096, 3072};
+constexpr int64_t kLargeViewImageBytes = int64_t{4096} * 3072 * 5 * sizeof(float);
+constexpr int64_t kAboutATile = 48 << 20;
+
+TEST(RenderViewTest, ARenderCancelledBeforeItStartsTouchesNoImage) {
+  std::unique_ptr<Backend> backend = MakeCpuBackend(2);
+  const PlenoxelMap empty(0.05f);
+  RenderViewOptions options;
+  const int64_t before = ResidentBytes();
+  int64_t touched = 0;
+  bool asked = false;
+  options.cancelled = [&] {
+    asked = true;
+    touched = ResidentBytes() - before;
+    return true;
+  };
+  const absl::StatusOr<RenderedView> view = RenderView(*backend, empty, SE3(), kLargeView, options);
+  EXPECT_EQ(view.status().code(), absl::StatusCode::kCancelled) << view.status();
+  EXPECT_THAT(view.status().message(), ::testing::HasSubstr("after 0 of 3072 rows"));
+  ASSERT_TRUE(asked);
+  EXPECT_LT(touched, kAboutATile) << "the images (" << kLargeViewImageBytes
+                                  << " bytes) were filled before the first question";
+}
+
+TEST(RenderViewTest, ALargeRenderCancelledAfterATileTouchedOnlyThatTile) {
+  std::unique_ptr<Backend> backend = MakeCpuBackend(2);
+  const PlenoxelMap empty(0.05f);
+  RenderViewOptions options;
+  const int64_t before = ResidentBytes();
+  int64_t touched = 0;
+  int asked = 0;
+  options.cancelled = [&] {
+    if (++asked < 2) return false;
+    touched = ResidentBytes() - before;
+    return true;
+  };
+  const absl::StatusOr<RenderedView> view = RenderView(*backend, empty, SE3(), kLargeView, options);
+  EXPECT_EQ(view.status().code(), absl::StatusCode::kCancelled) << view.status();
+  EXPECT_THAT(view.status().message(), ::testing::HasSubstr("after 64 of 3072 rows"));
+  ASSERT_EQ(asked, 2);
+  EXPECT_LT(touched, kAboutATile) << "of " << kLargeViewImageBytes << " bytes of images";
 }
 
 TEST(RenderViewTest, ThePixelLimitNamesTheSizeAndTheLimit) {
