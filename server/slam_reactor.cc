@@ -21,6 +21,7 @@ pb::SlamState ToProto(SlamState state) {
     case SlamState::kDegraded: return pb::SLAM_STATE_DEGRADED;
     case SlamState::kLost: return pb::SLAM_STATE_LOST;
     case SlamState::kRelocalised: return pb::SLAM_STATE_RELOCALISED;
+    case SlamState::kWaiting: return pb::SLAM_STATE_WAITING;
   }
   return pb::SLAM_STATE_UNSPECIFIED;
 }
@@ -277,11 +278,12 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
   std::string camera_label;  // the frame's camera_id, for the viewer
   const absl::Status failure = CatchAllocationFailure("SLAM tracking", [&]() -> absl::Status {
     const SlamMapView view = job->View();
-    // Only the bootstrap frame (the map's first, from its first camera) tracks without a
-    // version; any other waits for one, still encoded (SlamTracker::Track's precondition,
-    // checked before the frame is decoded or moved).
-    const bool bootstrap = tracker_ == nullptr && view.accepted_keyframes.empty();
-    if (view.map == nullptr && !bootstrap) {
+    if (!tracker_) tracker_ = std::make_unique<SlamTracker>(tracker_options_, backend);
+    // Only a bootstrap candidate (no keyframe in the map yet, from a camera that has not
+    // tracked a frame: the first frame, or one after WAITING frames, of any camera on the map)
+    // tracks without a version; any other waits for one, still encoded (SlamTracker::Track's
+    // precondition, checked before the frame is decoded or moved).
+    if (tracker_->NeedsVersion(view)) {
       retry = true;
       return absl::OkStatus();
     }
@@ -293,12 +295,6 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
     const RgbdFrame& frame = decoded->frame;
     const PinholeIntrinsics& k = decoded->calibration.pinhole;
     camera_label = decoded->camera_id;
-    if (!tracker_) {
-      // A camera that joins a map with content, or a job that has accepted its first keyframe
-      // from another stream, finds itself in it (relocalisation from the initial pose).
-      const bool joins = view.map != nullptr || !view.accepted_keyframes.empty();
-      tracker_ = std::make_unique<SlamTracker>(tracker_options_, backend, joins);
-    }
     if (absl::Status s = tracker_->CheckFrame(frame, k, decoded->client_pose); !s.ok()) {
       client_error = true;
       return s;
