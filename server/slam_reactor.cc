@@ -121,13 +121,19 @@ absl::Status SlamReactor::HandleFirstMessage() {
     return absl::InvalidArgumentError(absl::StrCat(
         "options.voxel_size: must be finite and >= 0 (0 = the default), got ", o.voxel_size()));
   }
-  // The options are checked before the store is touched (a refused stream creates no map);
-  // the lengths that scale with the voxel size are set again at the map's own below.
+  // The options and the initial pose are checked before the store is touched (a refused
+  // stream creates no map, which would count against --max-maps); the lengths that scale with
+  // the voxel size are set again at the map's own below.
   // 0 = SLAM's default voxel size (the proto's 0.02 m), for a new map and for these checks.
   const float voxel_size =
       o.voxel_size() > 0 ? o.voxel_size() : DefaultSlamOptions().mapping.mapper.voxel_size;
   PLX_RETURN_IF_ERROR(
       SlamOptionsFromProto(o, voxel_size, state_->maps->max_map_bytes()).status());
+  std::optional<SE3> initial_pose;
+  if (request_.has_initial_pose()) {
+    PLX_ASSIGN_OR_RETURN(initial_pose, PoseFromProto(request_.initial_pose(), "initial_pose"));
+    PLX_RETURN_IF_ERROR(CheckPoseInsideWorld(*initial_pose, "initial_pose"));
+  }
   // A map that does not exist yet is created here; another stream may create it meanwhile.
   absl::StatusOr<MapStatus> info = state_->maps->Info(map_name_);
   if (absl::IsNotFound(info.status())) {
@@ -144,11 +150,7 @@ absl::Status SlamReactor::HandleFirstMessage() {
       const SlamOptions slam,
       SlamOptionsFromProto(o, info->voxel_size, state_->maps->max_map_bytes()));
   tracker_options_ = SlamTrackerOptionsOf(slam);
-  if (request_.has_initial_pose()) {
-    PLX_ASSIGN_OR_RETURN(const SE3 pose, PoseFromProto(request_.initial_pose(), "initial_pose"));
-    PLX_RETURN_IF_ERROR(CheckPoseInsideWorld(pose, "initial_pose"));
-    tracker_options_.initial_pose = pose;
-  }
+  if (initial_pose) tracker_options_.initial_pose = initial_pose;
   realtime_ = o.realtime();
   deterministic_ = o.deterministic();
   max_pending_keyframes_ = slam.max_pending_keyframes;

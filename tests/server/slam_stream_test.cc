@@ -583,6 +583,50 @@ TEST(SlamStreamTest, AWaitingCameraJoinsTheMapAnotherCameraBootstrapped) {
   }
 }
 
+TEST(SlamStreamTest, ABadInitialPoseCreatesNoMap) {
+  DaemonOptions options = TestDaemonOptions(ScratchDir("plx_srv_slam_bad_pose"));
+  options.max_maps = 1;
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(options);
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+  pb::Pose zero_rotation = ToProto(GroundTruth(0));
+  zero_rotation.set_qx(0);
+  zero_rotation.set_qy(0);
+  zero_rotation.set_qz(0);
+  zero_rotation.set_qw(0);
+  pb::Pose not_finite = ToProto(GroundTruth(0));
+  not_finite.set_tx(std::nan(""));
+  for (const pb::Pose& pose : {zero_rotation, not_finite}) {
+    grpc::ClientContext context;
+    Prepare(&context);
+    auto stream = d.stub->Slam(&context);
+    pb::SlamRequest first;
+    first.set_map("posed");
+    *first.mutable_options() = SmallSlamOptions(false);
+    *first.mutable_initial_pose() = pose;
+    *first.mutable_frame() = EncodeFrame(0, false);
+    stream->Write(first);
+    stream->WritesDone();
+    pb::SlamUpdate update;
+    while (stream->Read(&update)) {
+    }
+    const grpc::Status status = stream->Finish();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << Describe(status);
+    EXPECT_NE(status.error_message().find("initial_pose"), std::string::npos) << Describe(status);
+    pb::MapInfo info;
+    EXPECT_EQ(GetMap(*d.stub, "posed", &info).error_code(), grpc::StatusCode::NOT_FOUND);
+    grpc::ClientContext list_context;
+    Prepare(&list_context);
+    pb::ListMapsResponse maps;
+    ASSERT_TRUE(d.stub->ListMaps(&list_context, pb::ListMapsRequest(), &maps).ok());
+    EXPECT_EQ(maps.maps_size(), 0);
+  }
+  // The one map --max-maps allows is still free for a good stream.
+  const SlamRun run = RunSlam(*d.stub, "good", SmallSlamOptions(false), Range(0, 3), GroundTruth(0));
+  EXPECT_TRUE(run.status.ok()) << Describe(run.status);
+  EXPECT_EQ(run.updates.size(), 3u);
+}
+
 TEST(SlamStreamTest, DrainMidStreamSavesEveryKeyframeAndARestartExtendsTheMap) {
   const std::string dir = ScratchDir("plx_srv_slam_drain");
   uint32_t keyframes_seen = 0;
