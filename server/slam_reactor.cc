@@ -177,7 +177,10 @@ absl::Status SlamReactor::HandleRequestLocked(bool first) {
     return absl::OkStatus();
   }
   if (request_.has_frame()) {
-    const std::string field = absl::StrCat("frame[", processed_ + queue_.size() + dropped_, "]");
+    // Its position in the stream, counting every frame received: the ones tracked, the one
+    // being tracked, those queued and those dropped.
+    const uint32_t index = received_++;
+    const std::string field = absl::StrCat("frame[", index, "]");
     PLX_ASSIGN_OR_RETURN(CheckedFrame frame,
                          CheckFrame(std::move(*request_.mutable_frame()), field, false,
                                     state_->config.max_frame_pixels));
@@ -190,7 +193,7 @@ absl::Status SlamReactor::HandleRequestLocked(bool first) {
       ++dropped_;
       state_->metrics->frames_dropped++;
     }
-    queue_.push_back(Pending{std::move(frame), std::chrono::steady_clock::now()});
+    queue_.push_back(Pending{std::move(frame), index, std::chrono::steady_clock::now()});
     AdvanceLocked();
   }
   return absl::OkStatus();
@@ -328,7 +331,8 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
     return;
   }
   job_->trajectory().Record(camera_, camera_label, result.timestamp, result.pose, result.state);
-  update.set_frame(processed_++);
+  ++processed_;
+  update.set_frame(work->index);
   update.set_timestamp(result.timestamp);
   PoseToProto(result.pose, update.mutable_pose());
   update.set_state(ToProto(result.state));
@@ -348,13 +352,13 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
   }
   if (result.keyframe) {
     LogEvent("info", "slam_keyframe",
-             {{"map", map_name_}, {"frame", absl::StrCat(result.frame)},
+             {{"map", map_name_}, {"frame", absl::StrCat(work->index)},
               {"keyframes", absl::StrCat(update.mapping().keyframes())},
               {"reason", result.reason}});
   }
   if (!last_state_ || *last_state_ != result.state) {
     LogEvent(result.state == SlamState::kLost ? "warning" : "info", "slam_state",
-             {{"map", map_name_}, {"frame", absl::StrCat(result.frame)},
+             {{"map", map_name_}, {"frame", absl::StrCat(work->index)},
               {"state", SlamStateName(result.state)}, {"reason", result.reason}});
     last_state_ = result.state;
   }

@@ -627,6 +627,47 @@ TEST(SlamStreamTest, ABadInitialPoseCreatesNoMap) {
   EXPECT_EQ(run.updates.size(), 3u);
 }
 
+TEST(SlamStreamTest, AnErrorNamesTheFramesPositionInTheStream) {
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started =
+      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_slam_frame_index")));
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+  // The fourth frame is bad and comes while the third is being tracked: it is posted as soon
+  // as the second's update goes out (one keyframe may be pending), and tracking takes long
+  // here (many rays and iterations). The error still names it frame[3].
+  grpc::ClientContext context;
+  Prepare(&context);
+  auto stream = d.stub->Slam(&context);
+  pb::SlamRequest first;
+  first.set_map("indexed");
+  *first.mutable_options() = SmallSlamOptions(false);
+  first.mutable_options()->set_max_pending_keyframes(1);
+  first.mutable_options()->mutable_tracking()->set_rays(16384);
+  first.mutable_options()->mutable_tracking()->set_iterations(12);
+  *first.mutable_initial_pose() = ToProto(GroundTruth(0));
+  ASSERT_TRUE(stream->Write(first));
+  for (int i = 0; i < 3; ++i) {
+    pb::SlamRequest request;
+    *request.mutable_frame() = EncodeFrame(i, false);
+    ASSERT_TRUE(stream->Write(request));
+  }
+  pb::SlamUpdate update;
+  for (int i = 0; i < 2; ++i) {
+    ASSERT_TRUE(stream->Read(&update));
+    EXPECT_EQ(update.frame(), static_cast<uint32_t>(i));
+  }
+  pb::SlamRequest bad;
+  *bad.mutable_frame() = EncodeFrame(3, false);
+  bad.mutable_frame()->mutable_intrinsics()->set_width(kWidth + 2);
+  stream->Write(bad);
+  stream->WritesDone();
+  while (stream->Read(&update)) {
+  }
+  const grpc::Status status = stream->Finish();
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << Describe(status);
+  EXPECT_NE(status.error_message().find("frame[3]"), std::string::npos) << Describe(status);
+}
+
 TEST(SlamStreamTest, DrainMidStreamSavesEveryKeyframeAndARestartExtendsTheMap) {
   const std::string dir = ScratchDir("plx_srv_slam_drain");
   uint32_t keyframes_seen = 0;
