@@ -1,5 +1,6 @@
 #include "server/metrics.h"
 
+#include <iterator>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -108,7 +109,8 @@ std::string Metrics::Render(const Gauges& g) const {
   absl::StrAppend(&out,
                   "# HELP plenoxd_slam_frames_total Frames Slam streams processed, by state.\n"
                   "# TYPE plenoxd_slam_frames_total counter\n");
-  static constexpr const char* kStates[] = {"ok", "degraded", "lost", "relocalised"};
+  static constexpr const char* kStates[] = {"ok", "degraded", "lost", "relocalised", "waiting"};
+  static_assert(std::size(kStates) == std::tuple_size_v<decltype(slam_frames_)>);
   for (size_t i = 0; i < slam_frames_.size(); ++i) {
     absl::StrAppend(&out, "plenoxd_slam_frames_total{state=\"", kStates[i], "\"} ",
                     slam_frames_[i].load(), "\n");

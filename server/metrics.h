@@ -41,7 +41,7 @@ class Metrics {
 
   void ObserveTrackLatency(double seconds) { track_latency_.Observe(seconds); }
   // A frame a Slam stream processed: `state` is its SlamState's index (OK, DEGRADED, LOST,
-  // RELOCALISED), `seconds` from receiving it to its update.
+  // RELOCALISED, WAITING), `seconds` from receiving it to its update.
   void ObserveSlamFrame(int state, double seconds);
 
   // Gauges supplied by the daemon at scrape time.
@@ -74,7 +74,7 @@ class Metrics {
  private:
   LatencyHistogram track_latency_;
   LatencyHistogram slam_latency_;
-  std::array<std::atomic<int64_t>, 4> slam_frames_{};  // by state
+  std::array<std::atomic<int64_t>, 5> slam_frames_{};  // by state
 };
 
 // Serves `render()` (the Prometheus text) at GET /metrics on `server`.

@@ -21,6 +21,7 @@ pb::SlamState ToProto(SlamState state) {
     case SlamState::kDegraded: return pb::SLAM_STATE_DEGRADED;
     case SlamState::kLost: return pb::SLAM_STATE_LOST;
     case SlamState::kRelocalised: return pb::SLAM_STATE_RELOCALISED;
+    case SlamState::kWaiting: return pb::SLAM_STATE_WAITING;
   }
   return pb::SLAM_STATE_UNSPECIFIED;
 }
@@ -120,13 +121,19 @@ absl::Status SlamReactor::HandleFirstMessage() {
     return absl::InvalidArgumentError(absl::StrCat(
         "options.voxel_size: must be finite and >= 0 (0 = the default), got ", o.voxel_size()));
   }
-  // The options are checked before the store is touched (a refused stream creates no map);
-  // the lengths that scale with the voxel size are set again at the map's own below.
+  // The options and the initial pose are checked before the store is touched (a refused
+  // stream creates no map, which would count against --max-maps); the lengths that scale with
+  // the voxel size are set again at the map's own below.
   // 0 = SLAM's default voxel size (the proto's 0.02 m), for a new map and for these checks.
   const float voxel_size =
       o.voxel_size() > 0 ? o.voxel_size() : DefaultSlamOptions().mapping.mapper.voxel_size;
   PLX_RETURN_IF_ERROR(
       SlamOptionsFromProto(o, voxel_size, state_->maps->max_map_bytes()).status());
+  std::optional<SE3> initial_pose;
+  if (request_.has_initial_pose()) {
+    PLX_ASSIGN_OR_RETURN(initial_pose, PoseFromProto(request_.initial_pose(), "initial_pose"));
+    PLX_RETURN_IF_ERROR(CheckPoseInsideWorld(*initial_pose, "initial_pose"));
+  }
   // A map that does not exist yet is created here; another stream may create it meanwhile.
   absl::StatusOr<MapStatus> info = state_->maps->Info(map_name_);
   if (absl::IsNotFound(info.status())) {
@@ -143,11 +150,7 @@ absl::Status SlamReactor::HandleFirstMessage() {
       const SlamOptions slam,
       SlamOptionsFromProto(o, info->voxel_size, state_->maps->max_map_bytes()));
   tracker_options_ = SlamTrackerOptionsOf(slam);
-  if (request_.has_initial_pose()) {
-    PLX_ASSIGN_OR_RETURN(const SE3 pose, PoseFromProto(request_.initial_pose(), "initial_pose"));
-    PLX_RETURN_IF_ERROR(CheckPoseInsideWorld(pose, "initial_pose"));
-    tracker_options_.initial_pose = pose;
-  }
+  if (initial_pose) tracker_options_.initial_pose = initial_pose;
   realtime_ = o.realtime();
   deterministic_ = o.deterministic();
   max_pending_keyframes_ = slam.max_pending_keyframes;
@@ -174,7 +177,10 @@ absl::Status SlamReactor::HandleRequestLocked(bool first) {
     return absl::OkStatus();
   }
   if (request_.has_frame()) {
-    const std::string field = absl::StrCat("frame[", processed_ + queue_.size() + dropped_, "]");
+    // Its position in the stream, counting every frame received: the ones tracked, the one
+    // being tracked, those queued and those dropped.
+    const uint32_t index = received_++;
+    const std::string field = absl::StrCat("frame[", index, "]");
     PLX_ASSIGN_OR_RETURN(CheckedFrame frame,
                          CheckFrame(std::move(*request_.mutable_frame()), field, false,
                                     state_->config.max_frame_pixels));
@@ -187,7 +193,7 @@ absl::Status SlamReactor::HandleRequestLocked(bool first) {
       ++dropped_;
       state_->metrics->frames_dropped++;
     }
-    queue_.push_back(Pending{std::move(frame), std::chrono::steady_clock::now()});
+    queue_.push_back(Pending{std::move(frame), index, std::chrono::steady_clock::now()});
     AdvanceLocked();
   }
   return absl::OkStatus();
@@ -277,11 +283,12 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
   std::string camera_label;  // the frame's camera_id, for the viewer
   const absl::Status failure = CatchAllocationFailure("SLAM tracking", [&]() -> absl::Status {
     const SlamMapView view = job->View();
-    // Only the bootstrap frame (the map's first, from its first camera) tracks without a
-    // version; any other waits for one, still encoded (SlamTracker::Track's precondition,
-    // checked before the frame is decoded or moved).
-    const bool bootstrap = tracker_ == nullptr && view.accepted_keyframes.empty();
-    if (view.map == nullptr && !bootstrap) {
+    if (!tracker_) tracker_ = std::make_unique<SlamTracker>(tracker_options_, backend);
+    // Only a bootstrap candidate (no keyframe in the map yet, from a camera that has not
+    // tracked a frame: the first frame, or one after WAITING frames, of any camera on the map)
+    // tracks without a version; any other waits for one, still encoded (SlamTracker::Track's
+    // precondition, checked before the frame is decoded or moved).
+    if (tracker_->NeedsVersion(view)) {
       retry = true;
       return absl::OkStatus();
     }
@@ -293,12 +300,6 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
     const RgbdFrame& frame = decoded->frame;
     const PinholeIntrinsics& k = decoded->calibration.pinhole;
     camera_label = decoded->camera_id;
-    if (!tracker_) {
-      // A camera that joins a map with content, or a job that has accepted its first keyframe
-      // from another stream, finds itself in it (relocalisation from the initial pose).
-      const bool joins = view.map != nullptr || !view.accepted_keyframes.empty();
-      tracker_ = std::make_unique<SlamTracker>(tracker_options_, backend, joins);
-    }
     if (absl::Status s = tracker_->CheckFrame(frame, k, decoded->client_pose); !s.ok()) {
       client_error = true;
       return s;
@@ -330,7 +331,8 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
     return;
   }
   job_->trajectory().Record(camera_, camera_label, result.timestamp, result.pose, result.state);
-  update.set_frame(processed_++);
+  ++processed_;
+  update.set_frame(work->index);
   update.set_timestamp(result.timestamp);
   PoseToProto(result.pose, update.mutable_pose());
   update.set_state(ToProto(result.state));
@@ -350,13 +352,13 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
   }
   if (result.keyframe) {
     LogEvent("info", "slam_keyframe",
-             {{"map", map_name_}, {"frame", absl::StrCat(result.frame)},
+             {{"map", map_name_}, {"frame", absl::StrCat(work->index)},
               {"keyframes", absl::StrCat(update.mapping().keyframes())},
               {"reason", result.reason}});
   }
   if (!last_state_ || *last_state_ != result.state) {
     LogEvent(result.state == SlamState::kLost ? "warning" : "info", "slam_state",
-             {{"map", map_name_}, {"frame", absl::StrCat(result.frame)},
+             {{"map", map_name_}, {"frame", absl::StrCat(work->index)},
               {"state", SlamStateName(result.state)}, {"reason", result.reason}});
     last_state_ = result.state;
   }

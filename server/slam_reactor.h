@@ -42,6 +42,7 @@ class SlamReactor final : public StreamReactor<plenoxd::v1::SlamRequest, plenoxd
  private:
   struct Pending {
     CheckedFrame frame;  // still encoded
+    uint32_t index = 0;  // 0-based position in the stream (frame[index] in errors)
     std::chrono::steady_clock::time_point received;
   };
 
@@ -75,7 +76,8 @@ class SlamReactor final : public StreamReactor<plenoxd::v1::SlamRequest, plenoxd
   std::shared_ptr<SlamJob> job_;
   std::shared_ptr<SlamJobListener> listener_;
   int camera_ = -1;  // this stream's camera in the job's TrajectoryRecord
-  uint32_t processed_ = 0;
+  uint32_t received_ = 0;   // frames received (dropped ones too)
+  uint32_t processed_ = 0;  // updates sent
   int keyframes_ = 0;
   std::optional<SlamState> last_state_;  // logged when it changes
 

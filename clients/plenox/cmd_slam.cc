@@ -118,6 +118,7 @@ int RunSlam(const std::vector<std::string>& args) {
   report.degraded = p.degraded;
   report.lost = p.lost;
   report.relocalised = p.relocalised;
+  report.waiting = p.waiting;
   report.ms_per_frame_median = result->ms_per_frame_median;
   report.ms_per_frame_p95 = result->ms_per_frame_p95;
   report.wall_s = result->wall_s;

@@ -316,6 +316,7 @@ const char* SlamStateText(pb::SlamState state) {
     case pb::SLAM_STATE_DEGRADED: return SlamStateName(SlamState::kDegraded);
     case pb::SLAM_STATE_LOST: return SlamStateName(SlamState::kLost);
     case pb::SLAM_STATE_RELOCALISED: return SlamStateName(SlamState::kRelocalised);
+    case pb::SLAM_STATE_WAITING: return SlamStateName(SlamState::kWaiting);
     default: return "?";
   }
 }

@@ -114,8 +114,8 @@ absl::StatusOr<pb::Frame> LoadFrameToProto(const RgbdDataset& dataset, int index
 
 // The name of a TrackingState for progress lines ("OK", "DEGRADED", "LOST").
 const char* TrackingStateText(pb::TrackingState state);
-// The same for a SlamState ("OK", "DEGRADED", "LOST", "RELOCALISED"), as in-process SLAM names
-// them.
+// The same for a SlamState ("OK", "DEGRADED", "LOST", "RELOCALISED", "WAITING"), as in-process
+// SLAM names them.
 const char* SlamStateText(pb::SlamState state);
 
 // The tracker settings of the --mode/--rays/--iterations flags (AddTrackerFlags) as the wire's

@@ -89,7 +89,7 @@ struct Received {
   std::vector<int> frame_index;      // the dataset's index of each update's frame
   std::vector<std::string> state;    // each update's state (SlamStateText) and keyframe mark
   int keyframes = 0;                 // this stream's
-  int ok = 0, degraded = 0, lost = 0, relocalised = 0;
+  int ok = 0, degraded = 0, lost = 0, relocalised = 0, waiting = 0;
   int dropped = 0;
   bool done = false;
   pb::SlamMapping mapping;  // as of the last update (the done message's at the end)
@@ -221,6 +221,7 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
         case pb::SLAM_STATE_DEGRADED: ++r.degraded; break;
         case pb::SLAM_STATE_LOST: ++r.lost; break;
         case pb::SLAM_STATE_RELOCALISED: ++r.relocalised; break;
+        case pb::SLAM_STATE_WAITING: ++r.waiting; break;
         default: break;
       }
       line.Update(SlamProgressText(sent[at].index + 1, report.frames,
@@ -340,6 +341,7 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
   report.degraded = received.degraded;
   report.lost = received.lost;
   report.relocalised = received.relocalised;
+  report.waiting = received.waiting;
   report.ms_per_frame_median = Percentile(received.daemon_ms, 0.5);
   report.ms_per_frame_p95 = Percentile(received.daemon_ms, 0.95);
   report.wall_s = absl::ToDoubleSeconds(received.done_at - wall_start);

@@ -81,14 +81,18 @@ absl::Status CheckSlamDataset(const RgbdDataset& dataset) {
   if (dataset.size() == 0) {
     return absl::InvalidArgumentError(absl::StrCat(dataset.name(), " has no frames"));
   }
-  PLX_ASSIGN_OR_RETURN(const RgbdFrame first, dataset.LoadFrame(0));
-  const bool any_depth = std::any_of(first.depth.data.begin(), first.depth.data.end(),
-                                     [](float d) { return d > 0.0f; });
-  if (!any_depth) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "frame 0 of ", dataset.name(), " has no valid depth: SLAM needs RGB-D frames"));
+  // A sequence may start without depth (a depth camera's first frames): SLAM waits for a frame
+  // with enough to start the map (SlamState::kWaiting), so any frame with depth will do here.
+  for (int i = 0; i < dataset.size(); ++i) {
+    PLX_ASSIGN_OR_RETURN(const RgbdFrame frame, dataset.LoadFrame(i));
+    if (std::any_of(frame.depth.data.begin(), frame.depth.data.end(),
+                    [](float d) { return d > 0.0f; })) {
+      return absl::OkStatus();
+    }
   }
-  return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat(dataset.name(),
+                                                 " has no valid depth in any of its ",
+                                                 dataset.size(), " frames: SLAM needs RGB-D frames"));
 }
 
 int SlamFrameCount(const RgbdDataset& dataset, const SlamDatasetOptions& options) {
@@ -134,10 +138,10 @@ std::string SlamSummaryText(const SlamReport& r, const std::string& tag) {
   if (r.keyframe_mb) absl::StrAppendFormat(&memory, ", keyframes %.1f MB", *r.keyframe_mb);
   if (r.peak_rss_mb) absl::StrAppendFormat(&memory, ", peak RSS %.0f MB", *r.peak_rss_mb);
   std::string text = absl::StrFormat(
-      "slam: %d frames (%d dropped), %d keyframes, %d OK, %d degraded, %d lost, %d relocalised; "
-      "tracking median %.1f ms, p95 %.1f ms; %.2f frames/s wall-clock; %d mapping iterations; "
-      "%s%s",
-      r.processed, r.dropped, r.keyframes, r.ok, r.degraded, r.lost, r.relocalised,
+      "slam: %d frames (%d dropped), %d keyframes, %d OK, %d degraded, %d lost, %d relocalised, "
+      "%d waiting; tracking median %.1f ms, p95 %.1f ms; %.2f frames/s wall-clock; %d mapping "
+      "iterations; %s%s",
+      r.processed, r.dropped, r.keyframes, r.ok, r.degraded, r.lost, r.relocalised, r.waiting,
       r.ms_per_frame_median, r.ms_per_frame_p95, r.fps(), r.mapping_iterations, memory, tag);
   if (r.ate_none_m && r.ate_se3_m) {
     text += absl::StrFormat("\nslam: ATE %.2f cm (no alignment), %.2f cm (SE(3))",
@@ -167,6 +171,7 @@ void PrintSlamResult(const SlamReport& r, bool json, const JsonObject& more) {
       .Add("degraded", r.degraded)
       .Add("lost", r.lost)
       .Add("relocalised", r.relocalised)
+      .Add("waiting", r.waiting)
       .Add("ms_per_frame_median", r.ms_per_frame_median)
       .Add("ms_per_frame_p95", r.ms_per_frame_p95)
       .Add("fps", r.fps())

@@ -30,7 +30,8 @@ absl::StatusOr<SlamDatasetOptions> SlamOptionsFromFlags(const FlagSet& flags);
 absl::StatusOr<double> RpeDeltaFromFlags(const FlagSet& flags);
 
 // What SLAM cannot run on, found before any frame is processed or sent: a dataset without
-// frames, or one whose frame 0 has no valid depth (InvalidArgument naming it).
+// frames, or one where no frame has valid depth (InvalidArgument naming it). Frames are loaded
+// until one has depth: usually frame 0 alone.
 absl::Status CheckSlamDataset(const RgbdDataset& dataset);
 
 // The number of frames a run goes through: the dataset's, or --max-frames when fewer.
@@ -43,6 +44,7 @@ struct SlamReport {
   int dropped = 0;         // --realtime: skipped while the tracker was behind
   int keyframes = 0;
   int ok = 0, degraded = 0, lost = 0, relocalised = 0;
+  int waiting = 0;  // before a frame had enough depth to start the map (SlamState::kWaiting)
   double ms_per_frame_median = 0.0;
   double ms_per_frame_p95 = 0.0;
   double wall_s = 0.0;

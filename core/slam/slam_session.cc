@@ -74,6 +74,9 @@ SlamTrackerOptions SlamTrackerOptionsOf(const SlamOptions& o) {
   t.relocalisation_keyframes = o.relocalisation_keyframes;
   t.relocalisation_radius_m = o.relocalisation_radius_m;
   t.initial_pose = o.initial_pose;
+  // A pixel helps the bootstrap only if the tracker uses it and the mapper maps it.
+  t.bootstrap_max_depth =
+      std::min(o.tracker.params.max_depth, o.mapping.mapper.allocation.max_depth);
   return t;
 }
 
@@ -90,10 +93,8 @@ SlamMapperOptions SlamMapperOptionsOf(const SlamOptions& o) {
   return m;
 }
 
-SlamSession::SlamSession(const SlamOptions& options, Backend* tracking_backend,
-                         bool extends_map)
-    : options_(options),
-      tracker_(SlamTrackerOptionsOf(options), tracking_backend, extends_map) {}
+SlamSession::SlamSession(const SlamOptions& options, Backend* tracking_backend)
+    : options_(options), tracker_(SlamTrackerOptionsOf(options), tracking_backend) {}
 
 absl::StatusOr<std::unique_ptr<SlamSession>> SlamSession::Create(
     const SlamOptions& options, Backend* tracking_backend,
@@ -103,9 +104,9 @@ absl::StatusOr<std::unique_ptr<SlamSession>> SlamSession::Create(
     return absl::InvalidArgumentError("SLAM needs a tracking backend and a mapping backend");
   }
   if (base != nullptr && base->grid.num_bricks() == 0) base = nullptr;  // nothing to extend
-  // A session that extends a map starts lost: its first frame has to find itself in it.
-  std::unique_ptr<SlamSession> session(
-      new SlamSession(options, tracking_backend, /*extends_map=*/base != nullptr));
+  // A session that extends a map starts lost: its first frame has to find itself in it (the
+  // tracker sees the base as the map's first version).
+  std::unique_ptr<SlamSession> session(new SlamSession(options, tracking_backend));
   PLX_RETURN_IF_ERROR(session->StartMapping(make_mapping_backend, std::move(base)));
   return session;
 }
@@ -316,6 +317,7 @@ SlamProgress SlamSession::progress() const {
   p.degraded = counts_.degraded;
   p.lost = counts_.lost;
   p.relocalised = counts_.relocalised;
+  p.waiting = counts_.waiting;
   return p;
 }
 

@@ -1,8 +1,9 @@
 // Online RGB-D SLAM in-process (DESIGN.md §9): unposed frames from one camera in, one pose
 // per frame out while the map grows behind the tracker. A session is the two halves wired
 // together with a threading mode:
-//   - SlamTracker (core/slam/slam_tracker.h): bootstrap, tracking against the latest published
-//     version, keyframe decisions, relocalisation after LOST;
+//   - SlamTracker (core/slam/slam_tracker.h): bootstrap (WAITING until a frame has enough depth
+//     to start the map), tracking against the latest published version, keyframe decisions,
+//     relocalisation after LOST;
 //   - SlamMapper (core/slam/slam_mapper.h): the keyframes' MappingSession with its local window,
 //     keyframe pose refinement, published versions.
 // By default mapping runs on its own thread with its own backend (optionally at a lower CPU
@@ -104,6 +105,7 @@ struct SlamProgress {
   int keyframes_integrated = 0;   // by mapping
   int pending_keyframes = 0;      // accepted, not yet integrated (mapping lag)
   int ok = 0, degraded = 0, lost = 0, relocalised = 0;
+  int waiting = 0;                // no map yet, too little depth to start one (SlamState)
   int mapping_iterations = 0;
   int refined_keyframes = 0;      // pose updates applied by refinement
   int64_t map_version = 0;
@@ -143,7 +145,7 @@ class SlamSession {
   SlamProgress progress() const;
 
  private:
-  SlamSession(const SlamOptions& options, Backend* tracking_backend, bool extends_map);
+  SlamSession(const SlamOptions& options, Backend* tracking_backend);
 
   absl::Status StartMapping(const BackendFactory& make_backend,
                             std::shared_ptr<const PlenoxelMap> base);

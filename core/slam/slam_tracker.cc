@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "core/common/status_macros.h"
 
 namespace plx {
@@ -28,8 +29,20 @@ const char* SlamStateName(SlamState state) {
     case SlamState::kDegraded: return "DEGRADED";
     case SlamState::kLost: return "LOST";
     case SlamState::kRelocalised: return "RELOCALISED";
+    case SlamState::kWaiting: return "WAITING";
   }
   return "?";
+}
+
+BootstrapDepth CountBootstrapDepth(const DepthImage& depth, float max_depth) {
+  BootstrapDepth out;
+  // NaN fails both comparisons, so a NaN pixel never counts.
+  out.valid = std::count_if(depth.data.begin(), depth.data.end(),
+                            [max_depth](float d) { return d > 0.0f && d <= max_depth; });
+  const auto fraction = static_cast<int64_t>(
+      std::ceil(kSlamBootstrapMinDepthFraction * static_cast<double>(depth.num_pixels())));
+  out.needed = std::max(fraction, kSlamBootstrapMinDepthPixels);
+  return out;
 }
 
 absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& o) {
@@ -43,17 +56,18 @@ absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& o) {
     return absl::InvalidArgumentError(absl::StrCat(
         "relocalisation_radius_m must be positive, got ", o.relocalisation_radius_m));
   }
+  if (!(o.bootstrap_max_depth > 0.0f) || !std::isfinite(o.bootstrap_max_depth)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "bootstrap_max_depth must be positive, got ", o.bootstrap_max_depth));
+  }
   if (o.initial_pose && !o.initial_pose->IsFinite()) {
     return absl::InvalidArgumentError("initial pose is not finite");
   }
   return absl::OkStatus();
 }
 
-SlamTracker::SlamTracker(const SlamTrackerOptions& options, Backend* backend, bool start_lost)
-    : options_(options),
-      backend_(backend),
-      tracker_(nullptr, backend, options.tracker),
-      lost_(start_lost) {}
+SlamTracker::SlamTracker(const SlamTrackerOptions& options, Backend* backend)
+    : options_(options), backend_(backend), tracker_(nullptr, backend, options.tracker) {}
 
 absl::Status SlamTracker::CheckFrame(const RgbdFrame& frame, const PinholeIntrinsics& k,
                                      const std::optional<SE3>& prior) const {
@@ -122,6 +136,38 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::Relocalise(
   return std::optional<TrackingResult>();
 }
 
+SlamFrameResult SlamTracker::Bootstrap(const RgbdFrame& frame, const std::optional<SE3>& prior,
+                                       SlamFrameResult out) {
+  ++counts_.frames;
+  const SE3 pose = prior.value_or(options_.initial_pose.value_or(SE3::Identity()));
+  out.pose = pose;
+  out.tracking.pose = pose;
+  const BootstrapDepth depth = CountBootstrapDepth(frame.depth, options_.bootstrap_max_depth);
+  if (!depth.enough()) {
+    // A map built from it would be too small to track the next frames against: the camera
+    // waits, as it is, for a frame that sees enough (a depth camera's first frames, a lens
+    // uncovered).
+    out.state = SlamState::kWaiting;
+    out.reason = absl::StrFormat(
+        "waiting for a frame to start the map: %d of %d pixels have depth in (0, %g m], %d "
+        "needed",
+        depth.valid, frame.depth.num_pixels(), options_.bootstrap_max_depth, depth.needed);
+    ++counts_.waiting;
+    return out;
+  }
+  // Keyframe 0: it builds the first version.
+  started_ = true;
+  tracker_.Reset(pose, frame.timestamp);
+  last_good_pose_ = pose;
+  out.state = SlamState::kOk;
+  out.reason = "first keyframe";
+  out.keyframe = true;
+  out.keyframes += 1;
+  out.tracking.state = TrackingState::kOk;
+  ++counts_.ok;
+  return out;
+}
+
 absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
                                                    const PinholeIntrinsics& k,
                                                    const std::optional<SE3>& prior,
@@ -132,30 +178,21 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   out.timestamp = frame.timestamp;
   out.keyframes = static_cast<int>(view.accepted_keyframes.size());
   out.map_version = view.version;
-  const bool first = counts_.frames == 0;
-  const bool bootstrap = first && view.map == nullptr && view.accepted_keyframes.empty();
-  if (view.map == nullptr && !bootstrap) {
+  if (BootstrapCandidate(view)) return Bootstrap(frame, prior, std::move(out));
+  if (view.map == nullptr) {
     // Checked before anything changes, so the caller can hand the same frame in again later.
     return absl::FailedPreconditionError(
         "the map has no published version yet: its first keyframe is still being integrated");
   }
   ++counts_.frames;
-  if (first) {
+  if (!started_) {
+    // The camera joins a map it did not bootstrap (one with content, or another camera's
+    // first keyframe, perhaps while this one was WAITING): it has to find itself in it.
+    started_ = true;
+    lost_ = true;
     const SE3 pose = prior.value_or(options_.initial_pose.value_or(SE3::Identity()));
     tracker_.Reset(pose, frame.timestamp);
     last_good_pose_ = pose;
-    if (bootstrap) {
-      // Bootstrap: the first frame is keyframe 0 and builds the first version.
-      out.pose = pose;
-      out.state = SlamState::kOk;
-      out.reason = "first keyframe";
-      out.keyframe = true;
-      out.keyframes += 1;
-      out.tracking.pose = pose;
-      out.tracking.state = TrackingState::kOk;
-      ++counts_.ok;
-      return out;
-    }
   }
   tracked_map_ = view.map;
   tracker_.set_map(tracked_map_.get());

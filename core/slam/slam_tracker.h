@@ -4,13 +4,14 @@
 // caller (SlamSession in-process; the daemon's Slam stream), so several cameras can track in
 // one map that one mapper grows.
 //
-//   - Bootstrap: with no map yet, the first frame is keyframe 0 at the initial pose (the
-//     frame's prior, else SlamTrackerOptions::initial_pose, else the identity).
+//   - Bootstrap: with no map yet, the first frame with enough valid depth to build one
+//     (BootstrapDepth) is keyframe 0 at the initial pose (the frame's prior, else
+//     SlamTrackerOptions::initial_pose, else the identity). Frames before it are WAITING.
 //   - Tracking: constant-velocity prediction, or the caller's prior (e.g. a headset's VIO).
 //   - Keyframes: only frames tracked OK, by the policy (core/slam/keyframe_policy.h) against
 //     every keyframe the map has accepted.
-//   - Relocalisation: after a LOST frame (or, when `start_lost`, from the first frame: a camera
-//     joining an existing map) each frame is tried from the prior, the motion model's
+//   - Relocalisation: after a LOST frame (or from the first frame of a camera joining a map
+//     it did not bootstrap: one with content, or another camera's first keyframe) each frame is tried from the prior, the motion model's
 //     prediction, the last good pose and the nearest keyframes; the first that tracks OK, stays
 //     near its start and passes a check at the sensor's noise is RELOCALISED. Until then
 //     frames are LOST with the prediction, never an unconverged estimate.
@@ -36,8 +37,36 @@
 
 namespace plx {
 
-enum class SlamState { kOk, kDegraded, kLost, kRelocalised };
+// kWaiting: no map yet and the frame has too little valid depth to start one (BootstrapDepth);
+// its pose is the initial pose, it is never a keyframe. Appended last: the daemon's metrics and
+// proto enum follow this order.
+enum class SlamState { kOk, kDegraded, kLost, kRelocalised, kWaiting };
 const char* SlamStateName(SlamState state);
+
+// The least valid depth a frame needs to bootstrap a map: pixels with depth in (0, max_depth]
+// (the tracker's and the mapper's range), at least kSlamBootstrapMinDepthFraction of the frame
+// and at least kSlamBootstrapMinDepthPixels.
+//   - 30 %: keyframe 0's map is all the next frames track against. The tracker calls a frame
+//     DEGRADED when fewer than 30 % of its rays hit the map (TrackerOptions::
+//     degraded_valid_fraction, LOST below 10 %), and only frames tracked OK become keyframes:
+//     after a keyframe 0 that saw less than that, a frame with full depth from the same place
+//     is DEGRADED, adds no keyframe, and the map never grows past keyframe 0 (the camera is
+//     LOST as soon as it moves off it). A depth camera's first frames and a covered lens have
+//     ~0 %; real frames with holes (glass, black or shiny surfaces, walls out of range) keep
+//     well above 30 %, so they are not refused.
+//   - 256 pixels: on tiny frames 30 % is a few dozen pixels, too few to map more than a brick
+//     or two, or for the tracker's robust noise scale (estimated from the spread of the
+//     residuals) to mean anything. It is below 30 % of any frame from 854 pixels up (40x30 is
+//     1200), so it only matters for thumbnails.
+inline constexpr double kSlamBootstrapMinDepthFraction = 0.30;
+inline constexpr int64_t kSlamBootstrapMinDepthPixels = 256;
+
+struct BootstrapDepth {
+  int64_t valid = 0;   // pixels with depth in (0, max_depth]
+  int64_t needed = 0;  // the minimum above for the frame's size
+  bool enough() const { return valid >= needed; }
+};
+BootstrapDepth CountBootstrapDepth(const DepthImage& depth, float max_depth);
 
 struct SlamTrackerOptions {
   TrackerOptions tracker;
@@ -48,6 +77,9 @@ struct SlamTrackerOptions {
   double relocalisation_radius_m = 0.25;
   // Where the camera starts (world_T_camera); the first frame's prior wins, else the identity.
   std::optional<SE3> initial_pose;
+  // Depth beyond this does not count towards the bootstrap minimum (BootstrapDepth): the
+  // nearer of the tracker's and the mapper's ranges (SlamTrackerOptionsOf).
+  float bootstrap_max_depth = 10.0f;
 };
 
 absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& options);
@@ -79,33 +111,47 @@ struct SlamFrameResult {
 // Per-camera counts.
 struct SlamTrackerCounts {
   int frames = 0;
-  int ok = 0, degraded = 0, lost = 0, relocalised = 0;
+  int ok = 0, degraded = 0, lost = 0, relocalised = 0, waiting = 0;
 };
 
 class SlamTracker {
  public:
-  // `backend` must outlive the tracker. `start_lost`: the camera joins an existing map and its
-  // first frame has to find itself in it (a relocalisation from the initial pose or prior).
-  SlamTracker(const SlamTrackerOptions& options, Backend* backend, bool start_lost);
+  // `backend` must outlive the tracker. Whether the camera bootstraps a map or joins one is
+  // decided by the view its first frames see (Track).
+  SlamTracker(const SlamTrackerOptions& options, Backend* backend);
 
   // Checks the frame against `k` and a prior for finiteness (InvalidArgument naming the frame).
   absl::Status CheckFrame(const RgbdFrame& frame, const PinholeIntrinsics& k,
                           const std::optional<SE3>& prior) const;
 
   // Tracks one frame in `view` (checked with CheckFrame first). Errors are the backend's; a
-  // frame that cannot be tracked is a LOST result. The first frame of a map with neither a
-  // version nor an accepted keyframe is the bootstrap keyframe (one camera must bootstrap a
-  // map: the caller serialises that); any other frame while the map has no version yet is
-  // FailedPrecondition, with nothing changed (hand the frame in again once a version is out).
+  // frame that cannot be tracked is a LOST result. Until the camera has tracked a frame, a
+  // view with neither a version nor an accepted keyframe makes the frame a bootstrap
+  // candidate: keyframe 0 when it has enough depth (BootstrapDepth), else WAITING (one camera
+  // must bootstrap a map: the caller serialises that). Any other frame while the map has no
+  // version yet is FailedPrecondition, with nothing changed (hand the frame in again once a
+  // version is out; NeedsVersion says so beforehand). The first frame of a camera that did not
+  // bootstrap the map joins it (relocalisation from the initial pose or prior).
   // `result.keyframes` counts view.accepted_keyframes plus this one.
   absl::StatusOr<SlamFrameResult> Track(const RgbdFrame& frame, const PinholeIntrinsics& k,
                                         const std::optional<SE3>& prior,
                                         const SlamMapView& view);
 
+  // Whether Track would refuse a frame in `view` until the map has a published version.
+  bool NeedsVersion(const SlamMapView& view) const {
+    return view.map == nullptr && !BootstrapCandidate(view);
+  }
+
   const SlamTrackerCounts& counts() const { return counts_; }
   int frames() const { return counts_.frames; }
 
  private:
+  bool BootstrapCandidate(const SlamMapView& view) const {
+    return !started_ && view.map == nullptr && view.accepted_keyframes.empty();
+  }
+  // A bootstrap candidate: keyframe 0, or WAITING without enough depth.
+  SlamFrameResult Bootstrap(const RgbdFrame& frame, const std::optional<SE3>& prior,
+                            SlamFrameResult out);
   absl::StatusOr<std::optional<TrackingResult>> Relocalise(const RgbdFrame& frame,
                                                             const PinholeIntrinsics& k,
                                                             const std::optional<SE3>& prior,
@@ -115,6 +161,7 @@ class SlamTracker {
   Backend* const backend_;
   Tracker tracker_;
   std::shared_ptr<const PlenoxelMap> tracked_map_;  // keeps the tracker's version alive
+  bool started_ = false;  // bootstrapped the map or tracked a frame in it
   bool lost_ = false;
   std::optional<SE3> last_good_pose_;
   SlamTrackerCounts counts_;

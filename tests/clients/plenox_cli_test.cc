@@ -758,6 +758,43 @@ TEST_F(PlenoxEndToEndTest, SlamWritesTrajectoryKeyframesAndMapAndScoresThem) {
   EXPECT_GT(JsonNumber(eval, "coverage").value_or(0), 0.8);
 }
 
+// A sequence whose first frames have no depth (a depth camera starting up): they are WAITING,
+// counted in the summary and the JSON; the first frame with depth starts the map and the rest
+// track.
+TEST_F(PlenoxEndToEndTest, SlamWaitsForAFrameWithDepthToStartTheMap) {
+  constexpr int kEmpty = 3;
+  constexpr int kRun = 12;
+  ScopedTempDir work("plenox_cli_slam_waiting");
+  const std::string copy = work.path() + "/late_depth";
+  fs::copy(*dataset_, copy, fs::copy_options::recursive);
+  const auto associations = ReadRows(copy + "/associations.txt");
+  ASSERT_GT(associations.size(), static_cast<size_t>(kEmpty));
+  for (int i = 0; i < kEmpty; ++i) {
+    ASSERT_EQ(associations[i].size(), 4u);
+    const std::string path = copy + "/" + associations[i][3];
+    cv::Mat depth = cv::imread(path, cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(depth.empty()) << path;
+    depth.setTo(0);
+    ASSERT_TRUE(cv::imwrite(path, depth));
+  }
+  const std::string trajectory = work.path() + "/slam.txt";
+  const CommandResult r = RunPlenox(
+      {"slam", "--dataset", copy, "--out", trajectory, "--deterministic", "--voxel-size", "0.03",
+       "--rays", "1024", "--iterations-per-keyframe", "20", "--max-frames", std::to_string(kRun),
+       "--json"},
+      "", /*timeout_s=*/300.0);
+  ASSERT_EQ(r.exit_code, kExitOk) << r.Describe();
+  EXPECT_THAT(r.err, HasSubstr(std::to_string(kEmpty) + " waiting")) << r.Describe();
+  const FlatJson json = LastLineJson(r);
+  EXPECT_EQ(JsonNumber(json, "processed").value_or(-1), kRun);
+  EXPECT_EQ(JsonNumber(json, "waiting").value_or(-1), kEmpty);
+  EXPECT_EQ(JsonNumber(json, "lost").value_or(-1), 0);
+  EXPECT_EQ(JsonNumber(json, "ok").value_or(0) + JsonNumber(json, "degraded").value_or(0),
+            kRun - kEmpty);
+  EXPECT_GE(JsonNumber(json, "keyframes").value_or(0), 1);
+  EXPECT_EQ(ReadRows(trajectory).size(), static_cast<size_t>(kRun));
+}
+
 TEST_F(PlenoxEndToEndTest, TrackRejectsBadFlagsBeforeWork) {
   ScopedTempDir work("plenox_cli_track_bad");
   for (const std::vector<std::string>& extra :

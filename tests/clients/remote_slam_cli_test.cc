@@ -437,6 +437,38 @@ TEST_F(RemoteSlamCliTest, ASecondStreamExtendsTheMap) {
   EXPECT_LE(JsonNumber(json, "ate_none_m").value_or(1), 0.01) << r.Describe();
 }
 
+// A sequence whose first frames have no depth (a depth camera starting up), into a new map:
+// the daemon answers them WAITING, the summary and the JSON count them, and the first frame
+// with depth starts the map.
+TEST_F(RemoteSlamCliTest, FramesWithoutDepthWaitForOneThatStartsTheMap) {
+  constexpr int kEmpty = 3;
+  ScopedTempDir work("plenox_remote_slam_waiting");
+  const std::string copy = work / "late_depth";
+  fs::copy(*dataset_, copy, fs::copy_options::recursive);
+  const auto associations = ReadRows(copy + "/associations.txt");
+  ASSERT_GT(associations.size(), static_cast<size_t>(kEmpty));
+  for (int i = 0; i < kEmpty; ++i) {
+    ASSERT_EQ(associations[i].size(), 4u);
+    const std::string path = copy + "/" + associations[i][3];
+    cv::Mat depth = cv::imread(path, cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(depth.empty()) << path;
+    depth.setTo(0);
+    ASSERT_TRUE(cv::imwrite(path, depth));
+  }
+  const CommandResult r =
+      Remote({"slam", "--dataset", copy, "--name", "late_depth", "--out", work / "t.txt",
+              "--deterministic", "--voxel-size", kVoxelSize, "--max-frames", "10", "--json"});
+  ASSERT_EQ(r.exit_code, kExitOk) << r.Describe() << "\n" << daemon_->Log();
+  EXPECT_THAT(r.err, HasSubstr(std::to_string(kEmpty) + " waiting")) << r.Describe();
+  const FlatJson json = LastLineJson(r);
+  EXPECT_EQ(JsonNumber(json, "processed").value_or(-1), 10);
+  EXPECT_EQ(JsonNumber(json, "waiting").value_or(-1), kEmpty);
+  EXPECT_EQ(JsonNumber(json, "lost").value_or(-1), 0);
+  EXPECT_GE(JsonNumber(json, "keyframes").value_or(0), 1);
+  EXPECT_GT(JsonNumber(json, "map_version").value_or(0), 0);
+  EXPECT_EQ(ReadRows(work / "t.txt").size(), 10u);
+}
+
 // What the daemon refuses comes back as its message, and no trajectory is written.
 TEST_F(RemoteSlamCliTest, TheDaemonsRefusalsAreReportedAndWriteNothing) {
   ScopedTempDir work("plenox_remote_slam_refused");

@@ -2,6 +2,7 @@
 // cameras into one live map while readers render it, and the bad-input answers.
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <filesystem>
 #include <functional>
@@ -40,13 +41,12 @@ struct SlamRun {
   std::optional<pb::SlamUpdate> done;
 };
 
-// One Slam stream: the first message names the map with `options` and `initial_pose`, then the
-// room's frames `indices` (without poses), stamped `timestamps` when given; half-closes and
-// reads to the end. `on_update` sees every update as it arrives.
-SlamRun RunSlam(pb::Plenoxd::Stub& stub, const std::string& map, const pb::SlamOptions& options,
-                const std::vector<int>& indices, std::optional<SE3> initial_pose,
-                const std::vector<double>& timestamps = {},
-                const std::function<void(const pb::SlamUpdate&)>& on_update = nullptr) {
+// One Slam stream: the first message names the map with `options` and `initial_pose`, then
+// `frames`; half-closes and reads to the end. `on_update` sees every update as it arrives.
+SlamRun RunSlamFrames(pb::Plenoxd::Stub& stub, const std::string& map,
+                      const pb::SlamOptions& options, const std::vector<pb::Frame>& frames,
+                      std::optional<SE3> initial_pose,
+                      const std::function<void(const pb::SlamUpdate&)>& on_update = nullptr) {
   SlamRun run;
   grpc::ClientContext context;
   Prepare(&context, "", absl::Seconds(300));
@@ -57,10 +57,9 @@ SlamRun RunSlam(pb::Plenoxd::Stub& stub, const std::string& map, const pb::SlamO
   if (initial_pose) *first.mutable_initial_pose() = ToProto(*initial_pose);
   std::thread writer([&] {
     bool writing = stream->Write(first);
-    for (size_t i = 0; i < indices.size() && writing; ++i) {
+    for (size_t i = 0; i < frames.size() && writing; ++i) {
       pb::SlamRequest request;
-      *request.mutable_frame() = EncodeFrame(indices[i], false);
-      if (!timestamps.empty()) request.mutable_frame()->set_timestamp(timestamps[i]);
+      *request.mutable_frame() = frames[i];
       writing = stream->Write(request);
     }
     stream->WritesDone();
@@ -77,6 +76,29 @@ SlamRun RunSlam(pb::Plenoxd::Stub& stub, const std::string& map, const pb::SlamO
   writer.join();
   run.status = stream->Finish();
   return run;
+}
+
+// The same with the room's frames `indices` (without poses), stamped `timestamps` when given.
+SlamRun RunSlam(pb::Plenoxd::Stub& stub, const std::string& map, const pb::SlamOptions& options,
+                const std::vector<int>& indices, std::optional<SE3> initial_pose,
+                const std::vector<double>& timestamps = {},
+                const std::function<void(const pb::SlamUpdate&)>& on_update = nullptr) {
+  std::vector<pb::Frame> frames;
+  for (size_t i = 0; i < indices.size(); ++i) {
+    frames.push_back(EncodeFrame(indices[i], false));
+    if (!timestamps.empty()) frames.back().set_timestamp(timestamps[i]);
+  }
+  return RunSlamFrames(stub, map, options, frames, initial_pose, on_update);
+}
+
+// Frame `index` of the room without depth (every pixel 0: a depth camera's first frames).
+pb::Frame EncodeFrameWithoutDepth(int index) {
+  pb::Frame frame = EncodeFrame(index, false);
+  absl::StatusOr<std::string> depth = EncodeDepthImage(DepthImage(kWidth, kHeight, 1, 0.0f),
+                                                       Room().calibration().depth_scale);
+  EXPECT_TRUE(depth.ok()) << depth.status();
+  if (depth.ok()) frame.set_depth(*depth);
+  return frame;
 }
 
 // ATE (no alignment) of a stream's poses against the room's ground truth of `indices`.
@@ -437,6 +459,213 @@ TEST(SlamStreamTest, BadInputNamesTheFieldAndLeavesOthersAlone) {
   pb::MapInfo info;
   ASSERT_TRUE(GetMap(*d.stub, "unsized", &info).ok());
   EXPECT_FLOAT_EQ(info.voxel_size(), 0.02f);
+}
+
+TEST(SlamStreamTest, FramesWithoutDepthWaitAndTheFirstGoodFrameBootstraps) {
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started =
+      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_slam_waiting")));
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+  // A camera whose first frames have no depth: WAITING at the initial pose, nothing mapped;
+  // frame 4 (the first with depth) is keyframe 0 and the camera tracks on from it.
+  constexpr int kEmpty = 4;
+  std::vector<pb::Frame> frames;
+  for (int i = 0; i < 15; ++i) {
+    frames.push_back(i < kEmpty ? EncodeFrameWithoutDepth(i) : EncodeFrame(i, false));
+  }
+  const SlamRun run =
+      RunSlamFrames(*d.stub, "waits", SmallSlamOptions(true), frames, GroundTruth(kEmpty));
+  ASSERT_TRUE(run.status.ok()) << Describe(run.status);
+  ASSERT_EQ(run.updates.size(), frames.size());
+  ASSERT_TRUE(run.done.has_value());
+  int keyframes = 0;
+  for (int i = 0; i < static_cast<int>(run.updates.size()); ++i) {
+    const pb::SlamUpdate& u = run.updates[static_cast<size_t>(i)];
+    EXPECT_EQ(u.frame(), static_cast<uint32_t>(i));
+    keyframes += u.keyframe();
+    if (i < kEmpty) {
+      EXPECT_EQ(u.state(), pb::SLAM_STATE_WAITING) << "frame " << i << ": " << u.reason();
+      EXPECT_FALSE(u.keyframe()) << "frame " << i;
+      EXPECT_EQ(u.mapping().keyframes(), 0u) << "frame " << i;
+      EXPECT_TRUE(FromProto(u.pose()).matrix().isApprox(GroundTruth(kEmpty).matrix(), 1e-9))
+          << "frame " << i;
+    } else if (i == kEmpty) {
+      EXPECT_EQ(u.state(), pb::SLAM_STATE_OK) << u.reason();
+      EXPECT_TRUE(u.keyframe());
+    } else {
+      EXPECT_NE(u.state(), pb::SLAM_STATE_LOST) << "frame " << i << ": " << u.reason();
+      EXPECT_LT((FromProto(u.pose()).translation() - GroundTruth(i).translation()).norm(), 0.02)
+          << "frame " << i;
+    }
+  }
+  EXPECT_EQ(run.done->mapping().keyframes_integrated(), static_cast<uint32_t>(keyframes));
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap(*d.stub, "waits", &info).ok());
+  EXPECT_GT(info.bricks(), 0u);
+  const std::string metrics = d.daemon->RenderMetrics();
+  EXPECT_NE(metrics.find(absl::StrCat("plenoxd_slam_frames_total{state=\"waiting\"} ", kEmpty)),
+            std::string::npos)
+      << metrics;
+  EXPECT_NE(metrics.find("plenoxd_slam_frames_total{state=\"lost\"} 0"), std::string::npos);
+
+  // A stream that never sees depth ends OK with every frame WAITING, and the map it created
+  // gets no version (no empty map is published); the next stream bootstraps it.
+  std::vector<pb::Frame> empty;
+  for (int i = 0; i < 3; ++i) empty.push_back(EncodeFrameWithoutDepth(i));
+  const SlamRun blind = RunSlamFrames(*d.stub, "later", SmallSlamOptions(true), empty, GroundTruth(0));
+  ASSERT_TRUE(blind.status.ok()) << Describe(blind.status);
+  ASSERT_EQ(blind.updates.size(), empty.size());
+  for (const pb::SlamUpdate& u : blind.updates) EXPECT_EQ(u.state(), pb::SLAM_STATE_WAITING);
+  pb::MapInfo fresh;
+  ASSERT_TRUE(CreateMap(*d.stub, "fresh", kVoxel, &fresh).ok());
+  ASSERT_TRUE(GetMap(*d.stub, "later", &info).ok());
+  EXPECT_EQ(info.version(), fresh.version()) << "a version published without a keyframe";
+  EXPECT_EQ(info.bricks(), 0u);
+  EXPECT_EQ(info.keyframes(), 0u);
+  const SlamRun seeing = RunSlam(*d.stub, "later", SmallSlamOptions(true), Range(0, 5), GroundTruth(0));
+  ASSERT_TRUE(seeing.status.ok()) << Describe(seeing.status);
+  ASSERT_EQ(seeing.updates.size(), 5u);
+  EXPECT_TRUE(seeing.updates.front().keyframe());
+  EXPECT_EQ(seeing.updates.front().state(), pb::SLAM_STATE_OK);
+}
+
+TEST(SlamStreamTest, AWaitingCameraJoinsTheMapAnotherCameraBootstrapped) {
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started =
+      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_slam_waiting_two")));
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+  // Camera A opens the map first and sees no depth: WAITING. Camera B (another stream)
+  // bootstraps the map meanwhile; A's first frame with depth then joins B's map.
+  grpc::ClientContext context;
+  Prepare(&context, "", absl::Seconds(300));
+  auto a = d.stub->Slam(&context);
+  pb::SlamRequest first;
+  first.set_map("shared");
+  *first.mutable_options() = SmallSlamOptions(true);
+  *first.mutable_initial_pose() = ToProto(GroundTruth(8));
+  ASSERT_TRUE(a->Write(first));
+  pb::SlamUpdate update;
+  for (int i = 0; i < 2; ++i) {
+    pb::SlamRequest request;
+    *request.mutable_frame() = EncodeFrameWithoutDepth(8);
+    request.mutable_frame()->set_timestamp(50.0 + i);
+    ASSERT_TRUE(a->Write(request));
+    ASSERT_TRUE(a->Read(&update));
+    EXPECT_EQ(update.state(), pb::SLAM_STATE_WAITING) << update.reason();
+  }
+  const SlamRun b = RunSlam(*d.stub, "shared", SmallSlamOptions(true), Range(0, 10), GroundTruth(0));
+  ASSERT_TRUE(b.status.ok()) << Describe(b.status);
+  ASSERT_EQ(b.updates.size(), 10u);
+  EXPECT_TRUE(b.updates.front().keyframe());
+  EXPECT_EQ(b.updates.front().state(), pb::SLAM_STATE_OK);
+  EXPECT_EQ(b.updates.front().mapping().streams(), 2u);
+  std::vector<pb::SlamUpdate> a_updates;
+  for (int i = 8; i < 12; ++i) {
+    pb::SlamRequest request;
+    *request.mutable_frame() = EncodeFrame(i, false);
+    request.mutable_frame()->set_timestamp(60.0 + 0.033 * i);
+    ASSERT_TRUE(a->Write(request));
+    ASSERT_TRUE(a->Read(&update));
+    a_updates.push_back(update);
+  }
+  a->WritesDone();
+  while (a->Read(&update)) {
+  }
+  const grpc::Status status = a->Finish();
+  ASSERT_TRUE(status.ok()) << Describe(status);
+  EXPECT_EQ(a_updates.front().state(), pb::SLAM_STATE_RELOCALISED) << a_updates.front().reason();
+  for (size_t i = 0; i < a_updates.size(); ++i) {
+    EXPECT_NE(a_updates[i].state(), pb::SLAM_STATE_LOST) << a_updates[i].reason();
+    EXPECT_LT((FromProto(a_updates[i].pose()).translation() -
+               GroundTruth(8 + static_cast<int>(i)).translation()).norm(),
+              0.02)
+        << "camera A, room frame " << 8 + i;
+  }
+}
+
+TEST(SlamStreamTest, ABadInitialPoseCreatesNoMap) {
+  DaemonOptions options = TestDaemonOptions(ScratchDir("plx_srv_slam_bad_pose"));
+  options.max_maps = 1;
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(options);
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+  pb::Pose zero_rotation = ToProto(GroundTruth(0));
+  zero_rotation.set_qx(0);
+  zero_rotation.set_qy(0);
+  zero_rotation.set_qz(0);
+  zero_rotation.set_qw(0);
+  pb::Pose not_finite = ToProto(GroundTruth(0));
+  not_finite.set_tx(std::nan(""));
+  for (const pb::Pose& pose : {zero_rotation, not_finite}) {
+    grpc::ClientContext context;
+    Prepare(&context);
+    auto stream = d.stub->Slam(&context);
+    pb::SlamRequest first;
+    first.set_map("posed");
+    *first.mutable_options() = SmallSlamOptions(false);
+    *first.mutable_initial_pose() = pose;
+    *first.mutable_frame() = EncodeFrame(0, false);
+    stream->Write(first);
+    stream->WritesDone();
+    pb::SlamUpdate update;
+    while (stream->Read(&update)) {
+    }
+    const grpc::Status status = stream->Finish();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << Describe(status);
+    EXPECT_NE(status.error_message().find("initial_pose"), std::string::npos) << Describe(status);
+    pb::MapInfo info;
+    EXPECT_EQ(GetMap(*d.stub, "posed", &info).error_code(), grpc::StatusCode::NOT_FOUND);
+    grpc::ClientContext list_context;
+    Prepare(&list_context);
+    pb::ListMapsResponse maps;
+    ASSERT_TRUE(d.stub->ListMaps(&list_context, pb::ListMapsRequest(), &maps).ok());
+    EXPECT_EQ(maps.maps_size(), 0);
+  }
+  // The one map --max-maps allows is still free for a good stream.
+  const SlamRun run = RunSlam(*d.stub, "good", SmallSlamOptions(false), Range(0, 3), GroundTruth(0));
+  EXPECT_TRUE(run.status.ok()) << Describe(run.status);
+  EXPECT_EQ(run.updates.size(), 3u);
+}
+
+TEST(SlamStreamTest, AnErrorNamesTheFramesPositionInTheStream) {
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started =
+      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_slam_frame_index")));
+  ASSERT_TRUE(started.ok()) << started.status();
+  TestDaemon& d = **started;
+  // The fourth frame is bad and comes while the third is being tracked: it is posted as soon
+  // as the second's update goes out (one keyframe may be pending), and tracking takes long
+  // here (many rays and iterations). The error still names it frame[3].
+  grpc::ClientContext context;
+  Prepare(&context);
+  auto stream = d.stub->Slam(&context);
+  pb::SlamRequest first;
+  first.set_map("indexed");
+  *first.mutable_options() = SmallSlamOptions(false);
+  first.mutable_options()->set_max_pending_keyframes(1);
+  first.mutable_options()->mutable_tracking()->set_rays(16384);
+  first.mutable_options()->mutable_tracking()->set_iterations(12);
+  *first.mutable_initial_pose() = ToProto(GroundTruth(0));
+  ASSERT_TRUE(stream->Write(first));
+  for (int i = 0; i < 3; ++i) {
+    pb::SlamRequest request;
+    *request.mutable_frame() = EncodeFrame(i, false);
+    ASSERT_TRUE(stream->Write(request));
+  }
+  pb::SlamUpdate update;
+  for (int i = 0; i < 2; ++i) {
+    ASSERT_TRUE(stream->Read(&update));
+    EXPECT_EQ(update.frame(), static_cast<uint32_t>(i));
+  }
+  pb::SlamRequest bad;
+  *bad.mutable_frame() = EncodeFrame(3, false);
+  bad.mutable_frame()->mutable_intrinsics()->set_width(kWidth + 2);
+  stream->Write(bad);
+  stream->WritesDone();
+  while (stream->Read(&update)) {
+  }
+  const grpc::Status status = stream->Finish();
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << Describe(status);
+  EXPECT_NE(status.error_message().find("frame[3]"), std::string::npos) << Describe(status);
 }
 
 TEST(SlamStreamTest, DrainMidStreamSavesEveryKeyframeAndARestartExtendsTheMap) {

@@ -296,8 +296,9 @@ class SlamStream(_FrameStream):
 
     Counters while and after iterating: sent (frames sent), received (updates), dropped (frames
     the server skipped with options realtime=True, the sum of SlamUpdate.dropped), keyframes
-    (frames handed to the mapping job), lost / degraded / relocalised (updates in those
-    states); mapping: the SlamMapping of the latest message. cancel() ends the call early."""
+    (frames handed to the mapping job), lost / degraded / relocalised / waiting (updates in
+    those states; WAITING: the map has no keyframe yet and the frame had too little depth to
+    start it); mapping: the SlamMapping of the latest message. cancel() ends the call early."""
 
     _method = "Slam"
     _request_type = pb.SlamRequest
@@ -309,6 +310,7 @@ class SlamStream(_FrameStream):
         self.lost = 0
         self.degraded = 0
         self.relocalised = 0
+        self.waiting = 0
         self.mapping = None
         self.done = None
 
@@ -330,6 +332,8 @@ class SlamStream(_FrameStream):
             self.degraded += 1
         elif update.state == pb.SLAM_STATE_RELOCALISED:
             self.relocalised += 1
+        elif update.state == pb.SLAM_STATE_WAITING:
+            self.waiting += 1
         return True
 
     def _ended(self):
@@ -693,7 +697,7 @@ def slam_pose(update):
 
 
 def slam_state_name(update):
-    """"OK", "DEGRADED", "LOST", "RELOCALISED" (or "UNSPECIFIED") of a SlamUpdate."""
+    """"OK", "DEGRADED", "LOST", "RELOCALISED", "WAITING" (or "UNSPECIFIED") of a SlamUpdate."""
     return pb.SlamState.Name(update.state).replace("SLAM_STATE_", "")
 
 

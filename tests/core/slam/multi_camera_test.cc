@@ -3,6 +3,7 @@
 // keyframe, so the numbers are the same run to run.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdio>
 #include <memory>
 #include <optional>
@@ -77,11 +78,11 @@ TEST(SlamMultiCameraTest, TwoCamerasTrackInOneGrowingMap) {
 
   SlamTrackerOptions a_options = SlamTrackerOptionsOf(options);
   a_options.initial_pose = *room->ground_truth(0);
-  SlamTracker a(a_options, tracking.get(), /*start_lost=*/false);
+  SlamTracker a(a_options, tracking.get());
   SlamTrackerOptions b_options = SlamTrackerOptionsOf(options);
   b_options.initial_pose = *room->ground_truth(40);
   // B joins a map that has versions: its first frame relocalises from its initial pose.
-  SlamTracker b(b_options, tracking.get(), /*start_lost=*/true);
+  SlamTracker b(b_options, tracking.get());
 
   std::vector<StampedPose> a_trajectory, a_truth, b_trajectory, b_truth;
   int b_keyframes = 0;
@@ -125,13 +126,74 @@ TEST(SlamMultiCameraTest, TwoCamerasTrackInOneGrowingMap) {
   EXPECT_EQ(static_cast<int>((*mapper)->keyframe_poses().size()), p.keyframes);
 }
 
+TEST(SlamMultiCameraTest, BootstrapNeedsEnoughDepth) {
+  // The minimum: 30 % of the pixels with depth in range, and 256 pixels.
+  DepthImage depth(100, 10, 1, 0.0f);
+  BootstrapDepth d = CountBootstrapDepth(depth, 10.0f);
+  EXPECT_EQ(d.valid, 0);
+  EXPECT_EQ(d.needed, 300);
+  EXPECT_FALSE(d.enough());
+  for (int i = 0; i < 300; ++i) depth.data[i] = 1.0f;
+  depth.data[300] = 12.0f;   // out of range
+  depth.data[301] = NAN;     // never valid
+  depth.data[302] = -1.0f;
+  EXPECT_TRUE(CountBootstrapDepth(depth, 10.0f).enough());
+  EXPECT_EQ(CountBootstrapDepth(depth, 10.0f).valid, 300);
+  EXPECT_FALSE(CountBootstrapDepth(depth, 0.5f).enough());
+  // A thumbnail: the absolute floor.
+  EXPECT_EQ(CountBootstrapDepth(DepthImage(20, 15, 1, 1.0f), 10.0f).needed, 256);
+  EXPECT_FALSE(CountBootstrapDepth(DepthImage(20, 15, 1, 0.0f), 10.0f).enough());
+}
+
+TEST(SlamMultiCameraTest, AWaitingCameraJoinsTheMapAnotherBootstrapped) {
+  // Camera A comes first but sees too little depth (20 % of the rows): WAITING, nothing
+  // accepted. Camera B bootstraps the map; A's next frame, with depth, joins it (relocalises
+  // from its initial pose) instead of bootstrapping a second keyframe 0.
+  std::unique_ptr<InMemoryDataset> room = testing::MakeSyntheticRoom(160, 120, 12);
+  ASSERT_NE(room, nullptr);
+  const PinholeIntrinsics k = room->calibration().pinhole;
+  std::unique_ptr<Backend> backend = MakeCpuBackend(2);
+  const SlamOptions options = TestOptions();
+  absl::StatusOr<std::unique_ptr<SlamMapper>> mapper =
+      SlamMapper::Create(SlamMapperOptionsOf(options), backend.get());
+  ASSERT_TRUE(mapper.ok()) << mapper.status();
+  SlamTrackerOptions a_options = SlamTrackerOptionsOf(options);
+  a_options.initial_pose = *room->ground_truth(2);
+  SlamTrackerOptions b_options = SlamTrackerOptionsOf(options);
+  b_options.initial_pose = *room->ground_truth(0);
+  SlamTracker a(a_options, backend.get());
+  SlamTracker b(b_options, backend.get());
+
+  RgbdFrame sparse = room->frames()[2];
+  for (int v = sparse.depth.height / 5; v < sparse.depth.height; ++v) {
+    for (int u = 0; u < sparse.depth.width; ++u) *sparse.depth.pixel(u, v) = 0.0f;
+  }
+  const SlamFrameResult waiting = Process(a, **mapper, sparse, k);
+  EXPECT_EQ(waiting.state, SlamState::kWaiting) << waiting.reason;
+  EXPECT_FALSE(waiting.keyframe);
+  EXPECT_EQ(waiting.pose.matrix(), room->ground_truth(2)->matrix());
+  EXPECT_TRUE((*mapper)->accepted_keyframes().empty());
+
+  const SlamFrameResult first = Process(b, **mapper, room->frames()[0], k);
+  EXPECT_TRUE(first.keyframe);
+  EXPECT_EQ(first.state, SlamState::kOk);
+  const SlamFrameResult joined = Process(a, **mapper, room->frames()[3], k);
+  EXPECT_EQ(joined.state, SlamState::kRelocalised) << joined.reason;
+  EXPECT_FALSE(joined.keyframe && joined.keyframes == 1) << "a second keyframe 0";
+  EXPECT_LT((joined.pose.translation() - room->ground_truth(3)->translation()).norm(), 0.02);
+  EXPECT_EQ(a.counts().waiting, 1);
+  EXPECT_EQ(a.counts().relocalised, 1);
+  EXPECT_EQ(a.counts().frames, 2);
+  EXPECT_EQ((*mapper)->progress().keyframes, 1 + static_cast<int>(joined.keyframe));
+}
+
 TEST(SlamMultiCameraTest, TrackerRefusesAFrameBeforeTheFirstVersion) {
   // A second camera whose first frame comes while the map has accepted its first keyframe but
   // not published it: it is told so, not bootstrapped as a second keyframe 0.
   std::unique_ptr<InMemoryDataset> room = testing::MakeSyntheticRoom(64, 48, 2);
   ASSERT_NE(room, nullptr);
   std::unique_ptr<Backend> backend = MakeCpuBackend(1);
-  SlamTracker tracker(SlamTrackerOptionsOf(TestOptions()), backend.get(), /*start_lost=*/true);
+  SlamTracker tracker(SlamTrackerOptionsOf(TestOptions()), backend.get());
   SlamMapView view;  // no version yet
   view.accepted_keyframes.push_back({0.0, SE3::Identity()});
   absl::StatusOr<SlamFrameResult> r =

@@ -189,6 +189,91 @@ TEST_F(SlamSessionTest, BlankStretchIsLostNeverIntegratedThenRelocalises) {
   ASSERT_TRUE((*session)->Finish().ok());
 }
 
+// Keeps the depth of the top `fraction` of the rows (a partly covered lens); the rest reads 0.
+RgbdFrame KeepDepthRows(RgbdFrame frame, double fraction) {
+  const int keep = static_cast<int>(fraction * frame.depth.height);
+  for (int v = keep; v < frame.depth.height; ++v) {
+    for (int u = 0; u < frame.depth.width; ++u) *frame.depth.pixel(u, v) = 0.0f;
+  }
+  return frame;
+}
+
+TEST_F(SlamSessionTest, FramesWithoutDepthWaitAndTheFirstGoodFrameBootstraps) {
+  // A depth camera's first frames: colour, no depth. They cannot start a map: WAITING at the
+  // initial pose, no keyframe, no map version. The first frame with depth is keyframe 0 and
+  // the camera tracks on from it (relative to that frame's place).
+  constexpr int kEmpty = 4;
+  constexpr int kFrames = 30;
+  const SE3 initial(Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitY())),
+                    Eigen::Vector3d(1.0, -0.5, 2.0));
+  SlamOptions options = TestOptions();
+  options.initial_pose = initial;
+  absl::StatusOr<std::unique_ptr<SlamSession>> session =
+      SlamSession::Create(options, backend_.get(), CpuFactory());
+  ASSERT_TRUE(session.ok()) << session.status();
+  const PinholeIntrinsics& k = dataset_->calibration().pinhole;
+  const SE3 to_estimate = initial * dataset_->ground_truth(kEmpty)->Inverse();
+  for (int i = 0; i < kFrames; ++i) {
+    RgbdFrame frame = dataset_->frames()[i];
+    if (i < kEmpty) frame = KeepDepthRows(std::move(frame), 0.0);
+    absl::StatusOr<SlamFrameResult> r = (*session)->ProcessFrame(std::move(frame), k);
+    ASSERT_TRUE(r.ok()) << r.status();
+    EXPECT_EQ(r->frame, i);
+    if (i < kEmpty) {
+      EXPECT_EQ(r->state, SlamState::kWaiting) << "frame " << i << ": " << r->reason;
+      EXPECT_FALSE(r->keyframe) << "frame " << i;
+      EXPECT_EQ(r->keyframes, 0) << "frame " << i;
+      EXPECT_EQ(r->pose.matrix(), initial.matrix()) << "frame " << i;
+      EXPECT_NE(r->reason.find("needed"), std::string::npos) << r->reason;
+      EXPECT_EQ((*session)->latest_map(), nullptr) << "frame " << i;
+    } else if (i == kEmpty) {
+      EXPECT_EQ(r->state, SlamState::kOk) << r->reason;
+      EXPECT_TRUE(r->keyframe);
+      EXPECT_EQ(r->keyframes, 1);
+      EXPECT_EQ(r->pose.matrix(), initial.matrix());
+    } else {
+      EXPECT_NE(r->state, SlamState::kLost) << "frame " << i << ": " << r->reason;
+      EXPECT_LT(Distance(r->pose, to_estimate * *dataset_->ground_truth(i)), 0.02)
+          << "frame " << i;
+    }
+  }
+  ASSERT_TRUE((*session)->Finish().ok());
+  const SlamProgress p = (*session)->progress();
+  EXPECT_EQ(p.frames, kFrames);
+  EXPECT_EQ(p.waiting, kEmpty);
+  EXPECT_EQ(p.lost, 0);
+  EXPECT_EQ(p.ok + p.degraded + p.relocalised + p.waiting, kFrames);
+  EXPECT_GT(p.keyframes, 1) << "the map never grew past keyframe 0";
+  ASSERT_NE((*session)->latest_map(), nullptr);
+  EXPECT_GT((*session)->latest_map()->grid.num_bricks(), 0);
+}
+
+TEST_F(SlamSessionTest, PartialDepthStillBootstraps) {
+  // Half the rows with depth (the bootstrap minimum is 30 %): keyframe 0 at once, and the
+  // frames after it, with full depth, track against its map and grow it.
+  absl::StatusOr<std::unique_ptr<SlamSession>> session =
+      SlamSession::Create(TestOptions(), backend_.get(), CpuFactory());
+  ASSERT_TRUE(session.ok()) << session.status();
+  const PinholeIntrinsics& k = dataset_->calibration().pinhole;
+  for (int i = 0; i < 20; ++i) {
+    RgbdFrame frame = dataset_->frames()[i];
+    if (i == 0) frame = KeepDepthRows(std::move(frame), 0.5);
+    absl::StatusOr<SlamFrameResult> r = (*session)->ProcessFrame(std::move(frame), k);
+    ASSERT_TRUE(r.ok()) << r.status();
+    if (i == 0) {
+      EXPECT_EQ(r->state, SlamState::kOk) << r->reason;
+      EXPECT_TRUE(r->keyframe);
+    } else {
+      EXPECT_NE(r->state, SlamState::kLost) << "frame " << i << ": " << r->reason;
+    }
+  }
+  ASSERT_TRUE((*session)->Finish().ok());
+  const SlamProgress p = (*session)->progress();
+  EXPECT_EQ(p.waiting, 0);
+  EXPECT_EQ(p.lost, 0);
+  EXPECT_GT(p.keyframes, 1);
+}
+
 TEST_F(SlamSessionTest, RefinementReducesAnInjectedKeyframePoseError) {
   SlamOptions o = TestOptions();
   auto mapping = MappingSession::Create(o.mapping, backend_.get(), nullptr);
