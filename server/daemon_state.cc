@@ -1,6 +1,5 @@
 #include "server/daemon_state.h"
 
-#include "absl/strings/str_cat.h"
 #include "absl/time/clock.h"
 #include "absl/time/time.h"
 
@@ -51,17 +50,12 @@ absl::Status CancelledCallStatus(const DaemonState& state,
   return absl::CancelledError(otherwise);
 }
 
-absl::Status AcquireStreamSlot(DaemonState& state, const grpc::CallbackServerContext* context) {
-  if (absl::Status s = CheckCall(state, context); !s.ok()) return s;
-  const int64_t now = state.metrics->active_streams.fetch_add(1) + 1;
-  if (now > state.config.max_streams) {
-    state.metrics->active_streams.fetch_sub(1);
-    return absl::ResourceExhaustedError(absl::StrCat(
-        "too many open streams (limit ", state.config.max_streams, "); retry later"));
+absl::Status QueuedCallStatus(bool worker_stopped, const grpc::CallbackServerContext* context) {
+  if (worker_stopped) return absl::UnavailableError("plenoxd is shutting down");
+  if (context->IsCancelled()) {
+    return absl::CancelledError("the call was cancelled before its work started");
   }
   return absl::OkStatus();
 }
-
-void ReleaseStreamSlot(DaemonState& state) { state.metrics->active_streams.fetch_sub(1); }
 
 }  // namespace plx::server

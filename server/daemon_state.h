@@ -26,7 +26,7 @@ inline constexpr int64_t kDefaultMaxRenderPixels = int64_t{3840} * 2160;
 
 struct DaemonConfig {
   std::string auth_token;   // empty: no authentication
-  int max_streams = 32;     // concurrent streaming RPCs
+  int max_streams = 32;     // concurrent streaming RPCs (server/stream_slot.h)
   // Largest frame (intrinsics width x height) Track and Integrate accept; checked before any
   // image is decoded (DaemonOptions::max_frame_pixels).
   int64_t max_frame_pixels = 3840 * 2160;
@@ -65,9 +65,9 @@ absl::Status CancelledCallStatus(const DaemonState& state,
                                  const grpc::CallbackServerContext* context,
                                  const char* otherwise = "cancelled by the client");
 
-// For streams: CheckCall plus the concurrent-stream limit; on OK the caller owns one stream slot
-// and must ReleaseStreamSlot when the stream ends.
-absl::Status AcquireStreamSlot(DaemonState& state, const grpc::CallbackServerContext* context);
-void ReleaseStreamSlot(DaemonState& state);
+// Whether a call's task, now taken from a worker's queue, should still run: UNAVAILABLE when
+// the worker stopped (the daemon drains), CANCELLED when the call was cancelled while it was
+// queued (client gone, deadline passed: nobody would read the result), else OK.
+absl::Status QueuedCallStatus(bool worker_stopped, const grpc::CallbackServerContext* context);
 
 }  // namespace plx::server

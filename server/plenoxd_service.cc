@@ -1,10 +1,7 @@
 #include "server/plenoxd_service.h"
 
 #include <algorithm>
-#include <cmath>
-#include <deque>
-#include <mutex>
-#include <new>
+#include <cstdint>
 
 #include "absl/strings/str_cat.h"
 #include "core/common/allocation_guard.h"
@@ -13,13 +10,14 @@
 #include "core/mapping/mapper.h"
 #include "core/render/render_view.h"
 #include "proto/render_size.h"
-#include "server/export_request.h"
+#include "server/export_reactor.h"
 #include "server/grpc_status.h"
 #include "server/integrate_reactor.h"
 #include "server/log.h"
 #include "server/proto_convert.h"
 #include "server/slam_reactor.h"
 #include "server/track_reactor.h"
+#include "server/watch_job_reactor.h"
 
 namespace plx::server {
 namespace {
@@ -36,222 +34,10 @@ void ToProto(const MapStatus& s, pb::MapInfo* out) {
   out->set_source(s.source);
 }
 
-// Whether a call's task, now taken from a worker's queue, should still run: UNAVAILABLE when
-// the worker stopped (the daemon drains), CANCELLED when the call was cancelled while it was
-// queued (client gone, deadline passed: nobody would read the result), else OK.
-absl::Status QueuedCallStatus(bool worker_stopped, const grpc::CallbackServerContext* context) {
-  if (worker_stopped) return absl::UnavailableError("plenoxd is shutting down");
-  if (context->IsCancelled()) {
-    return absl::CancelledError("the call was cancelled before its work started");
-  }
-  return absl::OkStatus();
-}
-
 absl::Status StatusToProto(const absl::StatusOr<MapStatus>& status, pb::MapInfo* out) {
   if (status.ok()) ToProto(*status, out);
   return status.status();
 }
-
-pb::JobStatus::State ToProto(JobState state) {
-  switch (state) {
-    case JobState::kQueued: return pb::JobStatus::STATE_QUEUED;
-    case JobState::kRunning: return pb::JobStatus::STATE_RUNNING;
-    case JobState::kDone: return pb::JobStatus::STATE_DONE;
-    case JobState::kFailed: return pb::JobStatus::STATE_FAILED;
-    case JobState::kCancelled: return pb::JobStatus::STATE_CANCELLED;
-  }
-  return pb::JobStatus::STATE_UNSPECIFIED;
-}
-
-// Export: the PLY (points or mesh) is built on a device worker from a published version, then
-// streamed in chunks.
-class ExportReactor final : public grpc::ServerWriteReactor<pb::ExportChunk> {
- public:
-  static constexpr size_t kChunkBytes = 1 << 20;
-
-  ExportReactor(DaemonState* state, grpc::CallbackServerContext* context,
-                const pb::ExportRequest* request)
-      : state_(state), context_(context) {
-    absl::Status status = AcquireStreamSlot(*state_, context);
-    if (!status.ok()) {
-      Done(status);
-      return;
-    }
-    holds_slot_ = true;
-    status = CheckMapName(request->map(), "map");
-    absl::StatusOr<MapVersion> map =
-        status.ok() ? state_->maps->Latest(request->map()) : absl::StatusOr<MapVersion>(status);
-    if (!map.ok()) {
-      Done(map.status());
-      return;
-    }
-    absl::StatusOr<ExportSpec> spec = ParseExportRequest(*request);
-    if (!spec.ok()) {
-      Done(spec.status());
-      return;
-    }
-    state_->workers->Pick(Priority::kBackground).Post(
-        Priority::kBackground, [this, map = *map, spec = *spec](Backend* backend, bool stopped) {
-          if (absl::Status queued = QueuedCallStatus(stopped, context_); !queued.ok()) {
-            Done(queued);
-            return;
-          }
-          // A call cancelled while exporting stops within a few bricks.
-          absl::StatusOr<std::string> bytes = BuildExport(
-              spec, *map.map, *backend, [this] { return context_->IsCancelled(); });
-          if (!bytes.ok()) {
-            Done(bytes.status());
-            return;
-          }
-          bytes_ = *std::move(bytes);
-          WriteNext();
-        });
-  }
-
-  void OnWriteDone(bool ok) override {
-    if (!ok) {
-      Done(CancelledCallStatus(*state_, context_, "client gone"));
-      return;
-    }
-    WriteNext();
-  }
-
-  void OnDone() override {
-    if (holds_slot_) ReleaseStreamSlot(*state_);
-    delete this;
-  }
-
- private:
-  void WriteNext() {
-    if (offset_ >= bytes_.size() && sent_last_) {
-      Done(absl::OkStatus());
-      return;
-    }
-    const size_t n = std::min(kChunkBytes, bytes_.size() - offset_);
-    try {
-      chunk_.set_data(bytes_.data() + offset_, n);
-    } catch (const std::bad_alloc&) {
-      Done(absl::ResourceExhaustedError("Export: out of memory"));
-      return;
-    }
-    chunk_.set_offset(offset_);
-    offset_ += n;
-    sent_last_ = offset_ >= bytes_.size();
-    chunk_.set_last(sent_last_);
-    StartWrite(&chunk_);
-  }
-  void Done(const absl::Status& status) {
-    if (!status.ok()) {
-      state_->metrics->rpc_errors++;
-      LogEvent("warning", "rpc", {{"method", "Export"},
-                                  {"code", absl::StatusCodeToString(status.code())},
-                                  {"message", std::string(status.message())}});
-    }
-    Finish(ToGrpcStatus(status));
-  }
-
-  DaemonState* state_;
-  grpc::CallbackServerContext* const context_;
-  bool holds_slot_ = false;
-  std::string bytes_;
-  size_t offset_ = 0;
-  bool sent_last_ = false;
-  pb::ExportChunk chunk_;
-};
-
-// WatchJob: the job's status now and after every change, until it ends. Updates that arrive
-// while a write is in flight are coalesced to the newest.
-class WatchJobReactor final : public grpc::ServerWriteReactor<pb::JobStatus> {
- public:
-  WatchJobReactor(DaemonState* state, grpc::CallbackServerContext* context,
-                  const pb::WatchJobRequest* request)
-      : state_(state) {
-    absl::Status status = AcquireStreamSlot(*state_, context);
-    if (!status.ok()) {
-      Finish(ToGrpcStatus(status));
-      return;
-    }
-    holds_slot_ = true;
-    absl::StatusOr<int64_t> handle = state_->jobs->Watch(
-        request->job_id(), [this](const JobInfo& info) { OnJobChanged(info); });
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (!handle.ok()) {
-      finished_ = true;
-      Finish(ToGrpcStatus(handle.status()));
-      return;
-    }
-    handle_ = *handle;
-    watching_ = true;
-    MaybeFinishLocked();
-  }
-
-  void OnWriteDone(bool ok) override {
-    std::lock_guard<std::mutex> lock(mutex_);
-    write_in_flight_ = false;
-    if (!ok) ended_ = true;
-    if (next_ && !ended_) {
-      current_ = *next_;
-      next_.reset();
-      write_in_flight_ = true;
-      StartWrite(&current_);
-    }
-    MaybeFinishLocked();
-  }
-
-  void OnCancel() override {
-    std::lock_guard<std::mutex> lock(mutex_);
-    ended_ = true;
-    MaybeFinishLocked();
-  }
-
-  void OnDone() override {
-    if (watching_) state_->jobs->Unwatch(handle_);
-    if (holds_slot_) ReleaseStreamSlot(*state_);
-    delete this;
-  }
-
- private:
-  void OnJobChanged(const JobInfo& info) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (finished_ || ended_) return;
-    pb::JobStatus status;
-    status.set_job_id(info.id);
-    status.set_kind(info.kind);
-    status.set_map(info.map);
-    status.set_state(ToProto(info.state));
-    status.set_progress(info.progress);
-    status.set_message(info.message);
-    if (info.terminal()) terminal_seen_ = true;
-    if (write_in_flight_) {
-      next_ = status;
-    } else {
-      current_ = status;
-      write_in_flight_ = true;
-      StartWrite(&current_);
-    }
-  }
-  void MaybeFinishLocked() {
-    // A cancelled or broken stream never sends the update still waiting.
-    if (ended_) next_.reset();
-    if (finished_ || write_in_flight_ || next_) return;
-    if (!(terminal_seen_ || ended_)) return;
-    finished_ = true;
-    Finish(ended_ && !terminal_seen_ ? grpc::Status(grpc::StatusCode::CANCELLED, "cancelled")
-                                     : grpc::Status::OK);
-  }
-
-  DaemonState* state_;
-  bool holds_slot_ = false;
-  std::mutex mutex_;
-  int64_t handle_ = 0;
-  bool watching_ = false;
-  bool write_in_flight_ = false;
-  bool terminal_seen_ = false;
-  bool ended_ = false;
-  bool finished_ = false;
-  pb::JobStatus current_;
-  std::optional<pb::JobStatus> next_;
-};
 
 }  // namespace
 

@@ -1,6 +1,7 @@
 // The plenoxd.v1.Plenoxd service on gRPC's callback API. Handlers only check the call,
-// convert, call core (on a device worker for anything heavy) and map the status; streams live
-// in track_reactor.h and integrate_reactor.h.
+// convert, call core (on a device worker for anything heavy) and map the status. The streams
+// live in their own reactors: track_reactor.h, integrate_reactor.h and slam_reactor.h (over
+// stream_reactor.h), export_reactor.h and watch_job_reactor.h.
 #pragma once
 
 #include <grpcpp/grpcpp.h>

@@ -1,7 +1,9 @@
-// The state machine every bidirectional stream of plenoxd shares (Track, Integrate, and the
-// coming Slam): admission against the stream limit, reading with optional backpressure, work
-// posted to the stream's one device worker, a single-write outbox, and finishing exactly once
-// when the input is over, no task is queued or running and every reply has been written.
+// The state machine every bidirectional stream of plenoxd shares (Track, Integrate and Slam):
+// admission against the stream limit, reading with optional backpressure, work posted to the
+// stream's one device worker, a single-write outbox, and finishing exactly once when the input
+// is over, no task is queued or running and every reply has been written. The server-streaming
+// calls (Export, WatchJob) write only, so they are grpc::ServerWriteReactors of their own; they
+// take their stream slot the same way (server/stream_slot.h).
 //
 // Phases: kOpen (reading requests) -> kClosing (the client half-closed, or the stream failed or
 // was cancelled: no more requests are handled) -> kFinished (Finish called). A subclass handles
@@ -23,6 +25,7 @@
 #include "server/grpc_status.h"
 #include "server/log.h"
 #include "server/proto_convert.h"
+#include "server/stream_slot.h"
 
 namespace plx::server {
 
@@ -106,7 +109,7 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
     if (!final_status_.ok()) fields.emplace_back("message", final_status_.error_message());
     LogEvent(final_status_.ok() ? "info" : "warning", "rpc", fields);
     // After the log line: whoever waits for the stream count to drop sees the stream's line.
-    if (holds_slot_) ReleaseStreamSlot(*state_);
+    slot_.Release();
     if (worker_ != nullptr) state_->workers->DetachStream(*worker_);
     delete this;
   }
@@ -119,7 +122,7 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
   StreamReactor(DaemonState* state, grpc::CallbackServerContext* context, const char* method,
                 const char* request_name)
       : state_(state), context_(context), method_(method), request_name_(request_name) {
-    const absl::Status admitted = AcquireStreamSlot(*state_, context_);
+    const absl::Status admitted = slot_.Acquire(*state_, context_);
     if (!admitted.ok()) {
       state_->metrics->rpc_errors++;
       final_status_ = ToGrpcStatus(admitted);
@@ -127,7 +130,6 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
       this->Finish(final_status_);
       return;
     }
-    holds_slot_ = true;
     ReadLocked();  // no reaction runs before the constructor returns
   }
   virtual ~StreamReactor() = default;
@@ -242,7 +244,7 @@ class StreamReactor : public grpc::ServerBidiReactor<Request, Response> {
 
   const char* const method_;
   const char* const request_name_;
-  bool holds_slot_ = false;
+  StreamSlot slot_;
   Phase phase_ = Phase::kOpen;
   bool first_ = true;
   bool reading_ = false;          // a StartRead is outstanding

@@ -1,7 +1,7 @@
 // The web viewer on plenoxd's HTTP port (--viewer): the page and three.js, the map list, point
 // clouds, live SLAM trajectories and renders, authentication, and bad requests answered with
-// 4xx instead of work or a crash. Also the pieces on their own: the trajectory record's bounds,
-// the point cloud thinning and the mesh endpoint's triangle cap and cache.
+// 4xx instead of work or a crash. Also the pieces on their own: the point cloud thinning and the
+// mesh endpoint's triangle cap and cache (the trajectory record's bounds: trajectory_record_test).
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -13,7 +13,6 @@
 #include "app/make_backend.h"
 #include "core/formats/map_file.h"
 #include "core/io/image_io.h"
-#include "server/trajectory_record.h"
 #include "tests/ply_mesh_reader.h"
 #include "tests/server/viewer_fixture.h"
 #include "web/point_cloud_cache.h"
@@ -277,41 +276,6 @@ TEST(ViewerTest, TrajectoryFollowsARunningSlamStream) {
   t = HttpGetAnswer(port, "/viewer/api/trajectory?map=live");
   EXPECT_NE(t.body.find("\"active\":false"), std::string::npos) << t.body;
   EXPECT_EQ(CountOccurrences(t.body, "\"id\":"), 1) << t.body;
-}
-
-TEST(TrajectoryRecordTest, PathsAndCamerasStayBounded) {
-  TrajectoryRecord record;
-  const int id = record.AddCamera();
-  const int frames = 3 * static_cast<int>(TrajectoryRecord::kMaxPathPoints) + 17;
-  for (int i = 0; i < frames; ++i) {
-    record.Record(id, i == 0 ? "kinect" : "", i / 30.0, SE3(Eigen::Quaterniond::Identity(),
-                                                           Eigen::Vector3d(0.001 * i, 0, 0)),
-                  SlamState::kOk);
-  }
-  std::vector<web::CameraTrack> cameras = record.Cameras();
-  ASSERT_EQ(cameras.size(), 1u);
-  const web::CameraTrack& c = cameras[0];
-  EXPECT_EQ(c.label, "kinect");
-  EXPECT_EQ(c.frames, frames);
-  EXPECT_EQ(c.state, "OK");
-  EXPECT_LE(c.path.size(), TrajectoryRecord::kMaxPathPoints + 1);
-  EXPECT_GE(c.path.size(), TrajectoryRecord::kMaxPathPoints / 2);
-  // The whole way, from the first frame to the last.
-  EXPECT_DOUBLE_EQ(c.path.front().x(), 0.0);
-  EXPECT_NEAR(c.path.back().x(), 0.001 * (frames - 1), 1e-12);
-  for (size_t i = 1; i < c.path.size(); ++i) ASSERT_GT(c.path[i].x(), c.path[i - 1].x());
-
-  for (size_t i = 0; i < 2 * TrajectoryRecord::kMaxCameras; ++i) record.Close(record.AddCamera());
-  EXPECT_EQ(record.Cameras().size(), TrajectoryRecord::kMaxCameras);
-
-  std::vector<StampedPose> keyframes(TrajectoryRecord::kMaxKeyframes + 5);
-  for (size_t i = 0; i < keyframes.size(); ++i) {
-    keyframes[i].pose = SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(i, 0, 0));
-  }
-  record.SetKeyframes(keyframes);
-  const std::vector<SE3> kept = record.Keyframes();
-  ASSERT_EQ(kept.size(), TrajectoryRecord::kMaxKeyframes);
-  EXPECT_EQ(kept.back().translation().x(), keyframes.size() - 1.0);  // the newest
 }
 
 TEST(PointCloudThinningTest, KeepsEveryKthPointAndRewritesTheCount) {
