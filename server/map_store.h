@@ -88,7 +88,9 @@ class MapStore {
   // lease.
   absl::Status BeginMapping(const std::string& name, MappingJobKind kind);
   void EndMapping(const std::string& name);
-  // Publishes a new version from the lease holder; RESOURCE_EXHAUSTED over the memory limit.
+  // Publishes a new version; RESOURCE_EXHAUSTED over the memory limit. Only a lease holder
+  // calls it (the Integrate stream, the SLAM job); the store does not check who calls, since
+  // the lease belongs to a job, not to a caller it could recognise.
   absl::StatusOr<uint64_t> Publish(const std::string& name,
                                    std::shared_ptr<const PlenoxelMap> map, int keyframes_added);
 
