@@ -3,19 +3,18 @@
 // the round trip seen here.
 #include <algorithm>
 #include <cmath>
-#include <condition_variable>
 #include <iostream>
-#include <mutex>
 #include <string>
-#include <thread>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
+#include "clients/plenox/frame_stream.h"
 #include "clients/plenox/remote_client.h"
 #include "clients/plenox/slam_output.h"
 #include "core/common/percentile.h"
+#include "core/common/status_macros.h"
 #include "core/formats/trajectory_file.h"
 #include "core/io/atomic_write.h"
 
@@ -74,42 +73,7 @@ pb::SlamOptions SlamOptionsToProto(const FlagSet& flags, const SlamDatasetOption
   return wire;
 }
 
-// A frame on its way: which one, and when it went (encoding excluded).
-struct SentFrame {
-  int index = 0;
-  double timestamp = 0.0;
-  absl::Time at;
-};
-
-// What the reader thread gathers from the daemon's updates; guarded by Exchange::mutex.
-struct Received {
-  std::vector<StampedPose> trajectory;
-  std::vector<double> daemon_ms;     // frame received to update sent, as the daemon measured
-  std::vector<double> roundtrip_ms;  // frame sent to update read, here
-  std::vector<int> frame_index;      // the dataset's index of each update's frame
-  std::vector<std::string> state;    // each update's state (SlamStateText) and keyframe mark
-  int keyframes = 0;                 // this stream's
-  int ok = 0, degraded = 0, lost = 0, relocalised = 0, waiting = 0;
-  int dropped = 0;
-  bool done = false;
-  pb::SlamMapping mapping;  // as of the last update (the done message's at the end)
-  absl::Time done_at;
-  absl::Status problem;     // an update that makes no sense (cancels the call)
-  bool ended = false;       // the stream has nothing more to read
-};
-
-// The state the sender (this thread) and the reader thread share.
-struct Exchange {
-  std::mutex mutex;
-  std::condition_variable changed;
-  std::vector<SentFrame> sent;
-  size_t matched = 0;  // sent frames before this one are answered or were dropped
-  Received received;
-};
-
-}  // namespace
-
-int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& args) {
+FlagSet RemoteSlamFlags() {
   FlagSet flags("plenox slam",
                 "With --server: online RGB-D SLAM on the daemon. Streams every frame of a dataset\n"
                 "(no poses) into map N, which is created when it does not exist, bootstrapped\n"
@@ -135,12 +99,180 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
            "")
       .AddSwitch("save", "after the last update, write the map to the daemon's data directory");
   AddJsonAndQuietSwitches(flags);
+  return flags;
+}
+
+// One Slam stream over a dataset and what came back (counters go into `report`).
+struct SlamStream {
+  RemoteClient* client = nullptr;
+  const RgbdDataset* dataset;
+  std::string map_name;
+  pb::SlamOptions wire;
+  WireEncoding encoding;
+  std::optional<SE3> start_pose;
+  bool realtime = false;
+  double speed = 1.0;
+
+  std::vector<StampedPose> trajectory{};
+  pb::SlamMapping mapping{};  // as of the last update (the done message's at the end)
+  bool done = false;
+  absl::Time done_at{};
+  FrameStreamResult result{};  // records: each update's frame, times and state [keyframe]
+};
+
+// Counts an update into `report` and shows it; its frame is `record`.
+absl::Status TakeUpdate(const pb::SlamUpdate& update, FrameRecord& record, SlamStream& s,
+                        SlamReport& report, ProgressLine& line) {
+  absl::StatusOr<SE3> pose = PoseFromProto(update.pose(), "update.pose");
+  if (!pose.ok()) return pose.status();
+  s.trajectory.push_back({update.timestamp(), *pose});
+  record.note = absl::StrCat(SlamStateText(update.state()), update.keyframe() ? " keyframe" : "");
+  report.keyframes += update.keyframe();
+  report.dropped += static_cast<int>(update.dropped());
+  switch (update.state()) {
+    case pb::SLAM_STATE_OK: ++report.ok; break;
+    case pb::SLAM_STATE_DEGRADED: ++report.degraded; break;
+    case pb::SLAM_STATE_LOST: ++report.lost; break;
+    case pb::SLAM_STATE_RELOCALISED: ++report.relocalised; break;
+    case pb::SLAM_STATE_WAITING: ++report.waiting; break;
+    default: break;
+  }
+  line.Update(SlamProgressText(record.index + 1, report.frames, SlamStateText(update.state()),
+                               update.latency_ms(), report.keyframes, report.lost,
+                               update.state() == pb::SLAM_STATE_OK ? "" : update.reason()));
+  return absl::OkStatus();
+}
+
+// Streams the frames (the first with the map, the options and the start pose), one at a time
+// or at their timestamps, and collects the updates; the error to report when it went wrong.
+absl::Status StreamFrames(SlamStream& s, SlamReport& report, ProgressLine& line) {
+  std::unique_ptr<grpc::ClientContext> context =
+      s.client->NewContext(absl::InfiniteDuration(), s.map_name);
+  auto stream = s.client->stub().Slam(context.get());
+  // Lock-step: the next frame goes once this one's update is back, so the round trip is the
+  // daemon's work and not a queue's; --realtime: the sensor's clock, as in-process.
+  FrameStream<pb::SlamRequest, pb::SlamUpdate> frames(
+      stream.get(), [&] { context->TryCancel(); },
+      s.realtime ? FramePacing::Realtime(s.speed) : FramePacing::LockStep(), "an update");
+  s.result = frames.Run(report.frames, {
+      .request = [&](int i) -> absl::StatusOr<pb::SlamRequest> {
+        absl::StatusOr<pb::Frame> frame =
+            LoadFrameToProto(*s.dataset, i, /*with_pose=*/false, s.encoding);
+        if (!frame.ok()) return frame.status();
+        pb::SlamRequest request;
+        if (i == 0) {
+          request.set_map(s.map_name);
+          *request.mutable_options() = s.wire;
+          if (s.start_pose) PoseToProto(*s.start_pose, request.mutable_initial_pose());
+        }
+        *request.mutable_frame() = std::move(*frame);
+        return request;
+      },
+      .timestamp = [&](int i) { return s.dataset->timestamp(i); },
+      .answers = [](const pb::SlamUpdate& u) -> std::optional<FrameAnswer> {
+        if (u.done()) return std::nullopt;
+        return FrameAnswer{u.timestamp(), u.latency_ms()};
+      },
+      .on_reply = [&](const pb::SlamUpdate& update, FrameRecord* record) -> absl::Status {
+        s.mapping = update.mapping();
+        if (record != nullptr) return TakeUpdate(update, *record, s, report, line);
+        s.done = true;
+        s.done_at = absl::Now();
+        return absl::OkStatus();
+      },
+  });
+  const FrameStreamResult& r = s.result;
+  if (!r.local.ok() || !r.problem.ok()) {
+    line.Finish("slam cancelled");
+    return !r.local.ok() ? r.local : r.problem;
+  }
+  if (!r.finished.ok()) {
+    line.Finish("slam failed");
+    return s.client->ToStatus(r.finished);
+  }
+  if (!s.done) {
+    return absl::InternalError("the daemon ended the Slam stream without its done message");
+  }
+  return absl::OkStatus();
+}
+
+// The trajectory, then the timings (it is the result, the timings are extra), then --save.
+absl::StatusOr<std::optional<pb::MapInfo>> WriteAndSave(const FlagSet& flags, const SlamStream& s,
+                                                        const SlamReport& report) {
+  const std::string where = absl::StrCat(" on map ", s.map_name, " at ", s.client->server());
+  PLX_RETURN_IF_ERROR(WriteTumTrajectory(
+      report.trajectory, s.trajectory,
+      SlamTrajectoryHeader(s.dataset->name(), where, report.started_from_ground_truth)));
+  if (const std::string timings = flags.GetString("timings"); !timings.empty()) {
+    PLX_RETURN_IF_ERROR(WriteFileAtomically(
+        timings,
+        FrameTimingsText("# frame timestamp roundtrip_ms daemon_ms state [keyframe]\n",
+                         s.result.records),
+        "cannot write --timings"));
+  }
+  if (!flags.GetSwitch("save")) return std::nullopt;
+  if (!s.mapping.finished()) {
+    // Another stream still maps into it: the file has the keyframes mapped so far.
+    std::cerr << absl::StrFormat(
+        "plenox slam: other streams still map \"%s\" (%d in all): --save writes what is "
+        "mapped so far\n",
+        s.map_name, s.mapping.streams());
+  }
+  PLX_ASSIGN_OR_RETURN(pb::MapInfo info, s.client->SaveMap(s.map_name));
+  return info;
+}
+
+// The summary line(s), then the result on stdout.
+void PrintRemoteSlamResult(const FlagSet& flags, const SlamDatasetOptions& options,
+                           const SlamStream& s, const std::optional<pb::MapInfo>& saved,
+                           SlamReport& report, ProgressLine& line) {
+  const std::vector<double> daemon_ms = DaemonMs(s.result.records);
+  const std::vector<double> roundtrip_ms = RoundtripMs(s.result.records);
+  report.processed = static_cast<int>(s.trajectory.size());
+  report.ms_per_frame_median = Percentile(daemon_ms, 0.5);
+  report.ms_per_frame_p95 = Percentile(daemon_ms, 0.95);
+  report.wall_s = absl::ToDoubleSeconds(s.done_at - s.result.started);
+  report.mapping_iterations = static_cast<int>(s.mapping.iterations());
+  report.map_mb = s.mapping.map_bytes() / 1e6;
+  const double roundtrip_median = Percentile(roundtrip_ms, 0.5);
+  const double roundtrip_p95 = Percentile(roundtrip_ms, 0.95);
+  std::string summary = SlamSummaryText(
+      report, absl::StrFormat(" [%s, map \"%s\"; round trip median %.1f ms, p95 %.1f ms]",
+                              s.client->server(), s.map_name, roundtrip_median, roundtrip_p95));
+  if (saved) {
+    absl::StrAppendFormat(&summary,
+                          "\nslam: saved \"%s\" in the daemon's data directory: version %d, "
+                          "%d keyframes, %.1f MB",
+                          s.map_name, saved->version(), saved->keyframes(),
+                          saved->memory_bytes() / 1e6);
+  }
+  line.Finish(summary);
+  JsonObject more;
+  more.Add("roundtrip_ms_median", roundtrip_median)
+      .Add("roundtrip_ms_p95", roundtrip_p95)
+      .Add("roundtrip_ms_p99", Percentile(roundtrip_ms, 0.99))
+      .Add("ms_per_frame_p99", Percentile(daemon_ms, 0.99))
+      .Add("encoding", flags.GetString("encoding"))
+      .AddBool("deterministic", options.slam.deterministic)
+      .AddBool("realtime", options.realtime)
+      .Add("map", s.map_name)
+      .Add("server", s.client->server())
+      .Add("map_keyframes", static_cast<int64_t>(s.mapping.keyframes()))
+      .Add("map_version", static_cast<int64_t>(s.mapping.map_version()))
+      .AddBool("mapping_finished", s.mapping.finished())
+      .AddBool("saved", saved.has_value());
+  PrintSlamResult(report, flags.GetSwitch("json"), more);
+}
+
+}  // namespace
+
+int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& args) {
+  FlagSet flags = RemoteSlamFlags();
   int exit_code = 0;
   if (absl::Status s = RefuseUnavailableFlags(args, InProcessOnlyFlags()); !s.ok()) {
     return ReportError(kCommand, s, true);
   }
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
-
   absl::StatusOr<SlamDatasetOptions> options = SlamOptionsFromFlags(flags);
   if (!options.ok()) return ReportError(kCommand, options.status(), true);
   absl::StatusOr<WireEncoding> encoding = ParseWireEncoding(flags.GetString("encoding"));
@@ -149,12 +281,9 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
   if (!dataset_options.ok()) return ReportError(kCommand, dataset_options.status(), true);
   absl::StatusOr<double> rpe_delta = RpeDeltaFromFlags(flags);
   if (!rpe_delta.ok()) return ReportError(kCommand, rpe_delta.status(), true);
-  const pb::SlamOptions wire = SlamOptionsToProto(flags, *options);
-  const std::string map_name = flags.GetString("name");
   SlamReport report;
   report.trajectory = flags.GetString("out");
-  const std::string timings = flags.GetString("timings");
-  for (const std::string& path : {report.trajectory, timings}) {
+  for (const std::string& path : {report.trajectory, flags.GetString("timings")}) {
     if (path.empty()) continue;
     if (absl::Status s = CheckOutputDirectory(path); !s.ok()) return ReportError(kCommand, s);
   }
@@ -166,216 +295,24 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
   if (!dataset) return exit_code;
   if (absl::Status s = CheckSlamDataset(*dataset); !s.ok()) return ReportError(kCommand, s);
   report.frames = SlamFrameCount(*dataset, *options);
-  const std::optional<SE3> start_pose = dataset->ground_truth(0);
-  report.started_from_ground_truth = start_pose.has_value();
+  SlamStream stream{.dataset = dataset.get(),
+                    .map_name = flags.GetString("name"),
+                    .wire = SlamOptionsToProto(flags, *options),
+                    .encoding = *encoding,
+                    .start_pose = dataset->ground_truth(0),
+                    .realtime = options->realtime,
+                    .speed = options->speed};
+  report.started_from_ground_truth = stream.start_pose.has_value();
 
   std::unique_ptr<RemoteClient> client = ConnectOrReport(kCommand, remote, &exit_code);
   if (!client) return exit_code;
-  std::unique_ptr<grpc::ClientContext> context =
-      client->NewContext(absl::InfiniteDuration(), map_name);
-  std::unique_ptr<grpc::ClientReaderWriter<pb::SlamRequest, pb::SlamUpdate>> stream =
-      client->stub().Slam(context.get());
-
+  stream.client = client.get();
   ProgressLine line(!flags.GetSwitch("quiet"));
-  Exchange exchange;
-  // Updates are read on their own thread: with --realtime frames go out at their timestamps
-  // whatever the daemon is doing, and after the last frame the done message can take as long
-  // as the mapping job has left.
-  std::thread reader([&] {
-    pb::SlamUpdate update;
-    while (stream->Read(&update)) {
-      const absl::Time now = absl::Now();
-      std::lock_guard<std::mutex> lock(exchange.mutex);
-      Received& r = exchange.received;
-      r.mapping = update.mapping();
-      if (update.done()) {
-        r.done = true;
-        r.done_at = now;
-        continue;
-      }
-      // Updates come in the order the frames went; frames without one were dropped.
-      std::vector<SentFrame>& sent = exchange.sent;
-      size_t at = exchange.matched;
-      while (at < sent.size() && sent[at].timestamp != update.timestamp()) ++at;
-      absl::StatusOr<SE3> pose = PoseFromProto(update.pose(), "update.pose");
-      if (at == sent.size() || !pose.ok()) {
-        r.problem = !pose.ok() ? pose.status()
-                               : absl::InternalError(absl::StrFormat(
-                                     "the daemon sent an update for t=%.6f, a frame not sent "
-                                     "(or answered twice)",
-                                     update.timestamp()));
-        context->TryCancel();
-        break;
-      }
-      exchange.matched = at + 1;
-      r.trajectory.push_back({update.timestamp(), *pose});
-      r.daemon_ms.push_back(update.latency_ms());
-      r.roundtrip_ms.push_back(absl::ToDoubleMilliseconds(now - sent[at].at));
-      r.frame_index.push_back(sent[at].index);
-      r.state.push_back(
-          absl::StrCat(SlamStateText(update.state()), update.keyframe() ? " keyframe" : ""));
-      r.keyframes += update.keyframe();
-      r.dropped += static_cast<int>(update.dropped());
-      switch (update.state()) {
-        case pb::SLAM_STATE_OK: ++r.ok; break;
-        case pb::SLAM_STATE_DEGRADED: ++r.degraded; break;
-        case pb::SLAM_STATE_LOST: ++r.lost; break;
-        case pb::SLAM_STATE_RELOCALISED: ++r.relocalised; break;
-        case pb::SLAM_STATE_WAITING: ++r.waiting; break;
-        default: break;
-      }
-      line.Update(SlamProgressText(sent[at].index + 1, report.frames,
-                                   SlamStateText(update.state()), update.latency_ms(),
-                                   r.keyframes, r.lost,
-                                   update.state() == pb::SLAM_STATE_OK ? "" : update.reason()));
-      exchange.changed.notify_all();
-    }
-    std::lock_guard<std::mutex> lock(exchange.mutex);
-    exchange.received.ended = true;
-    exchange.changed.notify_all();
-  });
-
-  const absl::Time wall_start = absl::Now();
-  const double t0 = dataset->timestamp(0);
-  absl::Status local = absl::OkStatus();  // a frame that does not load here
-  bool stream_open = true;
-  for (int i = 0; i < report.frames && stream_open; ++i) {
-    if (options->realtime) {
-      // The sensor's clock, as in-process: frame i is due (t_i - t_0) / speed after the start.
-      const absl::Time due =
-          wall_start + absl::Seconds((dataset->timestamp(i) - t0) / options->speed);
-      absl::SleepFor(due - absl::Now());
-    }
-    absl::StatusOr<pb::Frame> encoded =
-        LoadFrameToProto(*dataset, i, /*with_pose=*/false, *encoding);
-    if (!encoded.ok()) {
-      local = encoded.status();
-      break;
-    }
-    pb::SlamRequest request;
-    if (i == 0) {
-      request.set_map(map_name);
-      *request.mutable_options() = wire;
-      if (start_pose) PoseToProto(*start_pose, request.mutable_initial_pose());
-    }
-    *request.mutable_frame() = std::move(*encoded);
-    {
-      std::lock_guard<std::mutex> lock(exchange.mutex);
-      exchange.sent.push_back({i, request.frame().timestamp(), absl::Now()});
-    }
-    // false: the daemon ended the stream (an error); Finish says why.
-    stream_open = stream->Write(request);
-    if (stream_open && !options->realtime) {
-      // Lock-step: the next frame goes once this one's update is back, so the round trip is
-      // the daemon's work and not a queue's.
-      std::unique_lock<std::mutex> lock(exchange.mutex);
-      exchange.changed.wait(lock, [&] {
-        const Received& r = exchange.received;
-        return r.ended || !r.problem.ok() || exchange.matched >= exchange.sent.size();
-      });
-      stream_open = !exchange.received.ended && exchange.received.problem.ok();
-    }
-  }
-  if (!local.ok()) {
-    context->TryCancel();
-  } else if (stream_open) {
-    stream->WritesDone();
-  }
-  reader.join();
-  const grpc::Status finished = stream->Finish();
-  const Received& received = exchange.received;
-  if (!local.ok()) {
-    line.Finish("slam cancelled");
-    return ReportError(kCommand, local);
-  }
-  if (!received.problem.ok()) {
-    line.Finish("slam cancelled");
-    return ReportError(kCommand, received.problem);
-  }
-  if (!finished.ok()) {
-    line.Finish("slam failed");
-    return ReportError(kCommand, client->ToStatus(finished));
-  }
-  if (!received.done) {
-    return ReportError(kCommand, absl::InternalError(
-                                     "the daemon ended the Slam stream without its done message"));
-  }
-
-  const std::string where = absl::StrCat(" on map ", map_name, " at ", client->server());
-  if (absl::Status s = WriteTumTrajectory(
-          report.trajectory, received.trajectory,
-          SlamTrajectoryHeader(dataset->name(), where, report.started_from_ground_truth));
-      !s.ok()) {
-    return ReportError(kCommand, s);
-  }
-  if (!timings.empty()) {  // after the trajectory: it is the result, the timings are extra
-    std::string text = "# frame timestamp roundtrip_ms daemon_ms state [keyframe]\n";
-    for (size_t k = 0; k < received.trajectory.size(); ++k) {
-      absl::StrAppendFormat(&text, "%d %.6f %.3f %.3f %s\n", received.frame_index[k],
-                            received.trajectory[k].timestamp, received.roundtrip_ms[k],
-                            received.daemon_ms[k], received.state[k]);
-    }
-    if (absl::Status s = WriteFileAtomically(timings, text, "cannot write --timings"); !s.ok()) {
-      return ReportError(kCommand, s);
-    }
-  }
-  const pb::SlamMapping& mapping = received.mapping;
-  std::optional<pb::MapInfo> saved;
-  if (flags.GetSwitch("save")) {
-    if (!mapping.finished()) {
-      // Another stream still maps into it: the file has the keyframes mapped so far.
-      std::cerr << absl::StrFormat(
-          "plenox slam: other streams still map \"%s\" (%d in all): --save writes what is "
-          "mapped so far\n",
-          map_name, mapping.streams());
-    }
-    absl::StatusOr<pb::MapInfo> info = client->SaveMap(map_name);
-    if (!info.ok()) return ReportError(kCommand, info.status());
-    saved = *info;
-  }
-
-  report.processed = static_cast<int>(received.trajectory.size());
-  report.dropped = received.dropped;
-  report.keyframes = received.keyframes;
-  report.ok = received.ok;
-  report.degraded = received.degraded;
-  report.lost = received.lost;
-  report.relocalised = received.relocalised;
-  report.waiting = received.waiting;
-  report.ms_per_frame_median = Percentile(received.daemon_ms, 0.5);
-  report.ms_per_frame_p95 = Percentile(received.daemon_ms, 0.95);
-  report.wall_s = absl::ToDoubleSeconds(received.done_at - wall_start);
-  report.mapping_iterations = static_cast<int>(mapping.iterations());
-  report.map_mb = mapping.map_bytes() / 1e6;
-  ScoreSlamTrajectory(*dataset, received.trajectory, *rpe_delta, &report);
-  const double roundtrip_median = Percentile(received.roundtrip_ms, 0.5);
-  const double roundtrip_p95 = Percentile(received.roundtrip_ms, 0.95);
-  std::string summary = SlamSummaryText(
-      report, absl::StrFormat(" [%s, map \"%s\"; round trip median %.1f ms, p95 %.1f ms]",
-                              client->server(), map_name, roundtrip_median, roundtrip_p95));
-  if (saved) {
-    absl::StrAppendFormat(&summary,
-                          "\nslam: saved \"%s\" in the daemon's data directory: version %d, "
-                          "%d keyframes, %.1f MB",
-                          map_name, saved->version(), saved->keyframes(),
-                          saved->memory_bytes() / 1e6);
-  }
-  line.Finish(summary);
-  JsonObject more;
-  more.Add("roundtrip_ms_median", roundtrip_median)
-      .Add("roundtrip_ms_p95", roundtrip_p95)
-      .Add("roundtrip_ms_p99", Percentile(received.roundtrip_ms, 0.99))
-      .Add("ms_per_frame_p99", Percentile(received.daemon_ms, 0.99))
-      .Add("encoding", flags.GetString("encoding"))
-      .AddBool("deterministic", options->slam.deterministic)
-      .AddBool("realtime", options->realtime)
-      .Add("map", map_name)
-      .Add("server", client->server())
-      .Add("map_keyframes", static_cast<int64_t>(mapping.keyframes()))
-      .Add("map_version", static_cast<int64_t>(mapping.map_version()))
-      .AddBool("mapping_finished", mapping.finished())
-      .AddBool("saved", saved.has_value());
-  PrintSlamResult(report, flags.GetSwitch("json"), more);
+  if (absl::Status s = StreamFrames(stream, report, line); !s.ok()) return ReportError(kCommand, s);
+  absl::StatusOr<std::optional<pb::MapInfo>> saved = WriteAndSave(flags, stream, report);
+  if (!saved.ok()) return ReportError(kCommand, saved.status());
+  ScoreSlamTrajectory(*dataset, stream.trajectory, *rpe_delta, &report);
+  PrintRemoteSlamResult(flags, *options, stream, *saved, report, line);
   return kExitOk;
 }
 

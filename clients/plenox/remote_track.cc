@@ -1,17 +1,15 @@
 // plenox --server HOST:PORT track: localise every frame of a dataset in a map on the daemon
 // (one Track stream, in lock-step so that no frame is dropped).
-#include <algorithm>
-#include <cmath>
-
 #include "absl/strings/str_cat.h"
-#include "core/common/percentile.h"
-#include "absl/strings/str_format.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
+#include "clients/plenox/frame_stream.h"
 #include "clients/plenox/remote_client.h"
 #include "clients/plenox/track_output.h"
-#include "core/io/atomic_write.h"
+#include "core/common/percentile.h"
+#include "core/common/status_macros.h"
 #include "core/formats/trajectory_file.h"
+#include "core/io/atomic_write.h"
 #include "core/tracking/tracker.h"
 
 namespace plx::cli {
@@ -19,9 +17,7 @@ namespace {
 
 constexpr char kCommand[] = "track";
 
-}  // namespace
-
-int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& args) {
+FlagSet RemoteTrackFlags() {
   FlagSet flags("plenox track",
                 "With --server: tracks every frame of a dataset against map N on the daemon,\n"
                 "starting from frame 0's ground-truth pose when the dataset has one, and writes\n"
@@ -33,26 +29,139 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
   flags.Add("encoding", "png|raw", "how frames travel: PNG, or raw RGB8 + uint16 (no codec)", "png")
       .Add("timings", "FILE", "also write per-frame times: frame timestamp roundtrip_ms daemon_ms", "");
   AddJsonAndQuietSwitches(flags);
+  return flags;
+}
+
+// One Track stream over a dataset and what came back.
+struct TrackStream {
+  RemoteClient* client = nullptr;
+  const RgbdDataset* dataset;
+  std::string map_name;
+  pb::TrackOptions wire;
+  WireEncoding encoding;
+  std::optional<SE3> start_pose;
+  int rays = 0;
+
+  std::vector<StampedPose> trajectory{};
+  absl::Time first_tracked{};  // frame 1 loading: frames per second count from here
+  FrameStreamResult result{};
+};
+
+// Streams every frame (the first with the map, the options and the start pose) and collects the
+// estimates into `s` and `report`; the error to report when the stream did not track them all.
+absl::Status StreamFrames(TrackStream& s, ProgressLine& line, TrackReport& report) {
+  std::unique_ptr<grpc::ClientContext> context =
+      s.client->NewContext(absl::InfiniteDuration(), s.map_name);
+  auto stream = s.client->stub().Track(context.get());
+  FrameStream<pb::TrackRequest, pb::PoseEstimate> frames(
+      stream.get(), [&] { context->TryCancel(); }, FramePacing::LockStep(), "an estimate");
+  int64_t dropped = 0;
+  s.result = frames.Run(report.frames, {
+      .request = [&](int i) -> absl::StatusOr<pb::TrackRequest> {
+        if (i == 1) s.first_tracked = absl::Now();
+        pb::TrackRequest request;
+        if (i == 0) {
+          request.set_map(s.map_name);
+          *request.mutable_options() = s.wire;
+          if (s.start_pose) PoseToProto(*s.start_pose, request.mutable_initial_pose());
+        }
+        // No per-frame prior: the daemon predicts with constant velocity, as in-process.
+        absl::StatusOr<pb::Frame> frame =
+            LoadFrameToProto(*s.dataset, i, /*with_pose=*/false, s.encoding);
+        if (!frame.ok()) return frame.status();
+        *request.mutable_frame() = std::move(*frame);
+        return request;
+      },
+      .answers = [](const pb::PoseEstimate& e) -> std::optional<FrameAnswer> {
+        return FrameAnswer{e.timestamp(), e.latency_ms()};
+      },
+      .on_reply = [&](const pb::PoseEstimate& estimate, FrameRecord* record) -> absl::Status {
+        absl::StatusOr<SE3> pose = PoseFromProto(estimate.pose(), "estimate.pose");
+        if (!pose.ok()) return pose.status();
+        s.trajectory.push_back({record->timestamp, *pose});
+        if (record->index > 0) {  // frame 0 is the start pose, as in-process
+          report.lost += estimate.state() == pb::TRACKING_STATE_LOST;
+          report.degraded += estimate.state() == pb::TRACKING_STATE_DEGRADED;
+        }
+        dropped += estimate.dropped();
+        line.Update(TrackProgressText({.frame = record->index + 1,
+                                       .frames = report.frames,
+                                       .state = TrackingStateText(estimate.state()),
+                                       .milliseconds = estimate.latency_ms(),
+                                       .valid_rays = static_cast<int>(estimate.valid_rays()),
+                                       .rays = s.rays,
+                                       .lost = report.lost,
+                                       .reason = estimate.reason()}));
+        return absl::OkStatus();
+      },
+  });
+  report.dropped = dropped;
+  const FrameStreamResult& r = s.result;
+  const int tracked = static_cast<int>(r.records.size());
+  if (r.local.ok() && r.problem.ok() && tracked == report.frames) {
+    return s.client->ToStatus(r.finished);
+  }
+  // The daemon's status when it has one; else the local problem, or that the stream ended.
+  if (!r.finished.ok() && r.finished.error_code() != grpc::StatusCode::CANCELLED) {
+    return s.client->ToStatus(r.finished);
+  }
+  if (!r.local.ok()) return r.local;
+  if (!r.problem.ok()) return r.problem;
+  return absl::InternalError(absl::StrCat("the daemon ended the Track stream at frame ", tracked,
+                                          " of ", report.frames));
+}
+
+// The trajectory first (it is the result; the timings are extra), then the summary.
+absl::Status WriteAndPrint(const FlagSet& flags, const TrackStream& s, ProgressLine& line,
+                           TrackReport& report) {
+  PLX_RETURN_IF_ERROR(WriteTrackTrajectory(report, s.trajectory, s.dataset->name(),
+                                           absl::StrCat(s.map_name, " at ", s.client->server())));
+  const std::vector<FrameRecord>& records = s.result.records;  // frames 1..: 0 is the start
+  if (const std::string timings = flags.GetString("timings"); !timings.empty()) {
+    PLX_RETURN_IF_ERROR(WriteFileAtomically(
+        timings,
+        FrameTimingsText("# frame timestamp roundtrip_ms daemon_ms (frames 1..; 0 is the start)\n",
+                         records, 1),
+        "cannot write --timings"));
+  }
+  const std::vector<double> latency_ms = DaemonMs(records, 1);
+  const std::vector<double> roundtrip_ms = RoundtripMs(records, 1);
+  report.ms_per_frame_median = Percentile(latency_ms, 0.5);
+  report.ms_per_frame_p95 = Percentile(latency_ms, 0.95);
+  report.started_from_ground_truth = s.start_pose.has_value();
+  line.Finish(TrackSummaryText(report, absl::StrCat(" on ", s.client->server()), ""));
+  const double seconds = absl::ToDoubleSeconds(s.result.last_answer - s.first_tracked);
+  JsonObject more_times;
+  more_times.Add("ms_per_frame_p99", Percentile(latency_ms, 0.99))
+      .Add("roundtrip_ms_median", Percentile(roundtrip_ms, 0.5))
+      .Add("roundtrip_ms_p99", Percentile(roundtrip_ms, 0.99))
+      // Loading and encoding included: what this client achieves end to end.
+      .Add("fps", roundtrip_ms.empty() ? 0.0 : roundtrip_ms.size() / seconds)
+      .Add("encoding", flags.GetString("encoding"));
+  PrintTrackResult(report, flags.GetSwitch("json"), more_times,
+                   JsonObject().Add("map", s.map_name).Add("server", s.client->server()));
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& args) {
+  FlagSet flags = RemoteTrackFlags();
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
-
   // The options the daemon will apply (it starts from the same TrackerOptionsForMode), so that
   // the summary names what actually ran; only flags the user set go on the wire.
-  absl::StatusOr<TrackerOptions> tracker_options = TrackerOptionsFromFlags(flags);
-  if (!tracker_options.ok()) return ReportError(kCommand, tracker_options.status(), true);
-  const TrackerOptions& options = *tracker_options;
-  const pb::TrackOptions wire = TrackOptionsToProto(flags, options);
+  absl::StatusOr<TrackerOptions> options = TrackerOptionsFromFlags(flags);
+  if (!options.ok()) return ReportError(kCommand, options.status(), true);
   absl::StatusOr<WireEncoding> encoding = ParseWireEncoding(flags.GetString("encoding"));
   if (!encoding.ok()) return ReportError(kCommand, encoding.status(), true);
   absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);
   if (!dataset_options.ok()) return ReportError(kCommand, dataset_options.status(), true);
-  const std::string map_name = flags.GetString("map");
   TrackReport report{.mode = flags.GetString("mode"),
-                     .rays = options.rays,
-                     .iterations = options.iterations,
+                     .rays = options->rays,
+                     .iterations = options->iterations,
                      .trajectory = flags.GetString("out")};
-  const std::string timings = flags.GetString("timings");
-  for (const std::string& path : {report.trajectory, timings}) {
+  for (const std::string& path : {report.trajectory, flags.GetString("timings")}) {
     if (path.empty()) continue;
     if (absl::Status s = CheckOutputDirectory(path); !s.ok()) return ReportError(kCommand, s);
   }
@@ -66,108 +175,20 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
   if (report.frames == 0) {
     return ReportError(kCommand, absl::InvalidArgumentError("the dataset has no frames"));
   }
-  const std::optional<SE3> start_pose = dataset->ground_truth(0);
-
-  std::unique_ptr<grpc::ClientContext> context =
-      client->NewContext(absl::InfiniteDuration(), map_name);
-  std::unique_ptr<grpc::ClientReaderWriter<pb::TrackRequest, pb::PoseEstimate>> stream =
-      client->stub().Track(context.get());
-  // Ends the stream after a problem: the daemon's status when it has one, else `problem`.
-  // A local problem (a frame that does not load) cancels the call; when the daemon ended the
-  // stream, its status is already on the way.
-  const auto fail = [&](const absl::Status& problem, bool cancel) {
-    if (cancel) context->TryCancel();
-    const grpc::Status finished = stream->Finish();
-    const bool daemon_error =
-        !finished.ok() && finished.error_code() != grpc::StatusCode::CANCELLED;
-    return ReportError(kCommand, daemon_error ? client->ToStatus(finished) : problem);
-  };
-
+  TrackStream stream{.client = client.get(),
+                     .dataset = dataset.get(),
+                     .map_name = flags.GetString("map"),
+                     .wire = TrackOptionsToProto(flags, *options),
+                     .encoding = *encoding,
+                     .start_pose = dataset->ground_truth(0),
+                     .rays = options->rays};
   ProgressLine line(!flags.GetSwitch("quiet"));
-  std::vector<StampedPose> trajectory;
-  std::vector<double> latency_ms;  // frames 1.., as in-process (frame 0 is the start pose)
-  std::vector<double> roundtrip_ms;
-  absl::Time first_tracked;  // frame 1 loading: frames per second count from here
-  int64_t dropped = 0;
-  for (int i = 0; i < report.frames; ++i) {
-    if (i == 1) first_tracked = absl::Now();
-    absl::StatusOr<RgbdFrame> frame = dataset->LoadFrame(i);
-    if (!frame.ok()) return fail(frame.status(), /*cancel=*/true);
-    pb::TrackRequest request;
-    if (i == 0) {
-      request.set_map(map_name);
-      *request.mutable_options() = wire;
-      if (start_pose) PoseToProto(*start_pose, request.mutable_initial_pose());
-    }
-    // No per-frame prior: the daemon predicts with constant velocity, as in-process tracking.
-    absl::StatusOr<pb::Frame> encoded =
-        FrameToProto(*frame, dataset->calibration(), /*with_pose=*/false, *encoding);
-    if (!encoded.ok()) return fail(encoded.status(), /*cancel=*/true);
-    *request.mutable_frame() = std::move(*encoded);
-    pb::PoseEstimate estimate;
-    const absl::Time sent = absl::Now();
-    if (!stream->Write(request) || !stream->Read(&estimate)) {
-      return fail(absl::InternalError(absl::StrCat("the daemon ended the Track stream at frame ",
-                                                   i, " of ", report.frames)),
-                  /*cancel=*/false);
-    }
-    absl::StatusOr<SE3> pose = PoseFromProto(estimate.pose(), "estimate.pose");
-    if (!pose.ok()) return fail(pose.status(), /*cancel=*/true);
-    trajectory.push_back({frame->timestamp, *pose});
-    if (i > 0) {
-      roundtrip_ms.push_back(absl::ToDoubleMilliseconds(absl::Now() - sent));
-      latency_ms.push_back(estimate.latency_ms());
-      report.lost += estimate.state() == pb::TRACKING_STATE_LOST;
-      report.degraded += estimate.state() == pb::TRACKING_STATE_DEGRADED;
-    }
-    dropped += estimate.dropped();
-    line.Update(TrackProgressText({.frame = i + 1,
-                                   .frames = report.frames,
-                                   .state = TrackingStateText(estimate.state()),
-                                   .milliseconds = estimate.latency_ms(),
-                                   .valid_rays = static_cast<int>(estimate.valid_rays()),
-                                   .rays = options.rays,
-                                   .lost = report.lost,
-                                   .reason = estimate.reason()}));
-  }
-  const absl::Time last_tracked = absl::Now();
-  stream->WritesDone();
-  if (const grpc::Status finished = stream->Finish(); !finished.ok()) {
-    return ReportError(kCommand, client->ToStatus(finished));
-  }
-
-  // The trajectory first: it is the result; the timings are extra.
-  if (absl::Status s = WriteTrackTrajectory(report, trajectory, dataset->name(),
-                                            absl::StrCat(map_name, " at ", client->server()));
-      !s.ok()) {
+  if (absl::Status s = StreamFrames(stream, line, report); !s.ok()) {
     return ReportError(kCommand, s);
   }
-  if (!timings.empty()) {
-    std::string text = "# frame timestamp roundtrip_ms daemon_ms (frames 1..; 0 is the start)\n";
-    for (size_t k = 0; k < roundtrip_ms.size(); ++k) {
-      absl::StrAppendFormat(&text, "%d %.6f %.3f %.3f\n", static_cast<int>(k + 1),
-                            trajectory[k + 1].timestamp, roundtrip_ms[k], latency_ms[k]);
-    }
-    if (absl::Status s = WriteFileAtomically(timings, text, "cannot write --timings"); !s.ok()) {
-      return ReportError(kCommand, s);
-    }
+  if (absl::Status s = WriteAndPrint(flags, stream, line, report); !s.ok()) {
+    return ReportError(kCommand, s);
   }
-  report.ms_per_frame_median = Percentile(latency_ms, 0.5);
-  report.ms_per_frame_p95 = Percentile(latency_ms, 0.95);
-  report.dropped = dropped;
-  report.started_from_ground_truth = start_pose.has_value();
-  line.Finish(TrackSummaryText(report, absl::StrCat(" on ", client->server()), ""));
-  JsonObject more_times;
-  more_times.Add("ms_per_frame_p99", Percentile(latency_ms, 0.99))
-      .Add("roundtrip_ms_median", Percentile(roundtrip_ms, 0.5))
-      .Add("roundtrip_ms_p99", Percentile(roundtrip_ms, 0.99))
-      // Loading and encoding included: what this client achieves end to end.
-      .Add("fps", roundtrip_ms.empty() ? 0.0
-                                       : roundtrip_ms.size() /
-                                             absl::ToDoubleSeconds(last_tracked - first_tracked))
-      .Add("encoding", flags.GetString("encoding"));
-  PrintTrackResult(report, flags.GetSwitch("json"), more_times,
-                   JsonObject().Add("map", map_name).Add("server", client->server()));
   return kExitOk;
 }
 
