@@ -149,7 +149,8 @@ absl::Status SlamReactor::HandleFirstMessage() {
   PLX_ASSIGN_OR_RETURN(
       const SlamOptions slam,
       SlamOptionsFromProto(o, info->voxel_size, state_->maps->max_map_bytes()));
-  tracker_options_ = SlamTrackerOptionsOf(slam);
+  const SlamSplitOptions split = SplitSlamOptions(slam);
+  tracker_options_ = split.tracker;
   if (initial_pose) tracker_options_.initial_pose = initial_pose;
   realtime_ = o.realtime();
   deterministic_ = o.deterministic();
@@ -157,7 +158,7 @@ absl::Status SlamReactor::HandleFirstMessage() {
   const bool mapping_set =
       o.iterations_per_keyframe() > 0 || o.rays_per_iteration() > 0 || o.max_depth() > 0;
   listener_ = std::make_shared<SlamJobListener>([this] { OnJobChanged(); });
-  PLX_ASSIGN_OR_RETURN(job_, state_->slam_jobs->Join(map_name_, SlamMapperOptionsOf(slam),
+  PLX_ASSIGN_OR_RETURN(job_, state_->slam_jobs->Join(map_name_, split.mapper,
                                                      mapping_set, deterministic_, listener_));
   state_->metrics->slam_streams++;
   camera_ = job_->trajectory().AddCamera();
