@@ -262,8 +262,8 @@ std::string Daemon::RenderMetrics() const {
   for (const std::shared_ptr<SlamJob>& job : slam_jobs_->Running()) {
     const SlamJobStatus s = job->Status();
     ++g.slam_jobs;
-    g.slam_pending_keyframes += s.pending_keyframes;
-    g.slam_last_publish_s = std::max(g.slam_last_publish_s, s.last_publish_s);
+    g.slam_pending_keyframes += s.mapping.pending_keyframes;
+    g.slam_last_publish_s = std::max(g.slam_last_publish_s, s.mapping.last_publish_s);
   }
   for (size_t i = 0; i < workers_->size(); ++i) {
     const DeviceWorker& w = workers_->worker(i);

@@ -37,7 +37,7 @@ absl::StatusOr<web::ViewerTrajectories> DaemonViewerSource::Trajectories(
   if (const std::shared_ptr<SlamJob> job = state_->slam_jobs->RunningOn(name)) {
     const SlamJobStatus s = job->Status();
     out.slam_running = !s.finished;
-    out.keyframes_integrated = s.keyframes_integrated;
+    out.keyframes_integrated = s.mapping.keyframes_integrated;
   }
   if (const std::shared_ptr<const TrajectoryRecord> record = state_->slam_jobs->Trajectory(name)) {
     out.cameras = record->Cameras();

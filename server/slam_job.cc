@@ -23,19 +23,29 @@ void SlamJobListener::Reset() {
 }
 
 SlamJob::SlamJob(DaemonState* state, std::string map, std::string job_id,
-                 SlamMapperOptions options, bool deterministic,
-                 std::shared_ptr<TrajectoryRecord> trajectory)
+                 const SlamSplitOptions& split, std::shared_ptr<TrajectoryRecord> trajectory)
     : state_(state),
       map_(std::move(map)),
       job_id_(std::move(job_id)),
-      options_(std::move(options)),
-      deterministic_(deterministic),
       trajectory_(std::move(trajectory)) {
   status_.job_id = job_id_;
+  std::shared_ptr<const PlenoxelMap> base;
+  int64_t base_version = 0;
   if (absl::StatusOr<MapVersion> latest = state_->maps->Latest(map_); latest.ok()) {
-    status_.map_version = latest->version;
-    if (latest->map != nullptr && latest->map->grid.num_bricks() > 0) base_ = latest->map;
+    base = latest->map;  // the coordinator extends it only when it has content
+    base_version = static_cast<int64_t>(latest->version);
   }
+  // The store numbers the versions (the map's one counter): readers, the streams' updates and
+  // the trackers' views all see its numbers.
+  SlamPublisher publish_to_store = [state = state_, name = map_](
+                                       std::shared_ptr<const PlenoxelMap> version,
+                                       int new_keyframes) -> absl::StatusOr<int64_t> {
+    PLX_ASSIGN_OR_RETURN(const uint64_t number,
+                         state->maps->Publish(name, std::move(version), new_keyframes));
+    return static_cast<int64_t>(number);
+  };
+  coordinator_ = std::make_unique<SlamCoordinator>(split.mapper, split.gate, std::move(base),
+                                                   base_version, std::move(publish_to_store));
 }
 
 SlamJob::~SlamJob() {
@@ -51,46 +61,18 @@ absl::Status SlamJob::AddKeyframe(const RgbdFrame& frame, const SE3& pose,
       return absl::FailedPreconditionError(
           absl::StrCat("the SLAM job on map \"", map_, "\" has ended"));
     }
-    if (mapper_ == nullptr) {
-      // The mapper is made by the first task, with its worker's backend.
-      early_.push_back({frame, pose, k});
-      ++status_.keyframes;
-      ++status_.pending_keyframes;
-      status_.idle = false;
-      ScheduleLocked();
-      return absl::OkStatus();
-    }
   }
-  PLX_RETURN_IF_ERROR(mapper_->AddKeyframe(frame, pose, k));
+  PLX_RETURN_IF_ERROR(coordinator_->AddKeyframe(frame, pose, k));
   std::lock_guard<std::mutex> lock(mutex_);
-  ++status_.keyframes;
-  ++status_.pending_keyframes;
-  status_.idle = false;
   ScheduleLocked();
   return absl::OkStatus();
 }
 
-SlamMapView SlamJob::View() const {
-  SlamMapView view;
-  std::lock_guard<std::mutex> lock(mutex_);
-  if (mapper_ == nullptr) {
-    view.map = base_;
-    view.version = base_ ? static_cast<int64_t>(status_.map_version) : 0;
-    for (const QueuedKeyframe& k : early_) view.accepted_keyframes.push_back({k.frame.timestamp, k.pose});
-  } else {
-    const SlamMapVersion latest = mapper_->latest();
-    view.map = latest.map;
-    view.version = static_cast<int64_t>(status_.map_version);
-    view.accepted_keyframes = mapper_->accepted_keyframes();
-    view.keyframe_poses = mapper_->keyframe_poses();
-  }
-  view.mapping_behind = status_.pending_keyframes > 0;
-  return view;
-}
-
 SlamJobStatus SlamJob::Status() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return status_;
+  SlamJobStatus s = status_;
+  s.mapping = coordinator_->progress();
+  return s;
 }
 
 void SlamJob::Enter(std::shared_ptr<SlamJobListener> listener) {
@@ -110,8 +92,8 @@ void SlamJob::Leave(const std::shared_ptr<SlamJobListener>& listener) {
     status_.streams = static_cast<int>(members_.size());
     // The last stream gone: spend the rest of the budget, publish, end (RunStep).
     if (members_.empty() && !status_.finished) {
-      if (worker_ == nullptr && early_.empty()) {
-        FinishLocked(absl::OkStatus());  // never started: nothing to map
+      if (worker_ == nullptr) {
+        FinishLocked(absl::OkStatus());  // no keyframe, no task: nothing to map
         finished = true;
       } else {
         ScheduleLocked();
@@ -133,107 +115,55 @@ void SlamJob::ScheduleLocked() {
                 });
 }
 
-absl::Status SlamJob::PublishToStore() {
-  const SlamMapVersion latest = mapper_->latest();
-  if (latest.map == nullptr || latest.version == published_mapper_version_) {
-    return absl::OkStatus();
-  }
-  const int integrated = mapper_->progress().keyframes_integrated;
-  PLX_ASSIGN_OR_RETURN(const uint64_t version,
-                       state_->maps->Publish(map_, latest.map, integrated - integrated_at_publish_));
-  published_mapper_version_ = latest.version;
-  integrated_at_publish_ = integrated;
-  std::lock_guard<std::mutex> lock(mutex_);
-  status_.map_version = version;
-  return absl::OkStatus();
-}
-
-absl::Status SlamJob::StepMapper(Backend* backend, bool finishing, bool draining) {
-  if (mapper_ == nullptr) {
-    PLX_ASSIGN_OR_RETURN(std::unique_ptr<SlamMapper> mapper,
-                         SlamMapper::Create(options_, backend, base_));
-    std::vector<QueuedKeyframe> early;
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      early = std::move(early_);
-      early_.clear();
-    }
-    for (const QueuedKeyframe& k : early) {
-      PLX_RETURN_IF_ERROR(mapper->AddKeyframe(k.frame, k.pose, k.intrinsics));
-    }
-    std::lock_guard<std::mutex> lock(mutex_);
-    mapper_ = std::move(mapper);
-    // Keyframes added between the move above and now went to early_ again: hand them over.
-    for (const QueuedKeyframe& k : early_) {
-      PLX_RETURN_IF_ERROR(mapper_->AddKeyframe(k.frame, k.pose, k.intrinsics));
-    }
-    early_.clear();
-  }
-  // Draining: only the keyframes already accepted are integrated; the rest of the iteration
-  // budget is not spent, so the map is saved before the daemon's grace runs out.
-  const bool integrate = mapper_->progress().pending_keyframes > 0;
-  if (draining ? integrate : mapper_->has_work()) {
-    PLX_RETURN_IF_ERROR(mapper_->Step(finishing).status());
-  }
-  // Out of work: what the last iterations changed is published now, not at the next keyframe
-  // (a lock-step stream waits for exactly this).
-  if (!mapper_->has_work() || (draining && mapper_->progress().pending_keyframes == 0)) {
-    PLX_RETURN_IF_ERROR(mapper_->PublishIfChanged());
-  }
-  return PublishToStore();
-}
-
 void SlamJob::RunStep(Backend* backend, bool cancelled) {
-  bool finishing = false;
-  bool finished = false;
-  const bool draining = state_->draining.load();
+  SlamStepMode mode = SlamStepMode::kMap;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     scheduled_ = false;
     if (status_.finished) return;
-    if (cancelled) {
-      FinishLocked(absl::UnavailableError("plenoxd is shutting down"));
+    if (cancelled) FinishLocked(absl::UnavailableError("plenoxd is shutting down"));
+    // Draining: only what was accepted goes into the map before the save. The last stream
+    // gone: the rest of the budget, then the final version.
+    if (state_->draining.load()) {
+      mode = SlamStepMode::kDrain;
+    } else if (members_.empty()) {
+      mode = SlamStepMode::kFinish;
     }
-    finishing = members_.empty() || draining;
   }
   if (cancelled) {
     state_->slam_jobs->Remove(this);
     NotifyAll();
     return;
   }
-  const absl::Status status =
-      CatchAllocationFailure("SLAM mapping",
-                             [&] { return StepMapper(backend, finishing, draining); });
+  // The mapper is made by the first task, with its worker's backend.
+  const absl::StatusOr<SlamStepResult> step = CatchAllocationFailure(
+      "SLAM mapping", [&]() -> absl::StatusOr<SlamStepResult> {
+        if (!coordinator_->mapper_started()) {
+          PLX_RETURN_IF_ERROR(coordinator_->StartMapper(backend));
+        }
+        return coordinator_->Step(mode);
+      });
+  bool finished = false;
   {
+    const SlamMapperProgress p = coordinator_->progress();
     std::lock_guard<std::mutex> lock(mutex_);
-    if (mapper_ != nullptr) {
-      const SlamMapperProgress p = mapper_->progress();
-      status_.keyframes_integrated = p.keyframes_integrated;
-      status_.pending_keyframes = status_.keyframes - p.keyframes_integrated;
-      status_.iterations = p.mapping_iterations;
-      status_.map_bytes = p.map_bytes;
-      status_.last_publish_s = p.last_publish_s;
-      has_work_ = mapper_->has_work();
-      // The viewer's keyframes: copied only when one more is in the map (O(keyframes) each).
-      if (p.keyframes_integrated != keyframes_recorded_) {
-        keyframes_recorded_ = p.keyframes_integrated;
-        trajectory_->SetKeyframes(mapper_->keyframe_poses());
-      }
+    // The viewer's keyframes: copied only when one more is in the map (O(keyframes) each).
+    if (p.keyframes_integrated != keyframes_recorded_) {
+      keyframes_recorded_ = p.keyframes_integrated;
+      trajectory_->SetKeyframes(coordinator_->keyframe_poses());
     }
-    status_.idle = !has_work_ && early_.empty() && status_.pending_keyframes == 0;
-    // Draining, every keyframe accepted is in the map: nothing more to do before the save.
-    const bool drained = draining && early_.empty() && status_.pending_keyframes == 0;
-    if (!status.ok()) {
+    if (!step.ok()) {
       LogEvent("error", "slam_mapping_failed",
-               {{"map", map_}, {"job", job_id_}, {"error", status.ToString()}});
-      FinishLocked(status);
-    } else if (members_.empty() && (status_.idle || drained)) {
+               {{"map", map_}, {"job", job_id_}, {"error", step.status().ToString()}});
+      FinishLocked(step.status());
+    } else if (members_.empty() && step->out_of_work) {
+      // Idle, or (draining) every keyframe accepted is in the map: nothing more to do.
       FinishLocked(absl::OkStatus());
     } else {
-      if ((has_work_ && !drained) || !early_.empty()) ScheduleLocked();
+      if (!step->out_of_work) ScheduleLocked();
       state_->jobs->Update(job_id_, JobState::kRunning, 0.0,
                            absl::StrFormat("%d keyframes integrated, map version %d",
-                                           status_.keyframes_integrated, status_.map_version));
+                                           p.keyframes_integrated, p.map_version));
     }
     finished = status_.finished;
   }
@@ -247,13 +177,14 @@ void SlamJob::FinishLocked(const absl::Status& status) {
   status_.error = status;
   state_->maps->EndMapping(map_);
   if (status.ok()) {
+    const SlamMapperProgress p = coordinator_->progress();
     state_->jobs->Update(job_id_, JobState::kDone, 1.0,
-                         absl::StrFormat("%d keyframes, map version %d",
-                                         status_.keyframes_integrated, status_.map_version));
+                         absl::StrFormat("%d keyframes, map version %d", p.keyframes_integrated,
+                                         p.map_version));
     LogEvent("info", "slam_mapping_done",
              {{"map", map_}, {"job", job_id_},
-              {"keyframes", absl::StrCat(status_.keyframes_integrated)},
-              {"version", absl::StrCat(status_.map_version)}});
+              {"keyframes", absl::StrCat(p.keyframes_integrated)},
+              {"version", absl::StrCat(p.map_version)}});
   } else {
     state_->jobs->Update(job_id_, JobState::kFailed, 0.0, std::string(status.message()));
   }
@@ -269,9 +200,11 @@ void SlamJob::NotifyAll() {
 }
 
 absl::StatusOr<std::shared_ptr<SlamJob>> SlamJobs::Join(const std::string& map,
-                                                        const SlamMapperOptions& options,
-                                                        bool mapping_set, bool deterministic,
+                                                        const SlamSplitOptions& split,
+                                                        bool mapping_set,
                                                         std::shared_ptr<SlamJobListener> listener) {
+  const SlamMapperOptions& options = split.mapper;
+  const bool deterministic = split.gate.lock_step;
   std::lock_guard<std::mutex> lock(mutex_);
   auto it = jobs_.find(map);
   // A job that has just ended but is not removed yet has released the lease: start anew.
@@ -312,7 +245,7 @@ absl::StatusOr<std::shared_ptr<SlamJob>> SlamJobs::Join(const std::string& map,
   }
   auto trajectory = std::make_shared<TrajectoryRecord>();
   trajectories_[map] = trajectory;
-  auto job = std::make_shared<SlamJob>(state_, map, job_id, options, deterministic, trajectory);
+  auto job = std::make_shared<SlamJob>(state_, map, job_id, split, trajectory);
   job->Enter(std::move(listener));
   jobs_[map] = job;
   LogEvent("info", "slam_mapping_started", {{"map", map}, {"job", job_id}});

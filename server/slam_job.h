@@ -1,15 +1,18 @@
-// A map's SLAM mapping job: the one SlamMapper (core/slam/slam_mapper.h) that every Slam stream
-// on the map feeds with keyframes. It holds the map's writer lease (so Integrate is refused
-// meanwhile), runs the mapper in bounded steps as background tasks on one device worker
-// (allocation and fusion of one keyframe, or one chunk of iterations), publishes each new
-// version to the map store for every reader, and tells the streams when something changed
-// (a keyframe integrated, a version published, the job finished or failed).
+// A map's SLAM mapping job: the map's SlamCoordinator (core/slam/slam_coordinator.h: the one
+// SlamMapper, the gate, the step/publish/drain rules, the view) that every Slam stream on the
+// map feeds with keyframes, driven by background tasks. The job adds what only the daemon has:
+// the map's writer lease (so Integrate is refused meanwhile), the tasks on one device worker
+// (each one coordinator Step: allocation and fusion of one keyframe, or one chunk of
+// iterations), the store as the publisher that numbers each version (the map's one version
+// counter), and the streams' listeners, told when something changed (a keyframe integrated, a
+// version published, the job finished or failed).
 //
 // Lifetime: the first Slam stream on a map starts the job (SlamJobs::Join); later streams join
-// it. When the last stream leaves, the job spends the rest of its iteration budget, publishes
-// the final version, releases the lease and ends. When the daemon drains, it only integrates
-// the keyframes already accepted, publishes and ends, so the save has every one of them. A job is shared (shared_ptr) by its streams,
-// the registry and its queued task.
+// it. When the last stream leaves, the job spends the rest of its iteration budget
+// (SlamStepMode::kFinish), publishes the final version, releases the lease and ends. When the
+// daemon drains, it steps in SlamStepMode::kDrain (only the keyframes already accepted are
+// integrated) and ends, so the save has every one of them. A job is shared (shared_ptr) by its
+// streams, the registry and its queued task.
 #pragma once
 
 #include <cstdint>
@@ -26,6 +29,7 @@
 #include "core/geometry/intrinsics.h"
 #include "core/geometry/rgbd_frame.h"
 #include "core/geometry/se3.h"
+#include "core/slam/slam_coordinator.h"
 #include "core/slam/slam_mapper.h"
 #include "core/slam/slam_tracker.h"
 #include "server/daemon_state.h"
@@ -34,20 +38,15 @@
 
 namespace plx::server {
 
-// What the streams on a map are told about its job (SlamUpdate.mapping).
+// What the streams on a map are told about its job (SlamUpdate.mapping): the coordinator's
+// progress (keyframes from every stream; map_version: the store's version of the newest
+// published map) and the job's own state.
 struct SlamJobStatus {
   std::string job_id;
-  int keyframes = 0;             // accepted from every stream
-  int keyframes_integrated = 0;
-  int pending_keyframes = 0;
-  int iterations = 0;
-  uint64_t map_version = 0;      // the store's version of the newest published map
-  int64_t map_bytes = 0;
+  SlamMapperProgress mapping;
   int streams = 0;
-  bool idle = false;             // no keyframe waiting and the iteration budget spent
   bool finished = false;         // ended: the final version is published, the lease released
   absl::Status error;            // the job failed (every stream on it fails with this)
-  double last_publish_s = 0.0;
 };
 
 // A stream's mailbox for the job's news. The stream calls `reset` before it is destroyed; the
@@ -65,21 +64,29 @@ class SlamJobListener {
 
 class SlamJob : public std::enable_shared_from_this<SlamJob> {
  public:
-  SlamJob(DaemonState* state, std::string map, std::string job_id, SlamMapperOptions options,
-          bool deterministic, std::shared_ptr<TrajectoryRecord> trajectory);
+  // `split`: the first stream's options (its mapper options and gate; later streams bring
+  // their own max_pending_keyframes to MayCameraProceed).
+  SlamJob(DaemonState* state, std::string map, std::string job_id, const SlamSplitOptions& split,
+          std::shared_ptr<TrajectoryRecord> trajectory);
   ~SlamJob();
 
   const std::string& map() const { return map_; }
-  const SlamMapperOptions& options() const { return options_; }
-  bool deterministic() const { return deterministic_; }
+  const SlamMapperOptions& options() const { return coordinator_->mapper_options(); }
+  bool deterministic() const { return coordinator_->gate().lock_step; }
   // Where the job's streams record their cameras and the job its keyframes (the web viewer's
   // view of the job); it outlives the job in the registry (SlamJobs::Trajectory).
   TrajectoryRecord& trajectory() const { return *trajectory_; }
 
   // Queues a keyframe (any thread) and schedules mapping.
   absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k);
-  // What a camera tracks against now (the newest version, keyframes accepted and refined).
-  SlamMapView View() const;
+  // What a camera tracks against now (the newest version with the store's number, keyframes
+  // accepted and refined).
+  SlamMapView View() const { return coordinator_->View(); }
+  // Whether a stream whose last frame made a keyframe (or needed a version) may track its
+  // next one (SlamCoordinator::MayCameraProceed with the stream's own bound).
+  bool MayCameraProceed(int max_pending_keyframes) const {
+    return coordinator_->MayCameraProceed(max_pending_keyframes);
+  }
   SlamJobStatus Status() const;
 
   // Stream membership (SlamJobs does the joining). A stream that leaves is still notified (it
@@ -89,18 +96,10 @@ class SlamJob : public std::enable_shared_from_this<SlamJob> {
 
  private:
   friend class SlamJobs;
-  struct QueuedKeyframe {
-    RgbdFrame frame;
-    SE3 pose;
-    PinholeIntrinsics intrinsics;
-  };
 
-  void ScheduleLocked();  // posts one mapping task if none is queued and there is work
+  void ScheduleLocked();  // posts one mapping task unless one is queued
+  // One coordinator step (starting the mapper with the worker's backend first).
   void RunStep(Backend* backend, bool cancelled);
-  // Steps the mapper once (creating it first); returns whether a new version went to the store.
-  // Draining: only integrates the keyframes already accepted, then publishes.
-  absl::Status StepMapper(Backend* backend, bool finishing, bool draining);
-  absl::Status PublishToStore();
   // Marks the job ended and releases the map's lease; the caller then removes it from the
   // registry without holding mutex_ (lock order: registry, then job).
   void FinishLocked(const absl::Status& status);
@@ -109,26 +108,19 @@ class SlamJob : public std::enable_shared_from_this<SlamJob> {
   DaemonState* const state_;
   const std::string map_;
   const std::string job_id_;
-  const SlamMapperOptions options_;
-  const bool deterministic_;
   const std::shared_ptr<TrajectoryRecord> trajectory_;
+  // The map's rules; its base is the store's map when the job started (the map to extend,
+  // when it has content) and its publisher the store. Stepped by the job's task only.
+  std::unique_ptr<SlamCoordinator> coordinator_;
 
-  // Stepped by the job's task only (one at a time).
-  std::unique_ptr<SlamMapper> mapper_;
-  int64_t published_mapper_version_ = 0;  // the mapper's version last given to the store
-  int integrated_at_publish_ = 0;
-  int keyframes_recorded_ = 0;  // keyframes integrated when trajectory_ last got their poses
+  int keyframes_recorded_ = 0;  // keyframes integrated when trajectory_ last got their poses (task)
 
   mutable std::mutex mutex_;  // guards what follows
   std::vector<std::shared_ptr<SlamJobListener>> members_;    // the streams on the job
   std::vector<std::shared_ptr<SlamJobListener>> listeners_;  // notified: members and leavers
-  std::vector<QueuedKeyframe> early_;  // keyframes added before the mapper exists
   DeviceWorker* worker_ = nullptr;     // bound at the first post
   bool scheduled_ = false;
-  bool has_work_ = false;              // the mapper's, after the last step
-  SlamJobStatus status_;
-  // The store's map when the job started, when it had content (the map to extend), else null.
-  std::shared_ptr<const PlenoxelMap> base_;
+  SlamJobStatus status_;  // the job's own fields (Status adds the coordinator's progress)
 };
 
 // The running SLAM jobs by map name (owned by the daemon, shared through DaemonState).
@@ -140,8 +132,8 @@ class SlamJobs {
   // while Integrate holds it). A stream joining a running job must leave the mapping options at
   // their defaults or give the same values (`mapping_set`: the stream set them explicitly).
   absl::StatusOr<std::shared_ptr<SlamJob>> Join(const std::string& map,
-                                                const SlamMapperOptions& options,
-                                                bool mapping_set, bool deterministic,
+                                                const SlamSplitOptions& options,
+                                                bool mapping_set,
                                                 std::shared_ptr<SlamJobListener> listener);
   // Jobs still running (for metrics and drain).
   std::vector<std::shared_ptr<SlamJob>> Running() const;

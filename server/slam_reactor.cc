@@ -28,11 +28,11 @@ pb::SlamState ToProto(SlamState state) {
 
 void MappingToProto(const SlamJobStatus& s, pb::SlamMapping* out) {
   out->set_job_id(s.job_id);
-  out->set_keyframes(static_cast<uint32_t>(s.keyframes));
-  out->set_keyframes_integrated(static_cast<uint32_t>(s.keyframes_integrated));
-  out->set_iterations(static_cast<uint32_t>(s.iterations));
-  out->set_map_version(s.map_version);
-  out->set_map_bytes(static_cast<uint64_t>(s.map_bytes));
+  out->set_keyframes(static_cast<uint32_t>(s.mapping.keyframes));
+  out->set_keyframes_integrated(static_cast<uint32_t>(s.mapping.keyframes_integrated));
+  out->set_iterations(static_cast<uint32_t>(s.mapping.mapping_iterations));
+  out->set_map_version(static_cast<uint64_t>(s.mapping.map_version));
+  out->set_map_bytes(static_cast<uint64_t>(s.mapping.map_bytes));
   out->set_streams(static_cast<uint32_t>(s.streams));
   out->set_finished(s.finished);
 }
@@ -149,16 +149,15 @@ absl::Status SlamReactor::HandleFirstMessage() {
   PLX_ASSIGN_OR_RETURN(
       const SlamOptions slam,
       SlamOptionsFromProto(o, info->voxel_size, state_->maps->max_map_bytes()));
-  tracker_options_ = SlamTrackerOptionsOf(slam);
+  const SlamSplitOptions split = SplitSlamOptions(slam);
+  tracker_options_ = split.tracker;
   if (initial_pose) tracker_options_.initial_pose = initial_pose;
   realtime_ = o.realtime();
-  deterministic_ = o.deterministic();
-  max_pending_keyframes_ = slam.max_pending_keyframes;
+  max_pending_keyframes_ = split.gate.max_pending_keyframes;
   const bool mapping_set =
       o.iterations_per_keyframe() > 0 || o.rays_per_iteration() > 0 || o.max_depth() > 0;
   listener_ = std::make_shared<SlamJobListener>([this] { OnJobChanged(); });
-  PLX_ASSIGN_OR_RETURN(job_, state_->slam_jobs->Join(map_name_, SlamMapperOptionsOf(slam),
-                                                     mapping_set, deterministic_, listener_));
+  PLX_ASSIGN_OR_RETURN(job_, state_->slam_jobs->Join(map_name_, split, mapping_set, listener_));
   state_->metrics->slam_streams++;
   camera_ = job_->trajectory().AddCamera();
   LogEvent("info", "slam_stream_joined",
@@ -205,11 +204,8 @@ bool SlamReactor::JobAllowsNextFrameLocked() {
   if (!wait_for_job_) return true;
   const SlamJobStatus s = job_->Status();
   if (!s.error.ok() || s.finished) return true;  // the task reports it
-  // The keyframe is integrated and published (lock-step: its iterations are spent too), or
-  // the stream may run that many keyframes ahead (max_pending_keyframes); the map must have a
-  // version either way.
-  const bool ready = s.pending_keyframes <= max_pending_keyframes_ &&
-                     job_->View().map != nullptr && (!deterministic_ || s.idle);
+  // The map's rule (SlamCoordinator::MayCameraProceed) with this stream's bound.
+  const bool ready = job_->MayCameraProceed(max_pending_keyframes_);
   if (ready) wait_for_job_ = false;
   return ready;
 }

@@ -68,9 +68,9 @@ class SlamReactor final : public StreamReactor<plenoxd::v1::SlamRequest, plenoxd
   std::deque<Pending> queue_;
   uint32_t dropped_ = 0;
   bool realtime_ = false;
-  bool deterministic_ = false;
-  int max_pending_keyframes_ = 0;  // SlamOptions.max_pending_keyframes
-  bool wait_for_job_ = false;  // the last frame became a keyframe, or the map has no version
+  int max_pending_keyframes_ = 0;  // this stream's SlamGateOptions (lock-step is the job's)
+  bool wait_for_job_ = false;  // the last frame became a keyframe, or the map has no version:
+                               // the next waits for SlamJob::MayCameraProceed
   bool left_job_ = false;
   bool done_sent_ = false;
   std::shared_ptr<SlamJob> job_;

@@ -53,6 +53,9 @@ struct SlamMapperProgress {
   int64_t map_bytes = 0;
   int64_t keyframe_bytes = 0;     // images and ray lists kept for mapping
   double last_publish_s = 0.0;    // how long the last publish took
+  // No keyframe waiting and the iteration budget spent, the last version published
+  // (SlamCoordinator::progress; the mapper's own progress leaves it false).
+  bool idle = false;
 };
 
 // Bytes a keyframe keeps for mapping: float RGB + float depth per pixel, and two 32-bit ray

@@ -48,8 +48,9 @@ SlamOptions SlamOptionsFor(float voxel_size, const TrackerOptions& tracker) {
 }
 
 absl::Status ValidateSlamOptions(const SlamOptions& o) {
-  PLX_RETURN_IF_ERROR(ValidateSlamTrackerOptions(SlamTrackerOptionsOf(o)));
-  PLX_RETURN_IF_ERROR(ValidateSlamMapperOptions(SlamMapperOptionsOf(o)));
+  const SlamSplitOptions split = SplitSlamOptions(o);
+  PLX_RETURN_IF_ERROR(ValidateSlamTrackerOptions(split.tracker));
+  PLX_RETURN_IF_ERROR(ValidateSlamMapperOptions(split.mapper));
   if (o.max_pending_keyframes < 0 || o.max_pending_keyframes > kMaxPendingKeyframes) {
     return absl::InvalidArgumentError(absl::StrCat("max_pending_keyframes must be in [0, ",
                                                    kMaxPendingKeyframes, "], got ",
@@ -67,34 +68,13 @@ absl::Status ValidateSlamOptions(const SlamOptions& o) {
   return absl::OkStatus();
 }
 
-SlamTrackerOptions SlamTrackerOptionsOf(const SlamOptions& o) {
-  SlamTrackerOptions t;
-  t.tracker = o.tracker;
-  t.keyframes = o.keyframes;
-  t.relocalisation_keyframes = o.relocalisation_keyframes;
-  t.relocalisation_radius_m = o.relocalisation_radius_m;
-  t.initial_pose = o.initial_pose;
-  // A pixel helps the bootstrap only if the tracker uses it and the mapper maps it.
-  t.bootstrap_max_depth =
-      std::min(o.tracker.params.max_depth, o.mapping.mapper.allocation.max_depth);
-  return t;
-}
-
-SlamMapperOptions SlamMapperOptionsOf(const SlamOptions& o) {
-  SlamMapperOptions m;
-  m.mapping = o.mapping;
-  m.refinement = o.refinement;
-  if (o.deterministic) {
-    // Lock-step mapping publishes only when the caller's frame waits for it, and clones every
-    // brick it needs: neither may depend on the clock, or runs would differ.
-    m.mapping.min_publish_interval_s = 1e9;
-    m.mapping.max_clones_per_iteration = 0;
-  }
-  return m;
-}
-
-SlamSession::SlamSession(const SlamOptions& options, Backend* tracking_backend)
-    : options_(options), tracker_(SlamTrackerOptionsOf(options), tracking_backend) {}
+SlamSession::SlamSession(const SlamOptions& options, Backend* tracking_backend,
+                         std::shared_ptr<const PlenoxelMap> base)
+    : options_(options),
+      split_(SplitSlamOptions(options)),
+      tracker_(split_.tracker, tracking_backend),
+      // The mapper numbers its versions itself; a base map is its version 1.
+      coordinator_(split_.mapper, split_.gate, base, base != nullptr ? 1 : 0) {}
 
 absl::StatusOr<std::unique_ptr<SlamSession>> SlamSession::Create(
     const SlamOptions& options, Backend* tracking_backend,
@@ -106,8 +86,9 @@ absl::StatusOr<std::unique_ptr<SlamSession>> SlamSession::Create(
   if (base != nullptr && base->grid.num_bricks() == 0) base = nullptr;  // nothing to extend
   // A session that extends a map starts lost: its first frame has to find itself in it (the
   // tracker sees the base as the map's first version).
-  std::unique_ptr<SlamSession> session(new SlamSession(options, tracking_backend));
-  PLX_RETURN_IF_ERROR(session->StartMapping(make_mapping_backend, std::move(base)));
+  std::unique_ptr<SlamSession> session(
+      new SlamSession(options, tracking_backend, std::move(base)));
+  PLX_RETURN_IF_ERROR(session->StartMapping(make_mapping_backend));
   return session;
 }
 
@@ -126,19 +107,15 @@ void SlamSession::NotifyChanged() {
   changed_.notify_all();
 }
 
-absl::Status SlamSession::StartMapping(const BackendFactory& make_backend,
-                                       std::shared_ptr<const PlenoxelMap> base) {
-  if (options_.deterministic) {
+absl::Status SlamSession::StartMapping(const BackendFactory& make_backend) {
+  if (split_.gate.lock_step) {
     PLX_ASSIGN_OR_RETURN(mapping_backend_, make_backend());
-    PLX_ASSIGN_OR_RETURN(mapper_, SlamMapper::Create(SlamMapperOptionsOf(options_),
-                                                     mapping_backend_.get(), std::move(base)));
-    return absl::OkStatus();
+    return coordinator_.StartMapper(mapping_backend_.get());
   }
   std::promise<absl::Status> started;
   std::future<absl::Status> ready = started.get_future();
-  mapping_thread_ = std::thread([this, make_backend, base, &started] {
-    MappingLoop(make_backend, base, &started);
-  });
+  mapping_thread_ =
+      std::thread([this, make_backend, &started] { MappingLoop(make_backend, &started); });
   absl::Status status = ready.get();
   if (!status.ok()) {
     mapping_thread_.join();
@@ -148,7 +125,6 @@ absl::Status SlamSession::StartMapping(const BackendFactory& make_backend,
 }
 
 void SlamSession::MappingLoop(const BackendFactory& make_backend,
-                              std::shared_ptr<const PlenoxelMap> base,
                               std::promise<absl::Status>* started) {
   // Lower this thread's priority before the backend starts its workers: they inherit it, so
   // on a shared CPU the tracker's loops run first and mapping takes the cycles left over.
@@ -156,29 +132,22 @@ void SlamSession::MappingLoop(const BackendFactory& make_backend,
   (void)LowerCurrentThreadPriority(options_.mapping_nice);
   {
     absl::StatusOr<std::unique_ptr<Backend>> backend = make_backend();
-    if (!backend.ok()) {
-      started->set_value(backend.status());
-      return;
+    absl::Status status = backend.status();
+    if (status.ok()) {
+      mapping_backend_ = *std::move(backend);
+      status = coordinator_.StartMapper(mapping_backend_.get());
     }
-    mapping_backend_ = *std::move(backend);
-    absl::StatusOr<std::unique_ptr<SlamMapper>> mapper =
-        SlamMapper::Create(SlamMapperOptionsOf(options_), mapping_backend_.get(), base);
-    if (!mapper.ok()) {
-      started->set_value(mapper.status());
-      return;
-    }
-    mapper_ = *std::move(mapper);
-    started->set_value(absl::OkStatus());  // `started` dies with Create's frame after this
+    started->set_value(status);  // `started` dies with Create's frame after this
+    if (!status.ok()) return;
   }
   uint64_t seen_wakeups = 0;
+  bool more = false;  // the last step left work
   absl::Status status;
   for (;;) {
     bool finishing = false;
     {
       std::unique_lock<std::mutex> lock(mutex_);
-      changed_.wait(lock, [&] {
-        return stop_ || finishing_ || wakeups_ != seen_wakeups || mapper_->has_work();
-      });
+      changed_.wait(lock, [&] { return stop_ || finishing_ || wakeups_ != seen_wakeups || more; });
       if (stop_) break;
       seen_wakeups = wakeups_;
       finishing = finishing_;
@@ -187,10 +156,9 @@ void SlamSession::MappingLoop(const BackendFactory& make_backend,
       status = RunMappingToEnd(true);
       break;
     }
-    if (!mapper_->has_work()) continue;
-    status = mapper_->Step().status();
-    // Out of work: the last iterations are published now, not when the next keyframe comes.
-    if (status.ok() && !mapper_->has_work()) status = mapper_->PublishIfChanged();
+    absl::StatusOr<SlamStepResult> step = coordinator_.Step(SlamStepMode::kMap);
+    status = step.status();
+    more = step.ok() && !step->out_of_work;
     NotifyChanged();
     if (!status.ok()) break;
   }
@@ -201,17 +169,16 @@ void SlamSession::MappingLoop(const BackendFactory& make_backend,
 }
 
 absl::Status SlamSession::RunMappingToEnd(bool finish) {
-  while (mapper_->has_work()) {
+  for (;;) {
     {
       std::lock_guard<std::mutex> lock(mutex_);
       if (stop_) return absl::OkStatus();
     }
-    PLX_RETURN_IF_ERROR(mapper_->Step(finish).status());
+    PLX_ASSIGN_OR_RETURN(const SlamStepResult step,
+                         coordinator_.Step(finish ? SlamStepMode::kFinish : SlamStepMode::kMap));
     NotifyChanged();
+    if (step.out_of_work) return absl::OkStatus();
   }
-  PLX_RETURN_IF_ERROR(mapper_->PublishIfChanged());
-  NotifyChanged();
-  return absl::OkStatus();
 }
 
 absl::Status SlamSession::MappingError() const {
@@ -223,28 +190,22 @@ absl::Status SlamSession::MappingError() const {
 
 absl::Status SlamSession::AddKeyframe(const RgbdFrame& frame, const SE3& pose,
                                       const PinholeIntrinsics& k) {
-  PLX_RETURN_IF_ERROR(mapper_->AddKeyframe(frame, pose, k));
+  PLX_RETURN_IF_ERROR(coordinator_.AddKeyframe(frame, pose, k));
   {
     std::lock_guard<std::mutex> lock(mutex_);
     ++wakeups_;
   }
   changed_.notify_all();
-  if (options_.deterministic) return RunMappingToEnd(false);
-  std::unique_lock<std::mutex> lock(mutex_);
-  changed_.wait(lock, [&] {
-    return mapper_->progress().pending_keyframes <= options_.max_pending_keyframes ||
-           mapping_done_ || !mapping_error_.ok();
-  });
-  return mapping_error_;
-}
-
-absl::Status SlamSession::WaitForFirstVersion() {
-  std::unique_lock<std::mutex> lock(mutex_);
-  changed_.wait(lock, [&] {
-    return mapper_->latest().version > 0 || mapping_done_ || !mapping_error_.ok();
-  });
-  if (!mapping_error_.ok()) return mapping_error_;
-  if (mapper_->latest().version == 0) {
+  if (split_.gate.lock_step) {
+    PLX_RETURN_IF_ERROR(RunMappingToEnd(false));
+  } else {
+    std::unique_lock<std::mutex> lock(mutex_);
+    changed_.wait(lock, [&] {
+      return coordinator_.MayCameraProceed() || mapping_done_ || !mapping_error_.ok();
+    });
+    if (!mapping_error_.ok()) return mapping_error_;
+  }
+  if (coordinator_.latest().map == nullptr) {
     return absl::InternalError("mapping stopped before the first map version");
   }
   return absl::OkStatus();
@@ -259,18 +220,9 @@ absl::StatusOr<SlamFrameResult> SlamSession::ProcessFrame(RgbdFrame frame,
   PLX_RETURN_IF_ERROR(MappingError());
   frame.ground_truth.reset();
   return CatchAllocationFailure("SLAM frame", [&]() -> absl::StatusOr<SlamFrameResult> {
-    const SlamMapVersion latest = mapper_->latest();
-    SlamMapView view;
-    view.map = latest.map;
-    view.version = latest.version;
-    view.accepted_keyframes = mapper_->accepted_keyframes();
-    view.keyframe_poses = mapper_->keyframe_poses();
-    view.mapping_behind = mapper_->progress().pending_keyframes > 0;
-    PLX_ASSIGN_OR_RETURN(SlamFrameResult out, tracker_.Track(frame, k, prior, view));
-    if (out.keyframe) {
-      PLX_RETURN_IF_ERROR(AddKeyframe(frame, out.pose, k));
-      if (view.map == nullptr) PLX_RETURN_IF_ERROR(WaitForFirstVersion());
-    }
+    PLX_ASSIGN_OR_RETURN(SlamFrameResult out,
+                         tracker_.Track(frame, k, prior, coordinator_.View()));
+    if (out.keyframe) PLX_RETURN_IF_ERROR(AddKeyframe(frame, out.pose, k));
     {
       std::lock_guard<std::mutex> lock(mutex_);
       counts_ = tracker_.counts();
@@ -283,7 +235,7 @@ absl::StatusOr<SlamFrameResult> SlamSession::ProcessFrame(RgbdFrame frame,
 absl::Status SlamSession::Finish() {
   if (finished_) return MappingError();
   finished_ = true;
-  if (options_.deterministic) return RunMappingToEnd(true);
+  if (split_.gate.lock_step) return RunMappingToEnd(true);
   {
     std::lock_guard<std::mutex> lock(mutex_);
     finishing_ = true;
@@ -295,13 +247,15 @@ absl::Status SlamSession::Finish() {
 }
 
 std::shared_ptr<const PlenoxelMap> SlamSession::latest_map() const {
-  return mapper_->latest().map;
+  return coordinator_.latest().map;
 }
 
-std::vector<StampedPose> SlamSession::keyframe_poses() const { return mapper_->keyframe_poses(); }
+std::vector<StampedPose> SlamSession::keyframe_poses() const {
+  return coordinator_.keyframe_poses();
+}
 
 SlamProgress SlamSession::progress() const {
-  const SlamMapperProgress m = mapper_->progress();
+  const SlamMapperProgress m = coordinator_.progress();
   SlamProgress p;
   p.keyframes = m.keyframes;
   p.keyframes_integrated = m.keyframes_integrated;

@@ -42,6 +42,7 @@
 #include "core/mapping/mapping_session.h"
 #include "core/slam/keyframe_policy.h"
 #include "core/slam/keyframe_refinement.h"
+#include "core/slam/slam_coordinator.h"
 #include "core/slam/slam_mapper.h"
 #include "core/slam/slam_tracker.h"
 #include "core/tracking/tracker.h"
@@ -93,11 +94,7 @@ SlamOptions SlamOptionsFor(float voxel_size, const TrackerOptions& tracker);
 // InvalidArgument naming the field.
 absl::Status ValidateSlamOptions(const SlamOptions& options);
 
-// The halves' options (every caller that splits tracking from mapping, e.g. the daemon, takes
-// them from the same SlamOptions). Deterministic mode's publishing and cloning rules are in
-// the mapper's options.
-SlamTrackerOptions SlamTrackerOptionsOf(const SlamOptions& options);
-SlamMapperOptions SlamMapperOptionsOf(const SlamOptions& options);
+// The halves' options: SplitSlamOptions (core/slam/slam_coordinator.h).
 
 struct SlamProgress {
   int frames = 0;
@@ -145,30 +142,29 @@ class SlamSession {
   SlamProgress progress() const;
 
  private:
-  SlamSession(const SlamOptions& options, Backend* tracking_backend);
+  SlamSession(const SlamOptions& options, Backend* tracking_backend,
+              std::shared_ptr<const PlenoxelMap> base);
 
-  absl::Status StartMapping(const BackendFactory& make_backend,
-                            std::shared_ptr<const PlenoxelMap> base);
-  void MappingLoop(const BackendFactory& make_backend, std::shared_ptr<const PlenoxelMap> base,
-                   std::promise<absl::Status>* started);
-  // Steps until the mapper has no work (or the session stops), then publishes (lock-step
-  // mode, Finish).
+  absl::Status StartMapping(const BackendFactory& make_backend);
+  // The mapping thread (concurrent mode): the coordinator's steps whenever there is work.
+  void MappingLoop(const BackendFactory& make_backend, std::promise<absl::Status>* started);
+  // Steps until the coordinator is out of work (or the session stops) (lock-step mode, Finish).
   absl::Status RunMappingToEnd(bool finish);
-  // Hands a keyframe to the mapper and waits as the mode says (lock-step: its mapping;
-  // concurrent: its integration, max_pending_keyframes).
+  // Hands a keyframe to the coordinator, maps it (lock-step) and waits until the camera may go
+  // on (SlamCoordinator::MayCameraProceed).
   absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k);
-  absl::Status WaitForFirstVersion();
   absl::Status MappingError() const;
   void NotifyChanged();
 
   const SlamOptions options_;
+  const SlamSplitOptions split_;
   SlamTracker tracker_;  // the caller's thread
   bool finished_ = false;
 
   // Created on the mapping thread (concurrent mode; its nice value applies to the backend's
-  // workers) or in Create (lock-step); stepped only by that thread.
+  // workers) or in Create (lock-step). Declared before the coordinator, whose mapper uses it.
   std::unique_ptr<Backend> mapping_backend_;
-  std::unique_ptr<SlamMapper> mapper_;
+  SlamCoordinator coordinator_;  // stepped by the mapping thread or in lock-step
   std::thread mapping_thread_;
 
   mutable std::mutex mutex_;  // guards what follows

@@ -78,7 +78,7 @@ struct SlamTrackerOptions {
   // Where the camera starts (world_T_camera); the first frame's prior wins, else the identity.
   std::optional<SE3> initial_pose;
   // Depth beyond this does not count towards the bootstrap minimum (BootstrapDepth): the
-  // nearer of the tracker's and the mapper's ranges (SlamTrackerOptionsOf).
+  // nearer of the tracker's and the mapper's ranges (SplitSlamOptions).
   float bootstrap_max_depth = 10.0f;
 };
 

@@ -73,13 +73,13 @@ TEST(SlamMultiCameraTest, TwoCamerasTrackInOneGrowingMap) {
   std::unique_ptr<Backend> mapping = MakeCpuBackend(1);
   const SlamOptions options = TestOptions();
   absl::StatusOr<std::unique_ptr<SlamMapper>> mapper =
-      SlamMapper::Create(SlamMapperOptionsOf(options), mapping.get());
+      SlamMapper::Create(SplitSlamOptions(options).mapper, mapping.get());
   ASSERT_TRUE(mapper.ok()) << mapper.status();
 
-  SlamTrackerOptions a_options = SlamTrackerOptionsOf(options);
+  SlamTrackerOptions a_options = SplitSlamOptions(options).tracker;
   a_options.initial_pose = *room->ground_truth(0);
   SlamTracker a(a_options, tracking.get());
-  SlamTrackerOptions b_options = SlamTrackerOptionsOf(options);
+  SlamTrackerOptions b_options = SplitSlamOptions(options).tracker;
   b_options.initial_pose = *room->ground_truth(40);
   // B joins a map that has versions: its first frame relocalises from its initial pose.
   SlamTracker b(b_options, tracking.get());
@@ -155,11 +155,11 @@ TEST(SlamMultiCameraTest, AWaitingCameraJoinsTheMapAnotherBootstrapped) {
   std::unique_ptr<Backend> backend = MakeCpuBackend(2);
   const SlamOptions options = TestOptions();
   absl::StatusOr<std::unique_ptr<SlamMapper>> mapper =
-      SlamMapper::Create(SlamMapperOptionsOf(options), backend.get());
+      SlamMapper::Create(SplitSlamOptions(options).mapper, backend.get());
   ASSERT_TRUE(mapper.ok()) << mapper.status();
-  SlamTrackerOptions a_options = SlamTrackerOptionsOf(options);
+  SlamTrackerOptions a_options = SplitSlamOptions(options).tracker;
   a_options.initial_pose = *room->ground_truth(2);
-  SlamTrackerOptions b_options = SlamTrackerOptionsOf(options);
+  SlamTrackerOptions b_options = SplitSlamOptions(options).tracker;
   b_options.initial_pose = *room->ground_truth(0);
   SlamTracker a(a_options, backend.get());
   SlamTracker b(b_options, backend.get());
@@ -193,7 +193,7 @@ TEST(SlamMultiCameraTest, TrackerRefusesAFrameBeforeTheFirstVersion) {
   std::unique_ptr<InMemoryDataset> room = testing::MakeSyntheticRoom(64, 48, 2);
   ASSERT_NE(room, nullptr);
   std::unique_ptr<Backend> backend = MakeCpuBackend(1);
-  SlamTracker tracker(SlamTrackerOptionsOf(TestOptions()), backend.get());
+  SlamTracker tracker(SplitSlamOptions(TestOptions()).tracker, backend.get());
   SlamMapView view;  // no version yet
   view.accepted_keyframes.push_back({0.0, SE3::Identity()});
   absl::StatusOr<SlamFrameResult> r =

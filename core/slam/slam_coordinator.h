@@ -1,0 +1,157 @@
+// The SLAM rules that join the tracking halves (SlamTracker, one per camera) to the map's one
+// mapping half (SlamMapper), written once for every driver: SlamSession (in-process, a mapping
+// thread or lock-step on the caller's thread) and the daemon (server/slam_job.h: worker tasks,
+// many cameras per map). The coordinator starts no thread and waits for nothing; its callers
+// supply the threads or tasks and the waiting (they re-check MayCameraProceed when Step or
+// AddKeyframe has changed something). It owns:
+//   - the split of one SlamOptions into the halves' options (SplitSlamOptions), with lock-step
+//     mapping's publishing and cloning rules as a named policy (ApplyLockStepMappingPolicy);
+//   - the mapper, created with the step-runner's backend (StartMapper), and the keyframes that
+//     arrive before it exists;
+//   - the gate: whether a camera whose last frame made a keyframe (or that needs a version)
+//     may track its next frame (MayCameraProceed);
+//   - the mapper's drive loop, one bounded Step at a time: step, publish once out of work, and
+//     the drain rule (integrate only the keyframes accepted, then publish) as a StepMode;
+//   - the map's one version counter: each published map gets the number its publisher gives it
+//     (the daemon's store) or the mapper's own, and the view a tracker reads pairs that number
+//     with that map (View).
+//
+// Threads: AddKeyframe, View, MayCameraProceed and the accessors from any thread (an internal
+// lock guards the coordinator's state; the mapper has its own); StartMapper and Step from one
+// step-runner at a time. The publisher is called by Step without the coordinator's lock.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/geometry/intrinsics.h"
+#include "core/geometry/rgbd_frame.h"
+#include "core/geometry/se3.h"
+#include "core/geometry/stamped_pose.h"
+#include "core/grid/plenoxel_map.h"
+#include "core/kernels/backend.h"
+#include "core/slam/slam_mapper.h"
+#include "core/slam/slam_tracker.h"
+
+namespace plx {
+
+struct SlamOptions;  // core/slam/slam_session.h
+
+// When a camera may go on after a keyframe (MayCameraProceed).
+struct SlamGateOptions {
+  // Lock-step: the next frame waits until mapping has spent the keyframe's iterations and
+  // published (deterministic mode: the results do not depend on timing).
+  bool lock_step = false;
+  // Otherwise: accepted keyframes still waiting for integration that a camera may run ahead by
+  // (SlamOptions::max_pending_keyframes).
+  int max_pending_keyframes = 0;
+};
+
+// One SlamOptions cut into what each part reads.
+struct SlamSplitOptions {
+  SlamTrackerOptions tracker;  // every camera's
+  SlamMapperOptions mapper;    // the map's (ApplyLockStepMappingPolicy applied when lock-step)
+  SlamGateOptions gate;
+};
+
+// Lock-step mapping publishes only when the camera's frame waits for it (out of work), and
+// clones every brick it needs: neither may depend on the clock, or runs would differ.
+void ApplyLockStepMappingPolicy(SlamMapperOptions* options);
+
+// The halves' options: the fields copied as they are, then (deterministic) the lock-step
+// policy above; the tracker's bootstrap counts depth both halves use.
+SlamSplitOptions SplitSlamOptions(const SlamOptions& options);
+
+// What one Step does.
+enum class SlamStepMode {
+  kMap,     // a step while there is work; publishes once out of work
+  kFinish,  // the same, and the last steps publish whatever is left (no more keyframes come)
+  kDrain,   // kFinish for the keyframes accepted only: integrates them, then publishes (the
+            // rest of the iteration budget is not spent)
+};
+
+struct SlamStepResult {
+  bool stepped = false;     // the mapper did a step
+  bool published = false;   // a new version is out (and given a number)
+  bool out_of_work = false; // nothing left for this mode until a keyframe comes
+};
+
+// Gives a newly published map its number (the daemon: the store's version); `new_keyframes`
+// were integrated since the last one it was given.
+using SlamPublisher = std::function<absl::StatusOr<int64_t>(
+    std::shared_ptr<const PlenoxelMap> map, int new_keyframes)>;
+
+class SlamCoordinator {
+ public:
+  // `base`: an existing map to extend (shared, never written) with its number
+  // (`base_version`), or null for a new map. `publisher` null: versions are the mapper's own
+  // numbers (1, 2, ...).
+  SlamCoordinator(const SlamMapperOptions& mapper_options, const SlamGateOptions& gate,
+                  std::shared_ptr<const PlenoxelMap> base = nullptr, int64_t base_version = 0,
+                  SlamPublisher publisher = nullptr);
+
+  SlamCoordinator(const SlamCoordinator&) = delete;
+  SlamCoordinator& operator=(const SlamCoordinator&) = delete;
+
+  const SlamMapperOptions& mapper_options() const { return mapper_options_; }
+  const SlamGateOptions& gate() const { return gate_; }
+
+  // Creates the mapper on `backend` (it must outlive the coordinator) and hands it the
+  // keyframes added before. Step-runner; once.
+  absl::Status StartMapper(Backend* backend);
+  bool mapper_started() const;
+
+  // Queues a keyframe (any thread); before StartMapper it waits in the coordinator.
+  absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k);
+
+  // One bounded step of `mode` (StartMapper first). Step-runner.
+  absl::StatusOr<SlamStepResult> Step(SlamStepMode mode);
+
+  // What a camera tracks against now: the newest numbered version, the keyframes as accepted
+  // and as refined, and whether mapping is behind.
+  SlamMapView View() const;
+
+  // Whether a camera waiting after a keyframe (or for a first version) may track its next
+  // frame: at most gate.max_pending_keyframes keyframes wait for integration, the map has a
+  // version, and in lock-step mapping is idle.
+  bool MayCameraProceed() const;
+  // The same with a camera's own bound (the daemon: each stream gives its own; lock-step is
+  // the map's).
+  bool MayCameraProceed(int max_pending_keyframes) const;
+
+  // Mapping's counters: keyframes include those waiting for the mapper, map_version is the
+  // map's number (as in View), idle says no keyframe waits and the budget is spent.
+  SlamMapperProgress progress() const;
+  SlamMapVersion latest() const;  // the newest version with its number (View's map)
+  std::vector<StampedPose> keyframe_poses() const;  // as refined so far, in order
+
+ private:
+  struct EarlyKeyframe {
+    RgbdFrame frame;
+    SE3 pose;
+    PinholeIntrinsics intrinsics;
+  };
+  bool IdleLocked() const;
+
+  const SlamMapperOptions mapper_options_;
+  const SlamGateOptions gate_;
+  const SlamPublisher publisher_;
+  std::shared_ptr<const PlenoxelMap> base_;
+
+  // Step-runner only.
+  int64_t handed_mapper_version_ = 0;  // the mapper's version last given a number
+  int integrated_at_publish_ = 0;
+
+  mutable std::mutex mutex_;  // guards what follows (before the mapper's own lock)
+  std::unique_ptr<SlamMapper> mapper_;  // set once by StartMapper
+  std::vector<EarlyKeyframe> early_;    // added before the mapper exists
+  SlamMapVersion published_;            // the newest map with the map's number for it
+  bool has_work_ = false;               // the mapper's, after the last step (or a keyframe)
+  SlamMapperProgress progress_;         // the mapper's after the last step, our numbering
+};
+
+}  // namespace plx

@@ -1,0 +1,215 @@
+// SlamCoordinator's rules on their own, driven by hand as a caller would: the options split,
+// keyframes before the mapper, the gate, the step modes (drain) and the view's numbering.
+#include "core/slam/slam_coordinator.h"
+
+#include <gtest/gtest.h>
+
+#include <memory>
+#include <vector>
+
+#include "core/cpu/cpu_backend.h"
+#include "core/slam/slam_session.h"
+#include "tests/synthetic_room.h"
+
+namespace plx {
+namespace {
+
+SlamOptions SmallOptions(bool deterministic) {
+  SlamOptions o = DefaultSlamOptions();
+  o.deterministic = deterministic;
+  o.tracker.rays = 512;
+  o.mapping.mapper = MapperOptionsForVoxelSize(0.02f);
+  o.mapping.mapper.window_keyframes = 5;
+  o.mapping.mapper.batch_size = 1024;
+  o.mapping.iterations_per_keyframe = 10;
+  o.refinement.window = 0;
+  return o;
+}
+
+class SlamCoordinatorTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    room_ = testing::MakeSyntheticRoom(80, 60, 20);
+    ASSERT_NE(room_, nullptr);
+    backend_ = MakeCpuBackend(1);
+  }
+  RgbdFrame Frame(int i) {
+    absl::StatusOr<RgbdFrame> f = room_->LoadFrame(i);
+    EXPECT_TRUE(f.ok()) << f.status();
+    return f.ok() ? *std::move(f) : RgbdFrame();
+  }
+  SE3 Pose(int i) { return *room_->ground_truth(i); }
+  const PinholeIntrinsics& K() { return room_->calibration().pinhole; }
+  void AddKeyframe(SlamCoordinator& c, int i) {
+    ASSERT_TRUE(c.AddKeyframe(Frame(i), Pose(i), K()).ok());
+  }
+  // Steps in `mode` until the coordinator is out of work; returns the steps taken.
+  int RunOut(SlamCoordinator& c, SlamStepMode mode) {
+    for (int steps = 1; steps < 1000; ++steps) {
+      absl::StatusOr<SlamStepResult> r = c.Step(mode);
+      EXPECT_TRUE(r.ok()) << r.status();
+      if (!r.ok() || r->out_of_work) return steps;
+    }
+    ADD_FAILURE() << "never out of work";
+    return 0;
+  }
+
+  std::unique_ptr<InMemoryDataset> room_;
+  std::unique_ptr<Backend> backend_;
+};
+
+TEST_F(SlamCoordinatorTest, SplitAppliesTheLockStepPolicyOnlyWhenDeterministic) {
+  SlamOptions o = SmallOptions(false);
+  o.max_pending_keyframes = 2;
+  o.mapping.min_publish_interval_s = 0.5;
+  o.mapping.max_clones_per_iteration = 7;
+  const SlamSplitOptions free = SplitSlamOptions(o);
+  EXPECT_EQ(free.mapper.mapping.min_publish_interval_s, 0.5);
+  EXPECT_EQ(free.mapper.mapping.max_clones_per_iteration, 7);
+  EXPECT_FALSE(free.gate.lock_step);
+  EXPECT_EQ(free.gate.max_pending_keyframes, 2);
+  EXPECT_EQ(free.tracker.tracker.rays, 512);
+
+  o.deterministic = true;
+  o.max_pending_keyframes = 0;
+  const SlamSplitOptions locked = SplitSlamOptions(o);
+  SlamMapperOptions expected = free.mapper;
+  ApplyLockStepMappingPolicy(&expected);
+  EXPECT_EQ(locked.mapper.mapping.min_publish_interval_s,
+            expected.mapping.min_publish_interval_s);
+  EXPECT_EQ(locked.mapper.mapping.max_clones_per_iteration, 0);
+  EXPECT_TRUE(locked.gate.lock_step);
+}
+
+TEST_F(SlamCoordinatorTest, KeyframesBeforeTheMapperAreSeenAndHandedOver) {
+  const SlamSplitOptions split = SplitSlamOptions(SmallOptions(true));
+  SlamCoordinator c(split.mapper, split.gate);
+  EXPECT_FALSE(c.mapper_started());
+  AddKeyframe(c, 0);
+  SlamMapView view = c.View();
+  EXPECT_EQ(view.map, nullptr);
+  EXPECT_EQ(view.version, 0);
+  ASSERT_EQ(view.accepted_keyframes.size(), 1u);
+  EXPECT_TRUE(view.mapping_behind);
+  EXPECT_FALSE(c.MayCameraProceed());  // no version yet
+  EXPECT_EQ(c.progress().pending_keyframes, 1);
+  EXPECT_FALSE(c.Step(SlamStepMode::kMap).ok());  // StartMapper first
+
+  ASSERT_TRUE(c.StartMapper(backend_.get()).ok());
+  EXPECT_TRUE(c.mapper_started());
+  RunOut(c, SlamStepMode::kMap);
+  view = c.View();
+  ASSERT_NE(view.map, nullptr);
+  EXPECT_GE(view.version, 1);
+  EXPECT_EQ(view.accepted_keyframes.size(), 1u);
+  EXPECT_EQ(view.keyframe_poses.size(), 1u);
+  EXPECT_FALSE(view.mapping_behind);
+  const SlamMapperProgress p = c.progress();
+  EXPECT_EQ(p.keyframes, 1);
+  EXPECT_EQ(p.keyframes_integrated, 1);
+  EXPECT_EQ(p.map_version, view.version);
+  EXPECT_TRUE(p.idle);
+  EXPECT_TRUE(c.MayCameraProceed());
+}
+
+TEST_F(SlamCoordinatorTest, LockStepGateWaitsUntilMappingIsIdle) {
+  const SlamSplitOptions split = SplitSlamOptions(SmallOptions(true));
+  SlamCoordinator c(split.mapper, split.gate);
+  ASSERT_TRUE(c.StartMapper(backend_.get()).ok());
+  AddKeyframe(c, 0);
+  RunOut(c, SlamStepMode::kMap);
+  ASSERT_TRUE(c.MayCameraProceed());
+  const int64_t version = c.View().version;
+  AddKeyframe(c, 5);
+  EXPECT_FALSE(c.MayCameraProceed());
+  // Integrated but the iterations not spent: still waiting in lock-step.
+  for (int i = 0; i < 1000 && c.progress().pending_keyframes > 0; ++i) {
+    ASSERT_TRUE(c.Step(SlamStepMode::kMap).ok());
+  }
+  ASSERT_EQ(c.progress().pending_keyframes, 0);
+  EXPECT_FALSE(c.progress().idle);
+  EXPECT_FALSE(c.MayCameraProceed());
+  RunOut(c, SlamStepMode::kMap);
+  EXPECT_TRUE(c.MayCameraProceed());
+  EXPECT_GT(c.View().version, version);
+}
+
+TEST_F(SlamCoordinatorTest, ConcurrentGateLetsACameraRunAheadByMaxPendingKeyframes) {
+  SlamOptions o = SmallOptions(false);
+  o.max_pending_keyframes = 1;
+  const SlamSplitOptions split = SplitSlamOptions(o);
+  SlamCoordinator c(split.mapper, split.gate);
+  ASSERT_TRUE(c.StartMapper(backend_.get()).ok());
+  AddKeyframe(c, 0);
+  EXPECT_FALSE(c.MayCameraProceed());  // one pending is allowed, but there is no version
+  RunOut(c, SlamStepMode::kMap);
+  AddKeyframe(c, 5);
+  EXPECT_TRUE(c.MayCameraProceed());   // one pending, a version out
+  AddKeyframe(c, 10);
+  EXPECT_FALSE(c.MayCameraProceed());  // two pending
+  for (int i = 0; i < 1000 && c.progress().pending_keyframes > 1; ++i) {
+    ASSERT_TRUE(c.Step(SlamStepMode::kMap).ok());
+  }
+  EXPECT_TRUE(c.MayCameraProceed());  // not idle: only lock-step waits for that
+}
+
+TEST_F(SlamCoordinatorTest, DrainIntegratesTheAcceptedKeyframesThenPublishesAndStops) {
+  const SlamSplitOptions split = SplitSlamOptions(SmallOptions(true));
+  SlamCoordinator c(split.mapper, split.gate);
+  ASSERT_TRUE(c.StartMapper(backend_.get()).ok());
+  AddKeyframe(c, 0);
+  RunOut(c, SlamStepMode::kMap);
+  const int iterations_mapped = c.progress().mapping_iterations;
+  const int64_t version = c.View().version;
+  AddKeyframe(c, 5);
+  AddKeyframe(c, 10);
+  RunOut(c, SlamStepMode::kDrain);
+  const SlamMapperProgress p = c.progress();
+  EXPECT_EQ(p.pending_keyframes, 0);
+  EXPECT_EQ(p.keyframes_integrated, 3);
+  // The two keyframes' iteration budget is not spent, and the map with them is out.
+  EXPECT_LT(p.mapping_iterations - iterations_mapped, 2 * 10);
+  EXPECT_FALSE(p.idle);
+  EXPECT_GT(c.View().version, version);
+  EXPECT_EQ(c.View().version, p.map_version);
+  // Out of work for the drain: a further step does nothing.
+  absl::StatusOr<SlamStepResult> again = c.Step(SlamStepMode::kDrain);
+  ASSERT_TRUE(again.ok());
+  EXPECT_FALSE(again->stepped);
+  EXPECT_FALSE(again->published);
+  EXPECT_TRUE(again->out_of_work);
+}
+
+TEST_F(SlamCoordinatorTest, ThePublisherNumbersTheVersionsTheViewShows) {
+  const SlamSplitOptions split = SplitSlamOptions(SmallOptions(true));
+  std::vector<int> new_keyframes;
+  int64_t next = 40;
+  SlamCoordinator c(split.mapper, split.gate, nullptr, 39,
+                    [&](std::shared_ptr<const PlenoxelMap> map,
+                        int keyframes) -> absl::StatusOr<int64_t> {
+                      EXPECT_NE(map, nullptr);
+                      new_keyframes.push_back(keyframes);
+                      return next++;
+                    });
+  EXPECT_EQ(c.View().version, 0);      // no map: no version to track against
+  EXPECT_EQ(c.progress().map_version, 39);  // the map's number all the same
+  ASSERT_TRUE(c.StartMapper(backend_.get()).ok());
+  AddKeyframe(c, 0);
+  RunOut(c, SlamStepMode::kMap);
+  EXPECT_GE(next, 41);
+  EXPECT_EQ(c.View().version, next - 1);  // the last number handed out
+  AddKeyframe(c, 5);
+  RunOut(c, SlamStepMode::kFinish);
+  EXPECT_EQ(c.View().version, next - 1);
+  EXPECT_EQ(c.latest().version, next - 1);
+  EXPECT_EQ(c.progress().map_version, next - 1);
+  // Each keyframe counted once, with the first version that has it.
+  ASSERT_FALSE(new_keyframes.empty());
+  EXPECT_EQ(new_keyframes.front(), 1);
+  int total = 0;
+  for (int n : new_keyframes) total += n;
+  EXPECT_EQ(total, 2);
+}
+
+}  // namespace
+}  // namespace plx
