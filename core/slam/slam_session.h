@@ -70,9 +70,9 @@ struct SlamOptions {
   // At most kMaxPendingKeyframes.
   int max_pending_keyframes = 0;
   // Concurrent mode: the mapping thread's nice increment (Linux; 0 = same priority as the
-  // tracker). Its backend's worker threads inherit it. 0 by default: on the synthetic room
-  // (320x240, 2 cores) nice 10 starved the optimisation and doubled the ATE (0.62 cm against
-  // 0.33 cm SE(3)); a latency-bound caller (the daemon) may trade some accuracy for it.
+  // tracker). Its backend's worker threads inherit it. 0 by default: on the synthetic room on
+  // 2 cores nice 10 starved the optimisation and about doubled the ATE (docs/BENCHMARKS.md,
+  // "Online SLAM"); a latency-bound caller (the daemon) may trade some accuracy for it.
   int mapping_nice = 0;
 
   // Keyframe poses tried besides the last good pose when relocalising.
