@@ -13,7 +13,7 @@
 #include "core/kernels/backend.h"
 #include "core/kernels/refresh_occupancy.h"
 #include "core/mapping/mapper.h"
-#include "server/proto_convert.h"
+#include "proto/map_codec.h"
 
 namespace plx::server {
 namespace {
