@@ -19,6 +19,8 @@ namespace {
 using ::testing::HasSubstr;
 using ::testing::StartsWith;
 
+std::string Message(const absl::Status& s) { return std::string(s.message()); }
+
 TEST(TrackCodecTest, DefaultMessageIsCoresGaussNewtonDefaults) {
   const absl::StatusOr<TrackerOptions> o = TrackerOptionsFromProto(pb::TrackOptions(), "options");
   ASSERT_TRUE(o.ok()) << o.status();
@@ -48,7 +50,7 @@ TEST(TrackCodecTest, UnknownModeIsRefusedNamingTheField) {
     const absl::StatusOr<TrackerOptions> o = TrackerOptionsFromProto(m, field);
     ASSERT_FALSE(o.ok());
     EXPECT_EQ(o.status().code(), absl::StatusCode::kInvalidArgument);
-    EXPECT_THAT(std::string(o.status().message()), StartsWith(std::string(field) + ".mode: unknown mode 99"));
+    EXPECT_THAT(Message(o.status()), StartsWith(std::string(field) + ".mode: unknown mode 99"));
   }
 }
 
@@ -58,7 +60,7 @@ TEST(TrackCodecTest, OptionsCoreRefusesAreRefusedNamingTheMessage) {
   const absl::StatusOr<TrackerOptions> o = TrackerOptionsFromProto(m, "options.tracking");
   ASSERT_FALSE(o.ok());
   EXPECT_EQ(o.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_THAT(std::string(o.status().message()), StartsWith("options.tracking: "));
+  EXPECT_THAT(Message(o.status()), StartsWith("options.tracking: "));
 }
 
 TEST(TrackCodecTest, EveryTrackingStateHasItsWireValue) {
@@ -105,8 +107,8 @@ TEST(IntegrateCodecTest, IterationsPastCoresCapAreRefused) {
       MappingSessionOptionsFromProto(m, kVoxel, kMaxMapBytes);
   ASSERT_FALSE(o.ok());
   EXPECT_EQ(o.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_THAT(std::string(o.status().message()), StartsWith("options.iterations_per_keyframe: at most "));
-  EXPECT_THAT(std::string(o.status().message()), HasSubstr(absl::StrCat(kMaxIterationsPerKeyframe)));
+  EXPECT_THAT(Message(o.status()), StartsWith("options.iterations_per_keyframe: at most "));
+  EXPECT_THAT(Message(o.status()), HasSubstr(absl::StrCat(kMaxIterationsPerKeyframe)));
 }
 
 TEST(IntegrateCodecTest, UnusableMaxDepthIsRefused) {
@@ -117,7 +119,7 @@ TEST(IntegrateCodecTest, UnusableMaxDepthIsRefused) {
         MappingSessionOptionsFromProto(m, kVoxel, kMaxMapBytes);
     ASSERT_FALSE(o.ok()) << depth;
     EXPECT_EQ(o.status().code(), absl::StatusCode::kInvalidArgument);
-    EXPECT_THAT(std::string(o.status().message()), StartsWith("options.max_depth: "));
+    EXPECT_THAT(Message(o.status()), StartsWith("options.max_depth: "));
   }
 }
 
@@ -126,7 +128,7 @@ TEST(IntegrateCodecTest, VoxelSizeOutsideCoresRangeIsRefused) {
     const absl::StatusOr<MappingSessionOptions> o = MappingSessionOptionsFromProto(
         pb::IntegrateOptions(), static_cast<float>(voxel), kMaxMapBytes);
     ASSERT_FALSE(o.ok()) << voxel;
-    EXPECT_THAT(std::string(o.status().message()), StartsWith("options: voxel size must be in [0.001, 1]"));
+    EXPECT_THAT(Message(o.status()), StartsWith("options: voxel size must be in [0.001, 1]"));
   }
   EXPECT_TRUE(MappingSessionOptionsFromProto(pb::IntegrateOptions(),
                                              static_cast<float>(kMinVoxelSize), kMaxMapBytes)
