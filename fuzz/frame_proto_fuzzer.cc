@@ -1,7 +1,7 @@
 // A Track/Integrate frame off the wire: the bytes are parsed as a plenoxd.v1.Frame (what gRPC
 // hands the reactors), checked on the "gRPC thread" (CheckFrame: intrinsics, pixel limit,
 // timestamp, encodings, raw byte counts, image headers, pose) and decoded as a device worker
-// does (DecodeCheckedFrame), all from server/proto_convert.h.
+// does (DecodeCheckedFrame), all from proto/frame_codec.h.
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -9,7 +9,7 @@
 
 #include "absl/status/statusor.h"
 #include "fuzz/fuzz_util.h"
-#include "server/proto_convert.h"
+#include "proto/frame_codec.h"
 
 namespace {
 
@@ -28,10 +28,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
 
   // Integrate requires a pose on every frame; Track takes one as an optional prior. The two
   // must agree on everything else.
-  const absl::StatusOr<plx::server::CheckedFrame> with_pose =
-      plx::server::CheckFrame(frame, "frame[0]", /*require_pose=*/true, kMaxFramePixels);
-  absl::StatusOr<plx::server::CheckedFrame> checked =
-      plx::server::CheckFrame(frame, "frame", /*require_pose=*/false, kMaxFramePixels);
+  const absl::StatusOr<plx::CheckedFrame> with_pose =
+      plx::CheckFrame(frame, "frame[0]", /*require_pose=*/true, kMaxFramePixels);
+  absl::StatusOr<plx::CheckedFrame> checked =
+      plx::CheckFrame(frame, "frame", /*require_pose=*/false, kMaxFramePixels);
   if (!checked.ok()) {
     PLX_FUZZ_CHECK(!with_pose.ok(), "require_pose accepted what the optional check refused");
     return 0;
@@ -45,8 +45,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const int w = checked->calibration.pinhole.width, h = checked->calibration.pinhole.height;
   PLX_FUZZ_CHECK(w > 0 && h > 0 && int64_t{w} * h <= kMaxFramePixels, "size passed unchecked");
 
-  const absl::StatusOr<plx::server::DecodedFrame> decoded =
-      plx::server::DecodeCheckedFrame(*std::move(checked));
+  const absl::StatusOr<plx::DecodedFrame> decoded =
+      plx::DecodeCheckedFrame(*std::move(checked));
   if (!decoded.ok()) return 0;
   const plx::RgbdFrame& f = decoded->frame;
   PLX_FUZZ_CHECK(f.color.width == w && f.color.height == h && f.color.channels == 3,

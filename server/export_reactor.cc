@@ -7,7 +7,8 @@
 #include "server/export_request.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
-#include "server/proto_convert.h"
+#include "proto/map_codec.h"
+#include "proto/wire.h"
 
 namespace plx::server {
 

@@ -8,6 +8,7 @@
 #include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
 #include "core/geometry/world_pose.h"
+#include "proto/integrate_codec.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
 
@@ -26,33 +27,10 @@ IntegrateReactor::IntegrateReactor(DaemonState* state, grpc::CallbackServerConte
 absl::Status IntegrateReactor::HandleFirstMessage() {
   absl::StatusOr<MapStatus> info = state_->maps->Info(map_name_);
   if (!info.ok()) return info.status();
-  const pb::IntegrateOptions& o = request_.options();
-  options_ = MappingSessionOptions();
-  options_.mapper = MapperOptionsForVoxelSize(info->voxel_size);
-  if (o.rays_per_iteration() > 0) {
-    options_.mapper.batch_size = static_cast<int>(o.rays_per_iteration());
-  }
-  if (o.iterations_per_keyframe() > 0) {
-    options_.iterations_per_keyframe = static_cast<int>(o.iterations_per_keyframe());
-  }
-  // Exactly 0 means the default; anything else must be a usable depth.
-  if (!(std::isfinite(o.max_depth()) && o.max_depth() >= 0)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.max_depth: must be finite and > 0 metres (0 = the default), got ", o.max_depth()));
-  }
   // --max-map-mb is checked before each keyframe's bricks are allocated, not only at publish.
-  options_.mapper.max_map_bytes = state_->maps->max_map_bytes();
-  if (o.max_depth() > 0) {
-    options_.mapper.allocation.max_depth = o.max_depth();
-    options_.mapper.fusion.max_depth = o.max_depth();
-  }
-  if (o.iterations_per_keyframe() > static_cast<uint32_t>(kMaxIterationsPerKeyframe)) {
-    return absl::InvalidArgumentError(absl::StrCat("options.iterations_per_keyframe: at most ",
-                                                   kMaxIterationsPerKeyframe));
-  }
-  if (absl::Status s = ValidateMappingSessionOptions(options_); !s.ok()) {
-    return absl::InvalidArgumentError(absl::StrCat("options: ", s.message()));
-  }
+  PLX_ASSIGN_OR_RETURN(options_,
+                       MappingSessionOptionsFromProto(request_.options(), info->voxel_size,
+                                                      state_->maps->max_map_bytes()));
   if (absl::Status s = state_->maps->BeginMapping(map_name_, MappingJobKind::kIntegrate); !s.ok()) return s;
   lease_ = true;
   job_id_ = state_->jobs->Create("integrate", map_name_);

@@ -19,7 +19,7 @@
 #include "core/mapping/mapping_session.h"
 #include "plenoxd/v1/plenoxd.grpc.pb.h"
 #include "server/daemon_state.h"
-#include "server/proto_convert.h"
+#include "proto/frame_codec.h"
 #include "server/stream_reactor.h"
 
 namespace plx::server {

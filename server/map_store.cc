@@ -12,7 +12,8 @@
 #include "core/formats/map_file.h"
 #include "core/kernels/backend.h"
 #include "core/kernels/refresh_occupancy.h"
-#include "server/proto_convert.h"
+#include "core/mapping/mapper.h"
+#include "proto/map_codec.h"
 
 namespace plx::server {
 namespace {
@@ -82,9 +83,9 @@ std::vector<std::string> MapStore::LoadAllFromDataDir() {
 
 absl::StatusOr<MapStatus> MapStore::Create(const std::string& name, float voxel_size) {
   PLX_RETURN_IF_ERROR(CheckMapName(name, "name"));
-  if (!(voxel_size >= 0.001f && voxel_size <= 1.0f)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("voxel_size: must be in [0.001, 1] metres, got ", voxel_size));
+  if (!VoxelSizeInRange(voxel_size)) {
+    return absl::InvalidArgumentError(absl::StrCat("voxel_size: must be in [", kMinVoxelSize, ", ",
+                                                   kMaxVoxelSize, "] metres, got ", voxel_size));
   }
   std::lock_guard<std::mutex> lock(mutex_);
   if (maps_.count(name)) {

@@ -9,6 +9,7 @@
 #include "core/common/status_macros.h"
 #include "core/geometry/world_pose.h"
 #include "core/slam/slam_session.h"
+#include "proto/track_codec.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
 
@@ -47,18 +48,8 @@ absl::Status CheckOptional(double value, const char* field) {
 // The stream's options on top of SLAM's defaults at the map's voxel size (core/slam).
 absl::StatusOr<SlamOptions> SlamOptionsFromProto(const pb::SlamOptions& o, float voxel_size,
                                                  int64_t max_map_bytes) {
-  const pb::TrackOptions& t = o.tracking();
-  if (!pb::TrackOptions::Mode_IsValid(t.mode())) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.tracking.mode: unknown mode ", t.mode(), " (UNSPECIFIED, GAUSS_NEWTON or ADAM)"));
-  }
-  TrackerOptions tracker = TrackerOptionsForMode(
-      t.mode() == pb::TrackOptions::MODE_ADAM ? TrackingMode::kAdam : TrackingMode::kGaussNewton);
-  if (t.rays() > 0) tracker.rays = static_cast<int>(t.rays());
-  if (t.iterations() > 0) tracker.iterations = static_cast<int>(t.iterations());
-  if (absl::Status s = Tracker::ValidateOptions(tracker); !s.ok()) {
-    return absl::InvalidArgumentError(absl::StrCat("options.tracking: ", s.message()));
-  }
+  PLX_ASSIGN_OR_RETURN(const TrackerOptions tracker,
+                       TrackerOptionsFromProto(o.tracking(), "options.tracking"));
   SlamOptions s = SlamOptionsFor(voxel_size, tracker);
   PLX_RETURN_IF_ERROR(CheckOptional(o.kf_translation_m(), "kf_translation_m"));
   PLX_RETURN_IF_ERROR(CheckOptional(o.kf_rotation_deg(), "kf_rotation_deg"));

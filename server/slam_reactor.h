@@ -25,7 +25,7 @@
 #include "core/slam/slam_tracker.h"
 #include "plenoxd/v1/plenoxd.grpc.pb.h"
 #include "server/daemon_state.h"
-#include "server/proto_convert.h"
+#include "proto/frame_codec.h"
 #include "server/slam_job.h"
 #include "server/stream_reactor.h"
 

@@ -24,7 +24,8 @@
 #include "server/daemon_state.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
-#include "server/proto_convert.h"
+#include "proto/frame_codec.h"
+#include "proto/map_codec.h"
 #include "server/stream_slot.h"
 
 namespace plx::server {

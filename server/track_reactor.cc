@@ -4,22 +4,11 @@
 #include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
 #include "core/geometry/world_pose.h"
+#include "proto/track_codec.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
 
 namespace plx::server {
-namespace {
-
-pb::TrackingState ToProto(TrackingState state) {
-  switch (state) {
-    case TrackingState::kOk: return pb::TRACKING_STATE_OK;
-    case TrackingState::kDegraded: return pb::TRACKING_STATE_DEGRADED;
-    case TrackingState::kLost: return pb::TRACKING_STATE_LOST;
-  }
-  return pb::TRACKING_STATE_UNSPECIFIED;
-}
-
-}  // namespace
 
 TrackReactor::TrackReactor(DaemonState* state, grpc::CallbackServerContext* context)
     : StreamReactor(state, context, "Track", "TrackRequest") {}
@@ -28,20 +17,7 @@ absl::Status TrackReactor::HandleFirstMessage() {
   absl::StatusOr<MapVersion> map = state_->maps->Latest(map_name_);
   if (!map.ok()) return map.status();
   map_ = *map;
-  const pb::TrackOptions& o = request_.options();
-  // proto3 enums are open: an unknown number arrives as itself and must not become the default.
-  if (!pb::TrackOptions::Mode_IsValid(o.mode())) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.mode: unknown mode ", o.mode(), " (UNSPECIFIED, GAUSS_NEWTON or ADAM)"));
-  }
-  options_ = TrackerOptionsForMode(o.mode() == pb::TrackOptions::MODE_ADAM
-                                      ? TrackingMode::kAdam
-                                      : TrackingMode::kGaussNewton);
-  if (o.rays() > 0) options_.rays = static_cast<int>(o.rays());
-  if (o.iterations() > 0) options_.iterations = static_cast<int>(o.iterations());
-  if (absl::Status s = Tracker::ValidateOptions(options_); !s.ok()) {
-    return absl::InvalidArgumentError(absl::StrCat("options: ", s.message()));
-  }
+  PLX_ASSIGN_OR_RETURN(options_, TrackerOptionsFromProto(request_.options(), "options"));
   return absl::OkStatus();
 }
 
@@ -129,7 +105,7 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
     }
     estimate.set_timestamp(frame.timestamp);
     PoseToProto(result.pose, estimate.mutable_pose());
-    estimate.set_state(ToProto(result.state));
+    estimate.set_state(TrackingStateToProto(result.state));
     estimate.set_reason(result.reason);
     estimate.set_valid_rays(static_cast<uint32_t>(result.valid_rays));
     estimate.set_map_version(map_.version);

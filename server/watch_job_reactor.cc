@@ -1,7 +1,7 @@
 #include "server/watch_job_reactor.h"
 
 #include "server/grpc_status.h"
-#include "server/proto_convert.h"
+#include "proto/wire.h"
 
 namespace plx::server {
 namespace {

@@ -18,6 +18,7 @@
 #include "core/common/status_macros.h"
 #include "core/formats/map_file.h"
 #include "core/kernels/refresh_occupancy.h"
+#include "core/mapping/mapping_session.h"
 
 namespace plx::cli {
 
@@ -288,7 +289,7 @@ void AddMapperFlags(FlagSet& flags) {
   flags.Add("time-budget", "S", "optimisation time limit in seconds (0 = none)", "0")
       .Add("iterations", "N",
            absl::StrCat("optimisation iteration limit (0 = none) [default: ",
-                        kIterationsPerKeyframe, " per keyframe]"),
+                        kDefaultIterationsPerKeyframe, " per keyframe]"),
            "");
   AddBatchAndMaxDepthFlags(flags);
   flags.Add("seed", "N", "random seed for ray sampling", "20200823")
@@ -298,7 +299,7 @@ void AddMapperFlags(FlagSet& flags) {
 
 void SetIterationBudget(const FlagSet& flags, int keyframes, MapperOptions* options) {
   if (!flags.IsSet("iterations")) {
-    options->max_iterations = std::max(1, kIterationsPerKeyframe * keyframes);
+    options->max_iterations = std::max(1, kDefaultIterationsPerKeyframe * keyframes);
   }
 }
 

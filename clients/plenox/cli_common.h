@@ -95,8 +95,8 @@ std::unique_ptr<RgbdDataset> OpenDatasetOrReport(const std::string& command, con
 absl::Status CheckOutputDirectory(const std::string& path);
 
 // --voxel-size, --time-budget, --iterations, --batch, --max-depth, --seed. Without
-// --iterations the budget is kIterationsPerKeyframe per keyframe.
-inline constexpr int kIterationsPerKeyframe = 50;
+// --iterations the budget is kDefaultIterationsPerKeyframe (core/mapping/mapping_session.h) per
+// keyframe.
 void AddMapperFlags(FlagSet& flags);
 // The iteration budget is set for `keyframes` keyframes; call again (or SetIterationBudget) once
 // the real count is known.

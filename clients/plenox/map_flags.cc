@@ -20,7 +20,7 @@ void AddVoxelSizeFlag(FlagSet& flags, const std::string& help) {
 }
 
 absl::StatusOr<double> VoxelSizeFromFlags(const FlagSet& flags) {
-  return flags.GetDouble("voxel-size", 0.001, 1.0);
+  return flags.GetDouble("voxel-size", kMinVoxelSize, kMaxVoxelSize);
 }
 
 void AddBatchAndMaxDepthFlags(FlagSet& flags) {

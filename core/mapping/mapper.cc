@@ -169,9 +169,9 @@ absl::StatusOr<std::shared_ptr<const PlenoxelMap>> Mapper::Publish() {
 }
 
 absl::Status Mapper::ValidateOptions(const MapperOptions& o) {
-  if (!(o.voxel_size >= 0.001f && o.voxel_size <= 1.0f)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("voxel size must be in [0.001, 1] m, got ", o.voxel_size));
+  if (!VoxelSizeInRange(o.voxel_size)) {
+    return absl::InvalidArgumentError(absl::StrCat("voxel size must be in [", kMinVoxelSize, ", ",
+                                                   kMaxVoxelSize, "] m, got ", o.voxel_size));
   }
   if (o.max_iterations < 0 || o.time_budget_s < 0) {
     return absl::InvalidArgumentError("iteration and time budgets must not be negative");

@@ -43,6 +43,15 @@
 
 namespace plx {
 
+// The voxel sizes a map may have, in metres: the engine, the daemon's CreateMap and the CLI's
+// --voxel-size all check this one range.
+inline constexpr double kMinVoxelSize = 0.001;
+inline constexpr double kMaxVoxelSize = 1.0;
+// False for NaN too.
+inline bool VoxelSizeInRange(double voxel_size) {
+  return voxel_size >= kMinVoxelSize && voxel_size <= kMaxVoxelSize;
+}
+
 struct MapperOptions {
   float voxel_size = 0.02f;  // metres
   AllocationOptions allocation;

@@ -25,12 +25,15 @@ namespace plx {
 
 // The most iterations a keyframe may earn; beyond it a typo, not a wish.
 inline constexpr int kMaxIterationsPerKeyframe = 100000;
+// Iterations each keyframe earns when nobody says otherwise (the daemon's Integrate and Slam
+// streams, the CLI's budget without --iterations).
+inline constexpr int kDefaultIterationsPerKeyframe = 50;
 
 struct MappingSessionOptions {
   // Voxel size, batch, learning rates and the allocation/fusion bands. The budget fields are
   // the session's: it grows max_iterations by iterations_per_keyframe per keyframe.
   MapperOptions mapper;
-  int iterations_per_keyframe = 50;
+  int iterations_per_keyframe = kDefaultIterationsPerKeyframe;
 
   // One Step is either one optimisation chunk, at most chunk_iterations iterations or
   // chunk_seconds (at least one iteration), or one slice of a keyframe's integration

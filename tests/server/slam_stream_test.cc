@@ -18,7 +18,7 @@
 #include "core/cpu/cpu_backend.h"
 #include "core/eval/trajectory_metrics.h"
 #include "core/slam/slam_session.h"
-#include "server/proto_convert.h"
+#include "proto/frame_codec.h"
 #include "tests/server/daemon_fixture.h"
 
 namespace plx::server::testing {

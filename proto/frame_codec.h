@@ -1,5 +1,7 @@
-// Wire <-> engine conversions. Every check on client input lives here and names the field it
-// rejects (e.g. "frame.intrinsics.fx"), so handlers only convert, call core and map the status.
+// plenoxd.v1 Frame and Intrinsics -> core's frames and calibrations. Every check on a client's
+// frame lives here and names the field it rejects (e.g. "frame.intrinsics.fx"), so handlers only
+// convert, call core and map the status. (Render responses: proto/render_codec.h; map names:
+// proto/map_codec.h; poses: proto/pose_codec.h.)
 #pragma once
 
 #include <cstdint>
@@ -10,15 +12,10 @@
 #include "core/geometry/intrinsics.h"
 #include "core/geometry/rgbd_frame.h"
 #include "core/geometry/se3.h"
-#include "core/render/render_view.h"
-#include "plenoxd/v1/plenoxd.pb.h"
 #include "proto/pose_codec.h"
+#include "proto/wire.h"
 
-namespace plx::server {
-
-namespace pb = ::plenoxd::v1;
-
-// Poses: PoseFromProto / PoseToProto (proto/pose_codec.h, shared with the CLI).
+namespace plx {
 
 // With require_depth_scale, depth_scale must be positive (incoming depth images).
 absl::StatusOr<CameraCalibration> IntrinsicsFromProto(const pb::Intrinsics& intrinsics,
@@ -56,11 +53,4 @@ absl::StatusOr<CheckedFrame> CheckFrame(pb::Frame frame, const std::string& fiel
 // good header is corrupt; RESOURCE_EXHAUSTED when memory runs out).
 absl::StatusOr<DecodedFrame> DecodeCheckedFrame(CheckedFrame checked);
 
-// Encodes a rendered view for a RenderResponse.
-absl::Status RenderedViewToProto(const RenderedView& view, pb::ColorEncoding color_encoding,
-                                 pb::DepthEncoding depth_encoding, pb::RenderResponse* out);
-
-// Valid map names: 1-64 characters of [A-Za-z0-9_.-], not starting with '.'.
-absl::Status CheckMapName(const std::string& name, const std::string& field);
-
-}  // namespace plx::server
+}  // namespace plx

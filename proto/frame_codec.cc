@@ -1,4 +1,4 @@
-#include "server/proto_convert.h"
+#include "proto/frame_codec.h"
 
 #include <cmath>
 #include <cstring>
@@ -10,7 +10,7 @@
 #include "core/io/image_header.h"
 #include "core/io/image_io.h"
 
-namespace plx::server {
+namespace plx {
 namespace {
 
 absl::Status Invalid(const std::string& field, const std::string& what) {
@@ -157,59 +157,4 @@ absl::StatusOr<DecodedFrame> DecodeCheckedFrame(CheckedFrame checked) {
       });
 }
 
-absl::Status RenderedViewToProto(const RenderedView& view, pb::ColorEncoding color_encoding,
-                                 pb::DepthEncoding depth_encoding, pb::RenderResponse* out) {
-  out->set_width(view.color.width);
-  out->set_height(view.color.height);
-  switch (color_encoding) {
-    case pb::COLOR_ENCODING_UNSPECIFIED:
-    case pb::COLOR_ENCODING_PNG: {
-      PLX_ASSIGN_OR_RETURN(*out->mutable_color(), EncodeColorImage(view.color, ".png"));
-      out->set_color_encoding(pb::COLOR_ENCODING_PNG);
-      break;
-    }
-    case pb::COLOR_ENCODING_JPEG: {
-      PLX_ASSIGN_OR_RETURN(*out->mutable_color(), EncodeColorImage(view.color, ".jpg"));
-      out->set_color_encoding(pb::COLOR_ENCODING_JPEG);
-      break;
-    }
-    case pb::COLOR_ENCODING_RAW_RGB8: {
-      *out->mutable_color() = ColorImageToRgb8Bytes(view.color);
-      out->set_color_encoding(pb::COLOR_ENCODING_RAW_RGB8);
-      break;
-    }
-    default:
-      return Invalid("color_encoding", "unknown encoding");
-  }
-  switch (depth_encoding) {
-    case pb::DEPTH_ENCODING_UNSPECIFIED:
-    case pb::DEPTH_ENCODING_PNG16: {
-      PLX_ASSIGN_OR_RETURN(*out->mutable_depth(), EncodeDepthImage(view.z_depth, 1000.0));
-      out->set_depth_encoding(pb::DEPTH_ENCODING_PNG16);
-      break;
-    }
-    case pb::DEPTH_ENCODING_RAW_U16: {
-      *out->mutable_depth() = DepthImageToU16Bytes(view.z_depth, 1000.0);
-      out->set_depth_encoding(pb::DEPTH_ENCODING_RAW_U16);
-      break;
-    }
-    default:
-      return Invalid("depth_encoding", "unknown encoding");
-  }
-  return absl::OkStatus();
-}
-
-absl::Status CheckMapName(const std::string& name, const std::string& field) {
-  if (name.empty() || name.size() > 64 || name[0] == '.') {
-    return Invalid(field, absl::StrCat("map names are 1-64 characters of [A-Za-z0-9_.-] not "
-                                       "starting with '.', got \"", name, "\""));
-  }
-  for (char c : name) {
-    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '.' || c == '-')) {
-      return Invalid(field, absl::StrCat("map names use [A-Za-z0-9_.-] only, got \"", name, "\""));
-    }
-  }
-  return absl::OkStatus();
-}
-
-}  // namespace plx::server
+}  // namespace plx
