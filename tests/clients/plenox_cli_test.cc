@@ -18,6 +18,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "tests/clients/cli_runner.h"
+#include "tests/clients/depthless_dataset.h"
 #include "tests/clients/mesh_output.h"
 #include "tests/test_util.h"
 
@@ -26,6 +27,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using plx::testing::CommandResult;
+using plx::testing::CopyWithoutDepthAtStart;
 using plx::testing::FlatJson;
 using plx::testing::JsonNumber;
 using plx::testing::LastLine;
@@ -766,17 +768,7 @@ TEST_F(PlenoxEndToEndTest, SlamWaitsForAFrameWithDepthToStartTheMap) {
   constexpr int kRun = 12;
   ScopedTempDir work("plenox_cli_slam_waiting");
   const std::string copy = work.path() + "/late_depth";
-  fs::copy(*dataset_, copy, fs::copy_options::recursive);
-  const auto associations = ReadRows(copy + "/associations.txt");
-  ASSERT_GT(associations.size(), static_cast<size_t>(kEmpty));
-  for (int i = 0; i < kEmpty; ++i) {
-    ASSERT_EQ(associations[i].size(), 4u);
-    const std::string path = copy + "/" + associations[i][3];
-    cv::Mat depth = cv::imread(path, cv::IMREAD_UNCHANGED);
-    ASSERT_FALSE(depth.empty()) << path;
-    depth.setTo(0);
-    ASSERT_TRUE(cv::imwrite(path, depth));
-  }
+  ASSERT_EQ(CopyWithoutDepthAtStart(*dataset_, copy, kEmpty), "");
   const std::string trajectory = work.path() + "/slam.txt";
   const CommandResult r = RunPlenox(
       {"slam", "--dataset", copy, "--out", trajectory, "--deterministic", "--voxel-size", "0.03",

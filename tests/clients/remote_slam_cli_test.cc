@@ -19,6 +19,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "tests/clients/cli_runner.h"
+#include "tests/clients/depthless_dataset.h"
 #include "tests/clients/remote_daemon.h"
 #include "tests/test_util.h"
 
@@ -27,6 +28,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using plx::testing::CommandResult;
+using plx::testing::CopyWithoutDepthAtStart;
 using plx::testing::FlatJson;
 using plx::testing::JsonNumber;
 using plx::testing::LastLineJson;
@@ -444,17 +446,7 @@ TEST_F(RemoteSlamCliTest, FramesWithoutDepthWaitForOneThatStartsTheMap) {
   constexpr int kEmpty = 3;
   ScopedTempDir work("plenox_remote_slam_waiting");
   const std::string copy = work / "late_depth";
-  fs::copy(*dataset_, copy, fs::copy_options::recursive);
-  const auto associations = ReadRows(copy + "/associations.txt");
-  ASSERT_GT(associations.size(), static_cast<size_t>(kEmpty));
-  for (int i = 0; i < kEmpty; ++i) {
-    ASSERT_EQ(associations[i].size(), 4u);
-    const std::string path = copy + "/" + associations[i][3];
-    cv::Mat depth = cv::imread(path, cv::IMREAD_UNCHANGED);
-    ASSERT_FALSE(depth.empty()) << path;
-    depth.setTo(0);
-    ASSERT_TRUE(cv::imwrite(path, depth));
-  }
+  ASSERT_EQ(CopyWithoutDepthAtStart(*dataset_, copy, kEmpty), "");
   const CommandResult r =
       Remote({"slam", "--dataset", copy, "--name", "late_depth", "--out", work / "t.txt",
               "--deterministic", "--voxel-size", kVoxelSize, "--max-frames", "10", "--json"});
