@@ -347,7 +347,11 @@ TEST(DrainTest, HealthNewCallsOpenStreamsAndSaving) {
     stream->Write(r);
     stream->WritesDone();
     const grpc::Status s = ReadToEnd<pb::PoseEstimate>(stream);
-    EXPECT_EQ(s.error_code(), grpc::StatusCode::UNAVAILABLE) << Describe(s);
+    // gRPC's own shutdown may cancel a stream it accepted before the daemon's handler saw it
+    // (seen on a loaded machine: CANCELLED without a message); either way it is not served.
+    EXPECT_TRUE(s.error_code() == grpc::StatusCode::UNAVAILABLE ||
+                (s.error_code() == grpc::StatusCode::CANCELLED && s.error_message() == "CANCELLED"))
+        << Describe(s);
   }
   grpc::Status health_status;
   EXPECT_NE(HealthCheck(*d.health, &health_status), kServing);

@@ -681,7 +681,9 @@ TEST(SlamStreamTest, DrainMidStreamSavesEveryKeyframeAndARestartExtendsTheMap) {
     auto stream = d.stub->Slam(&context);
     pb::SlamRequest first;
     first.set_map("drained");
-    *first.mutable_options() = SmallSlamOptions(false);
+    // In lock-step, so the keyframes are the same every run however busy the machine is (the
+    // drain still cuts the mapper's optimisation at a moment that depends on timing).
+    *first.mutable_options() = SmallSlamOptions(true);
     *first.mutable_initial_pose() = ToProto(GroundTruth(0));
     ASSERT_TRUE(stream->Write(first));
     // Half the frames, each answered before the next is sent.
@@ -694,15 +696,15 @@ TEST(SlamStreamTest, DrainMidStreamSavesEveryKeyframeAndARestartExtendsTheMap) {
       keyframes_seen += update.keyframe();
       ++processed;
     }
-    // SIGTERM's path while the camera keeps streaming: no frame after it is processed.
+    // SIGTERM's path while the camera still sends: no frame after it is processed. The frame
+    // carries the half-close: a client that keeps writing while the daemon closes its
+    // connection has its unread bytes answered by a TCP reset, which can take the stream's
+    // status (and done message) with it (UNAVAILABLE; docs/LIMITS.md, "Stopping").
     std::thread drain([&] { EXPECT_TRUE(d.daemon->Drain(absl::Seconds(20)).ok()); });
     ASSERT_TRUE(WaitFor([&] { return HealthCheck(*d.health) != kServing; }));
-    for (int i = 20; i < kFrames; ++i) {
-      pb::SlamRequest request;
-      *request.mutable_frame() = EncodeFrame(i, false);
-      if (!stream->Write(request)) break;
-    }
-    stream->WritesDone();
+    pb::SlamRequest late;
+    *late.mutable_frame() = EncodeFrame(20, false);
+    stream->Write(late, grpc::WriteOptions().set_last_message());
     std::optional<pb::SlamUpdate> done;
     while (stream->Read(&update)) {
       if (update.done()) {
