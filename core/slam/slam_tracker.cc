@@ -63,7 +63,50 @@ absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& o) {
   if (o.initial_pose && !o.initial_pose->IsFinite()) {
     return absl::InvalidArgumentError("initial pose is not finite");
   }
+  if (o.odometry) {
+    PLX_RETURN_IF_ERROR(ValidateOdometryPyramidOptions(o.odometry_pyramid));
+    PLX_RETURN_IF_ERROR(ValidateOdometryOptions(o.odometry_options));
+  }
   return absl::OkStatus();
+}
+
+absl::StatusOr<OdometryPyramid> SlamTracker::PyramidOf(const RgbdFrame& frame,
+                                                       const PinholeIntrinsics& k) const {
+  if (!options_.odometry) return OdometryPyramid();
+  return BuildOdometryPyramid(frame, k, options_.odometry_pyramid);
+}
+
+absl::StatusOr<std::optional<OdometryPose>> SlamTracker::RunOdometry(
+    const OdometryPyramid& pyramid, double timestamp, const std::optional<SE3>& prior,
+    OdometryResult* result) const {
+  if (!options_.odometry || !previous_ || !previous_->pose) return std::optional<OdometryPose>();
+  const SE3& previous_pose = *previous_->pose;
+  // The starting guess: the client's prior, else the last motion scaled to this frame's gap
+  // (none after a gap of over a second, or out of order).
+  SE3 guess = SE3::Identity();
+  const double dt = timestamp - previous_->timestamp;
+  if (prior) {
+    guess = previous_pose.Inverse() * *prior;
+  } else if (last_motion_ && last_motion_dt_ > 0.0 && dt > 0.0 && dt <= 1.0) {
+    guess = SE3::Exp(last_motion_->Log() * (dt / last_motion_dt_));
+  }
+  PLX_ASSIGN_OR_RETURN(*result,
+                       EstimateOdometry(previous_->pyramid, pyramid, guess,
+                                        options_.odometry_options));
+  return std::optional<OdometryPose>(
+      OdometryPose{previous_pose * result->reference_T_current, result->ok, result->reason});
+}
+
+void SlamTracker::Remember(OdometryPyramid pyramid, const std::optional<SE3>& pose,
+                           double timestamp) {
+  if (!options_.odometry) return;
+  if (pose && previous_ && previous_->pose && timestamp > previous_->timestamp) {
+    last_motion_ = previous_->pose->Inverse() * *pose;
+    last_motion_dt_ = timestamp - previous_->timestamp;
+  } else {
+    last_motion_.reset();
+  }
+  previous_ = PreviousFrame{std::move(pyramid), pose, timestamp};
 }
 
 SlamTracker::SlamTracker(const SlamTrackerOptions& options, Backend* backend)
@@ -137,7 +180,7 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::Relocalise(
 }
 
 SlamFrameResult SlamTracker::Bootstrap(const RgbdFrame& frame, const std::optional<SE3>& prior,
-                                       SlamFrameResult out) {
+                                       OdometryPyramid pyramid, SlamFrameResult out) {
   ++counts_.frames;
   const SE3 pose = prior.value_or(options_.initial_pose.value_or(SE3::Identity()));
   out.pose = pose;
@@ -153,14 +196,18 @@ SlamFrameResult SlamTracker::Bootstrap(const RgbdFrame& frame, const std::option
         "needed",
         depth.valid, frame.depth.num_pixels(), options_.bootstrap_max_depth, depth.needed);
     ++counts_.waiting;
+    previous_.reset();
+    last_motion_.reset();
     return out;
   }
+  Remember(std::move(pyramid), pose, frame.timestamp);
   // Keyframe 0: it builds the first version.
   started_ = true;
   tracker_.Reset(pose, frame.timestamp);
   last_good_pose_ = pose;
   out.state = SlamState::kOk;
   out.reason = "first keyframe";
+  out.source = PoseSource::kMap;
   out.keyframe = true;
   out.keyframes += 1;
   out.tracking.state = TrackingState::kOk;
@@ -178,12 +225,13 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   out.timestamp = frame.timestamp;
   out.keyframes = static_cast<int>(view.accepted_keyframes.size());
   out.map_version = view.version;
-  if (BootstrapCandidate(view)) return Bootstrap(frame, prior, std::move(out));
-  if (view.map == nullptr) {
+  if (!BootstrapCandidate(view) && view.map == nullptr) {
     // Checked before anything changes, so the caller can hand the same frame in again later.
     return absl::FailedPreconditionError(
         "the map has no published version yet: its first keyframe is still being integrated");
   }
+  PLX_ASSIGN_OR_RETURN(OdometryPyramid pyramid, PyramidOf(frame, k));
+  if (BootstrapCandidate(view)) return Bootstrap(frame, prior, std::move(pyramid), std::move(out));
   ++counts_.frames;
   if (!started_) {
     // The camera joins a map it did not bootstrap (one with content, or another camera's
@@ -197,11 +245,13 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   tracked_map_ = view.map;
   tracker_.set_map(tracked_map_.get());
   std::optional<TrackingResult> result;
+  bool may_be_keyframe = false;
   if (lost_) {
     PLX_ASSIGN_OR_RETURN(result, Relocalise(frame, k, prior, view));
     if (result) {
       tracker_.Reset(result->pose, frame.timestamp);
       out.state = SlamState::kRelocalised;
+      out.source = PoseSource::kMap;
       out.reason = "relocalised";
       lost_ = false;
     } else {
@@ -214,20 +264,40 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       out.state = SlamState::kLost;
       out.reason = result->reason;
     }
-  } else {
+  } else if (!options_.odometry) {
     PLX_ASSIGN_OR_RETURN(TrackingResult tracked, tracker_.Track(frame, k, prior));
     out.state = FromTracking(tracked.state);
+    out.source = out.state == SlamState::kLost ? PoseSource::kPrediction : PoseSource::kMap;
     out.reason = tracked.reason;
+    may_be_keyframe = out.state == SlamState::kOk;
     result = std::move(tracked);
+  } else {
+    // The odometry's pose starts the map tracker (the prior's place when there is none), then
+    // the two are fused (core/slam/pose_fusion.h).
+    PLX_ASSIGN_OR_RETURN(const std::optional<OdometryPose> odometry,
+                         RunOdometry(pyramid, frame.timestamp, prior, &out.odometry));
+    const std::optional<SE3> start = odometry && odometry->ok ? odometry->pose : prior;
+    PLX_ASSIGN_OR_RETURN(TrackingResult tracked, tracker_.Track(frame, k, start));
+    const FusedPose fused = FusePoses(tracked, odometry, options_.fusion);
+    // The map tracker's motion model follows the pose given out when it is not its own.
+    if (fused.source == PoseSource::kOdometry) tracker_.Reset(fused.pose, frame.timestamp);
+    out.state = fused.state;
+    out.source = fused.source;
+    out.reason = fused.reason;
+    may_be_keyframe = fused.may_be_keyframe;
+    result = std::move(tracked);
+    result->pose = fused.pose;
   }
   out.tracking = *result;
   out.pose = result->pose;
   if (out.state == SlamState::kLost) {
     lost_ = true;
+    Remember(std::move(pyramid), std::nullopt, frame.timestamp);
   } else {
     last_good_pose_ = out.pose;
+    Remember(std::move(pyramid), out.pose, frame.timestamp);
   }
-  if (out.state == SlamState::kOk) {
+  if (may_be_keyframe) {
     // While keyframes wait for mapping, the part of the view the map does not render yet is
     // mostly what they will fill in: counting it again would take a keyframe per frame exactly
     // when mapping is behind, and feed the lag it comes from.

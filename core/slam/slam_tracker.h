@@ -32,16 +32,15 @@
 #include "core/geometry/stamped_pose.h"
 #include "core/grid/plenoxel_map.h"
 #include "core/kernels/backend.h"
+#include "core/odometry/odometry_pyramid.h"
+#include "core/odometry/rgbd_odometry.h"
 #include "core/slam/keyframe_policy.h"
+#include "core/slam/pose_fusion.h"
+#include "core/slam/slam_state.h"
 #include "core/tracking/tracker.h"
 
 namespace plx {
 
-// kWaiting: no map yet and the frame has too little valid depth to start one (BootstrapDepth);
-// its pose is the initial pose, it is never a keyframe. Appended last: the daemon's metrics and
-// proto enum follow this order.
-enum class SlamState { kOk, kDegraded, kLost, kRelocalised, kWaiting };
-const char* SlamStateName(SlamState state);
 
 // The least valid depth a frame needs to bootstrap a map: pixels with depth in (0, max_depth]
 // (the tracker's and the mapper's range), at least kSlamBootstrapMinDepthFraction of the frame
@@ -80,6 +79,13 @@ struct SlamTrackerOptions {
   // Depth beyond this does not count towards the bootstrap minimum (BootstrapDepth): the
   // nearer of the tracker's and the mapper's ranges (SplitSlamOptions).
   float bootstrap_max_depth = 10.0f;
+  // The map-free odometry (core/odometry/rgbd_odometry.h) gives the map tracker its start and
+  // carries the pose where the map cannot (core/slam/pose_fusion.h). Off: the map tracker
+  // alone from the constant-velocity prediction (the behaviour before the odometry existed).
+  bool odometry = true;
+  OdometryPyramidOptions odometry_pyramid;
+  OdometryOptions odometry_options;
+  PoseFusionOptions fusion;
 };
 
 absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& options);
@@ -100,11 +106,13 @@ struct SlamFrameResult {
   double timestamp = 0.0;
   SE3 pose;       // world_T_camera; for LOST frames the prediction
   SlamState state = SlamState::kLost;
+  PoseSource source = PoseSource::kPrediction;  // which estimate `pose` is
   std::string reason;  // why DEGRADED / LOST, how it relocalised, or what made a keyframe
   bool keyframe = false;        // the caller hands this frame to the mapper
   int keyframes = 0;            // keyframes accepted so far, this one included
   int64_t map_version = 0;      // the published version the frame was tracked against
-  TrackingResult tracking;      // rays, iterations, residual of the accepted estimate
+  TrackingResult tracking;      // the map tracker's rays, iterations, residual and state
+  OdometryResult odometry;      // the odometry's (points 0: not run)
   double milliseconds = 0.0;    // tracking time (SlamSession: the whole ProcessFrame)
 };
 
@@ -151,14 +159,37 @@ class SlamTracker {
   }
   // A bootstrap candidate: keyframe 0, or WAITING without enough depth.
   SlamFrameResult Bootstrap(const RgbdFrame& frame, const std::optional<SE3>& prior,
-                            SlamFrameResult out);
+                            OdometryPyramid pyramid, SlamFrameResult out);
   absl::StatusOr<std::optional<TrackingResult>> Relocalise(const RgbdFrame& frame,
                                                             const PinholeIntrinsics& k,
                                                             const std::optional<SE3>& prior,
                                                             const SlamMapView& view);
 
+  // The frame's pyramid when the odometry is on (else empty).
+  absl::StatusOr<OdometryPyramid> PyramidOf(const RgbdFrame& frame,
+                                            const PinholeIntrinsics& k) const;
+  // The odometry's pose for `frame` against the previous frame, when that one has a pose.
+  absl::StatusOr<std::optional<OdometryPose>> RunOdometry(const OdometryPyramid& pyramid,
+                                                           double timestamp,
+                                                           const std::optional<SE3>& prior,
+                                                           OdometryResult* result) const;
+  // Keeps `pyramid` as the next frame's reference, at `pose` (none: the frame was LOST).
+  void Remember(OdometryPyramid pyramid, const std::optional<SE3>& pose, double timestamp);
+
+  // The previous frame, as the odometry's reference.
+  struct PreviousFrame {
+    OdometryPyramid pyramid;
+    std::optional<SE3> pose;  // none when it was LOST
+    double timestamp = 0.0;
+  };
+
   const SlamTrackerOptions options_;
   Backend* const backend_;
+  std::optional<PreviousFrame> previous_;
+  // previous-but-one_T_previous and the time between them: the odometry's constant-velocity
+  // starting guess.
+  std::optional<SE3> last_motion_;
+  double last_motion_dt_ = 0.0;
   Tracker tracker_;
   std::shared_ptr<const PlenoxelMap> tracked_map_;  // keeps the tracker's version alive
   bool started_ = false;  // bootstrapped the map or tracked a frame in it

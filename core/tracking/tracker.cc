@@ -226,23 +226,29 @@ void Tracker::Classify(const SE3& predicted, const TrackingSums& last,
   const SE3 moved = predicted.Inverse() * result->pose;
   const double translation = moved.translation().norm();
   const double rotation = RotationAngleBetween(predicted, result->pose);
+  result->cause = TrackingCause::kNone;
   if (valid_fraction < options_.lost_valid_fraction) {
     result->state = TrackingState::kLost;
+    result->cause = TrackingCause::kFewValidRays;
     result->reason = absl::StrFormat("too few valid rays: %d of %d hit the map", result->valid_rays,
                                      result->rays);
   } else if (!result->pose.IsFinite() || translation > options_.lost_translation ||
              rotation > options_.lost_rotation) {
     result->state = TrackingState::kLost;
+    result->cause = TrackingCause::kDiverged;
     result->reason = absl::StrFormat("diverged: %.2f m / %.1f deg from the prediction",
                                      translation, rotation * 180.0 / M_PI);
   } else if (result->residual_rms > options_.lost_rms) {
     result->state = TrackingState::kLost;
+    result->cause = TrackingCause::kHighResidual;
     result->reason = absl::StrFormat("residual too high (RMS %.2f)", result->residual_rms);
   } else if (valid_fraction < options_.degraded_valid_fraction) {
     result->state = TrackingState::kDegraded;
+    result->cause = TrackingCause::kFewValidRays;
     result->reason = absl::StrFormat("few valid rays: %d of %d", result->valid_rays, result->rays);
   } else if (result->residual_rms > options_.degraded_rms) {
     result->state = TrackingState::kDegraded;
+    result->cause = TrackingCause::kHighResidual;
     result->reason = absl::StrFormat("high residual (RMS %.2f)", result->residual_rms);
   } else {
     result->state = TrackingState::kOk;

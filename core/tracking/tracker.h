@@ -22,6 +22,11 @@ namespace plx {
 enum class TrackingState { kOk, kDegraded, kLost };
 const char* TrackingStateName(TrackingState state);
 
+// Why a result is not OK. kFewValidRays says the map does not cover the view (unmapped space:
+// the pose may still be good, and the view is what a keyframe would add); the others say the
+// estimate itself is doubtful.
+enum class TrackingCause { kNone, kFewValidRays, kDiverged, kHighResidual };
+
 enum class TrackingMode { kGaussNewton, kAdam };
 
 struct TrackerOptions {
@@ -72,6 +77,7 @@ struct TrackingResult {
   SE3 pose;                 // world_T_camera; for LOST frames the prediction, not an estimate
   TrackingState state = TrackingState::kLost;
   std::string reason;       // why DEGRADED or LOST
+  TrackingCause cause = TrackingCause::kNone;
   int iterations = 0;
   int rays = 0;             // asked for
   int valid_rays = 0;       // rendered by the map with a valid measurement

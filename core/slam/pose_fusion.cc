@@ -1,0 +1,65 @@
+#include "core/slam/pose_fusion.h"
+
+#include "absl/strings/str_cat.h"
+
+namespace plx {
+
+const char* PoseSourceName(PoseSource source) {
+  switch (source) {
+    case PoseSource::kMap: return "map";
+    case PoseSource::kOdometry: return "odometry";
+    case PoseSource::kPrediction: return "prediction";
+  }
+  return "?";
+}
+
+FusedPose FusePoses(const TrackingResult& map, const std::optional<OdometryPose>& odometry,
+                    const PoseFusionOptions& options) {
+  FusedPose out;
+  if (map.state == TrackingState::kOk) {
+    out.pose = map.pose;
+    out.state = SlamState::kOk;
+    out.source = PoseSource::kMap;
+    out.may_be_keyframe = true;
+    return out;
+  }
+  const bool odometry_ok = odometry && odometry->ok;
+  if (!odometry_ok) {
+    out.pose = map.pose;
+    out.reason = map.reason;
+    if (odometry && !odometry->reason.empty()) {
+      absl::StrAppend(&out.reason, "; odometry: ", odometry->reason);
+    }
+    out.state = map.state == TrackingState::kLost ? SlamState::kLost : SlamState::kDegraded;
+    out.source = map.state == TrackingState::kLost ? PoseSource::kPrediction : PoseSource::kMap;
+    return out;
+  }
+  out.state = SlamState::kDegraded;
+  if (map.cause == TrackingCause::kFewValidRays) {
+    // Unmapped space, a sure pose: what a keyframe is for.
+    out.may_be_keyframe = true;
+    const SE3 apart = odometry->pose.Inverse() * map.pose;
+    const bool agrees = map.state == TrackingState::kDegraded &&
+                        apart.translation().norm() <= options.agree_translation_m &&
+                        RotationAngleBetween(odometry->pose, map.pose) <=
+                            options.agree_rotation_rad;
+    if (agrees) {
+      out.pose = map.pose;
+      out.source = PoseSource::kMap;
+      out.reason = absl::StrCat(map.reason, " (the odometry agrees)");
+      return out;
+    }
+    out.pose = odometry->pose;
+    out.source = PoseSource::kOdometry;
+    out.reason = absl::StrCat(map.reason, "; pose from odometry");
+    return out;
+  }
+  // The map renders the view but does not explain the frame (or the estimate ran off): the
+  // odometry's pose, and nothing of this frame goes into the map.
+  out.pose = odometry->pose;
+  out.source = PoseSource::kOdometry;
+  out.reason = absl::StrCat(map.reason, "; pose from odometry");
+  return out;
+}
+
+}  // namespace plx

@@ -1,0 +1,60 @@
+// How the SLAM front-end turns its two estimates of a frame's pose into one (docs/SLAM.md,
+// "Front-end"): the map tracker's (absolute, drift-free, but only where the map renders the
+// view) and the map-free odometry's (relative to the previous frame, so it drifts slowly, but it
+// works in unmapped space and across motions too large for the map tracker's basin, whose
+// starting point it gives).
+//
+//   map tracker        odometry   pose              state     may be a keyframe
+//   OK                 any        map               OK        yes (keyframe policy)
+//   few rays, agrees   OK         map               DEGRADED  yes: the view is unmapped, the
+//   few rays           OK         odometry          DEGRADED  yes  pose is sure: exactly when
+//                                                                  the map needs a keyframe
+//   diverged/residual  OK         odometry          DEGRADED  no: the map and the frame
+//                                                                  disagree (moving things?)
+//   DEGRADED           not OK     map               DEGRADED  no
+//   LOST               not OK     prediction        LOST      no
+//
+// "Agrees": within PoseFusionOptions of the odometry's pose. A map estimate from few rays is
+// absolute (it does not drift) but can slide along the little it sees; when it stays near the
+// odometry's it is the better of the two.
+#pragma once
+
+#include <optional>
+#include <string>
+
+#include "core/geometry/se3.h"
+#include "core/slam/slam_state.h"
+#include "core/tracking/tracker.h"
+
+namespace plx {
+
+enum class PoseSource { kMap, kOdometry, kPrediction };
+const char* PoseSourceName(PoseSource source);
+
+struct PoseFusionOptions {
+  double agree_translation_m = 0.05;
+  double agree_rotation_rad = 0.05;  // ~3 degrees
+};
+
+// The odometry's estimate of the frame's pose in the world (previous pose times the relative
+// motion) when it was trusted.
+struct OdometryPose {
+  SE3 pose;
+  bool ok = false;
+  std::string reason;  // why not ok
+};
+
+struct FusedPose {
+  SE3 pose;
+  SlamState state = SlamState::kLost;
+  std::string reason;
+  PoseSource source = PoseSource::kPrediction;
+  bool may_be_keyframe = false;
+};
+
+// `map`: the map tracker's result (its pose is the prediction when LOST); `odometry`: absent
+// when there was nothing to align to (the first frame, or the previous one was LOST).
+FusedPose FusePoses(const TrackingResult& map, const std::optional<OdometryPose>& odometry,
+                    const PoseFusionOptions& options);
+
+}  // namespace plx

@@ -1,0 +1,81 @@
+#include "core/slam/pose_fusion.h"
+
+#include <gtest/gtest.h>
+
+namespace plx {
+namespace {
+
+SE3 At(double x) { return SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(x, 0, 0)); }
+
+TrackingResult Map(TrackingState state, TrackingCause cause, double x) {
+  TrackingResult r;
+  r.state = state;
+  r.cause = cause;
+  r.pose = At(x);
+  r.reason = "map says so";
+  return r;
+}
+
+OdometryPose Odometry(bool ok, double x) { return OdometryPose{At(x), ok, ok ? "" : "blind"}; }
+
+TEST(PoseFusionTest, AnOkMapWinsAndMayMakeAKeyframe) {
+  const FusedPose f = FusePoses(Map(TrackingState::kOk, TrackingCause::kNone, 1.0),
+                                Odometry(true, 1.2), PoseFusionOptions());
+  EXPECT_EQ(f.state, SlamState::kOk);
+  EXPECT_EQ(f.source, PoseSource::kMap);
+  EXPECT_EQ(f.pose.translation().x(), 1.0);
+  EXPECT_TRUE(f.may_be_keyframe);
+}
+
+TEST(PoseFusionTest, UnmappedViewWithOdometryIsDegradedButMayMakeAKeyframe) {
+  // The map sees too little to say anything (LOST for few rays): the odometry carries the pose.
+  const FusedPose lost = FusePoses(Map(TrackingState::kLost, TrackingCause::kFewValidRays, 0.0),
+                                   Odometry(true, 2.0), PoseFusionOptions());
+  EXPECT_EQ(lost.state, SlamState::kDegraded);
+  EXPECT_EQ(lost.source, PoseSource::kOdometry);
+  EXPECT_EQ(lost.pose.translation().x(), 2.0);
+  EXPECT_TRUE(lost.may_be_keyframe);
+  EXPECT_NE(lost.reason.find("pose from odometry"), std::string::npos) << lost.reason;
+  // A few rays, near the odometry: the map's absolute pose.
+  const FusedPose near = FusePoses(
+      Map(TrackingState::kDegraded, TrackingCause::kFewValidRays, 2.03), Odometry(true, 2.0),
+      PoseFusionOptions());
+  EXPECT_EQ(near.source, PoseSource::kMap);
+  EXPECT_EQ(near.pose.translation().x(), 2.03);
+  EXPECT_TRUE(near.may_be_keyframe);
+  // A few rays that slid away from the odometry: the odometry's.
+  const FusedPose slid = FusePoses(
+      Map(TrackingState::kDegraded, TrackingCause::kFewValidRays, 2.2), Odometry(true, 2.0),
+      PoseFusionOptions());
+  EXPECT_EQ(slid.source, PoseSource::kOdometry);
+  EXPECT_EQ(slid.pose.translation().x(), 2.0);
+}
+
+TEST(PoseFusionTest, AMapThatDisagreesWithTheFrameNeverFeedsTheMap) {
+  for (TrackingCause cause : {TrackingCause::kHighResidual, TrackingCause::kDiverged}) {
+    const FusedPose f = FusePoses(Map(TrackingState::kLost, cause, 0.0), Odometry(true, 1.0),
+                                  PoseFusionOptions());
+    EXPECT_EQ(f.state, SlamState::kDegraded);
+    EXPECT_EQ(f.source, PoseSource::kOdometry);
+    EXPECT_FALSE(f.may_be_keyframe);
+  }
+}
+
+TEST(PoseFusionTest, WithoutATrustedOdometryTheMapDecidesAlone) {
+  const FusedPose degraded =
+      FusePoses(Map(TrackingState::kDegraded, TrackingCause::kFewValidRays, 1.0),
+                Odometry(false, 5.0), PoseFusionOptions());
+  EXPECT_EQ(degraded.state, SlamState::kDegraded);
+  EXPECT_EQ(degraded.source, PoseSource::kMap);
+  EXPECT_FALSE(degraded.may_be_keyframe);
+  EXPECT_NE(degraded.reason.find("odometry: blind"), std::string::npos) << degraded.reason;
+  const FusedPose lost = FusePoses(Map(TrackingState::kLost, TrackingCause::kFewValidRays, 1.0),
+                                   std::nullopt, PoseFusionOptions());
+  EXPECT_EQ(lost.state, SlamState::kLost);
+  EXPECT_EQ(lost.source, PoseSource::kPrediction);
+  EXPECT_EQ(lost.pose.translation().x(), 1.0);  // the map tracker's prediction
+  EXPECT_FALSE(lost.may_be_keyframe);
+}
+
+}  // namespace
+}  // namespace plx
