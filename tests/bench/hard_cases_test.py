@@ -6,7 +6,8 @@ benchmark needs from plenox (`synth --path`, `slam --frames-out`, `ms_per_frame_
 
 Writes a tiny `plenox synth` sequence, derives every hard case from it and checks frame counts,
 timestamps, ground truth, shifted colour, the covered span, the kidnap's jump and the depth
-noise; then runs `plenox slam` on a derived sequence. Exits 0 when everything passed, 1 with
+noise; then runs `plenox slam` on derived sequences, directly and through
+bench/slam_hard_bench.py's scoring. Exits 0 when everything passed, 1 with
 the failures listed, 77 (skip) when this interpreter lacks numpy or cv2.
 """
 
@@ -221,6 +222,71 @@ def check_plenox(plenox, work, kidnapped, f):
     f.check(int(rows[0]["keyframe"]) == 1, "--frames-out: frame 0 is a keyframe")
 
 
+def check_bench(plenox, work, covered, kidnapped, f):
+    """bench/slam_hard_bench.py's scoring of one run: the spans where LOST is allowed, the
+    frames to relocalise, the goal lines."""
+    import slam_hard_bench as bench
+    f.check(bench.frame_ranges([9, 3, 4, 5, 12, 13]) == "3-5, 9, 12-13", "frame_ranges")
+    states = [(0, "OK", 1.0), (1, "LOST", 1.0), (2, "LOST", 1.0), (3, "RELOCALISED", 1.0),
+              (4, "OK", 1.0)]
+    f.check(bench.first_back(states, 1) == 2 and bench.first_back(states, 0) == 0 and
+            bench.first_back(states, 5) is None, "first_back")
+    args = argparse.Namespace(plenox=plenox, prefix=[], timeout=300, slam_arg=[
+        "--voxel-size=0.08", "--iterations-per-keyframe=2", "--threads=1", "--quiet",
+        "--max-frames=24"])
+    rows = []
+    for name, dataset in (("tiny cover", covered), ("tiny kidnap", kidnapped)):
+        work_dir = os.path.join(work, "bench_" + name.split()[1])
+        os.makedirs(work_dir)
+        row, problems = bench.run_case(args, name, name, dataset, work_dir)
+        if not f.check(not problems, "%s: run and scored (%s)" % (name, problems)):
+            return
+        with open(os.path.join(work_dir, "frames.csv")) as fh:
+            lost = [int(r["frame"]) for r in csv.DictReader(fh) if r["state"] == "LOST"]
+        f.check(row["processed"] == 24 and row["lost"] == len(lost) == len(row["lost_frames"]),
+                "%s: counts match the per-frame states" % name)
+        f.check(row["ms_per_frame_max"] >= row["ms_per_frame_median"] and
+                abs(row["worst_ratio"] - row["ms_per_frame_max"] / row["ms_per_frame_median"])
+                < 1e-9, "%s: worst/median" % name)
+        f.check(isinstance(row.get("ate_se3"), float), "%s: ATE from eval-traj" % name)
+        rows.append((name, row, True))
+    cover, kidnap = rows[0][1], rows[1][1]
+    f.check(cover["span"] == "covered frames 5-10" and
+            cover["lost_outside"] == [x for x in cover["lost_frames"] if not 5 <= x <= 10],
+            "cover: LOST allowed only in the covered frames (LOST %s)" % cover["lost_frames"])
+    # No depth at all for 6 frames: tracking cannot go on through them.
+    f.check(set(range(5, 11)) <= set(cover["lost_frames"]), "cover: the covered frames are LOST")
+    f.check(isinstance(cover.get("reloc"), int) or cover.get("reloc") == float("inf"),
+            "cover: frames to relocalise after frame 10: %s" % cover.get("reloc"))
+    f.check(kidnap["span"] == "jump at frame 16" and
+            kidnap["lost_outside"] == [x for x in kidnap["lost_frames"] if not 16 <= x < 26],
+            "kidnap: LOST allowed in the 10 frames from the jump (LOST %s)"
+            % kidnap["lost_frames"])
+    # Relocalised = the first tracked frame from the jump on that is near the truth; tracked
+    # frames before it are listed as wrong.
+    back = kidnap.get("reloc")
+    with open(os.path.join(work, "bench_kidnap", "frames.csv")) as fh:
+        tracked = [int(r["frame"]) for r in csv.DictReader(fh)
+                   if r["state"] in ("OK", "RELOCALISED") and int(r["frame"]) >= 16]
+    if isinstance(back, int):
+        f.check(kidnap["reloc_error_m"] <= 0.10 and 16 + back in tracked and
+                kidnap["wrong_ok"] == [x for x in tracked if x < 16 + back],
+                "kidnap: relocalised after %d frames, %.1f cm from ground truth; wrongly "
+                "tracked before: %s" % (back, 100 * kidnap["reloc_error_m"], kidnap["wrong_ok"]))
+    else:
+        f.check(back == float("inf") and kidnap["wrong_ok"] == tracked,
+                "kidnap: never relocalised; wrongly tracked: %s" % kidnap["wrong_ok"])
+    goals = bench.goal_lines(rows, quick=True)
+    lost_goal = [g for g in goals if g.startswith("goal: no LOST frame")]
+    met = not cover["lost_outside"] and not kidnap["lost_outside"]
+    f.check(len(lost_goal) == 1 and (": MET" in lost_goal[0]) == met,
+            "goal line for LOST frames agrees with the rows: %s" % lost_goal[:1])
+    f.check(any(g.startswith("goal tiny kidnap: relocalised within 10 frames") for g in goals),
+            "goal line for the kidnap")
+    table = bench.table(rows, ["## test"], goals)
+    f.check("| tiny cover | 24 | %d |" % cover["lost"] in table, "table row")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--plenox", default=os.path.join(REPO, "build", "clients", "plenox",
@@ -250,6 +316,8 @@ def main():
                 f.check(True, "%s refused: %s" % (ops, exc))
         print("plenox", flush=True)
         check_plenox(args.plenox, work, kidnapped, f)
+        print("bench scoring", flush=True)
+        check_bench(args.plenox, work, os.path.join(work, "cover"), kidnapped, f)
     if f.items:
         print("%d check(s) failed:\n  %s" % (len(f.items), "\n  ".join(f.items)))
         return 1
