@@ -116,6 +116,7 @@ class Datasets:
     def __init__(self, args, s, root):
         self.args, self.s, self.root = args, s, root
         self.made = {}  # key -> path or CommandError
+        os.makedirs(root, exist_ok=True)
 
     def synth(self, path, frames):
         key = ("synth", path, frames)
@@ -491,14 +492,13 @@ def main():
         root = cleanup.name
     try:
         datasets = Datasets(args, s, os.path.join(root, "sequences"))
-        os.makedirs(datasets.root, exist_ok=True)
         for i, (key, name, recipe) in enumerate(cases):
             log("=== %s" % name)
             dataset = datasets.make(name, recipe)
             if isinstance(dataset, CommandError):
                 any_failed = True
                 notes.append("%s: no dataset: %s" % (name, dataset))
-                rows.append((name, {}, False))
+                rows.append((name, {}, True))  # every cell says failed
                 continue
             work = os.path.join(root, "runs", "%02d_%s" % (i, key))
             os.makedirs(work, exist_ok=True)

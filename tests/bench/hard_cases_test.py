@@ -233,7 +233,20 @@ def check_bench(plenox, work, covered, kidnapped, f):
             bench.first_back(states, 5) is None, "first_back")
     args = argparse.Namespace(plenox=plenox, prefix=[], timeout=300, slam_arg=[
         "--voxel-size=0.08", "--iterations-per-keyframe=2", "--threads=1", "--quiet",
-        "--max-frames=24"])
+        "--max-frames=24"], data=work)
+    # The benchmark's own datasets: a synthetic path at its size, and a case derived from one.
+    sizes = dict(bench.settings(quick=True), width=32, height=24, circle=12)
+    made = bench.Datasets(args, sizes, os.path.join(work, "bench_sequences"))
+    head = made.make("head", ("synth", "head-turns", 9))
+    f.check(not isinstance(head, Exception) and len(frames_of(head)) == 9 and
+            read_intrinsics(head)["width"] == 32, "bench: plenox synth --path head-turns, 32x24")
+    shifted = made.make("shift", ("derive", ("synth", "circle"), {"shift": (2, 1)}))
+    f.check(not isinstance(shifted, Exception) and len(frames_of(shifted)) == 12 and
+            hard_cases.read_intrinsics(shifted)["height"] == 24 and
+            bench.read_meta(shifted)["shift_colour"] == [2, 1],
+            "bench: a case derived from the synthetic circle")
+    missing = made.make("nothing", ("derive", ("data", "no_such_sequence"), {"every": 2}))
+    f.check(isinstance(missing, Exception), "bench: a missing source is reported: %s" % missing)
     rows = []
     for name, dataset in (("tiny cover", covered), ("tiny kidnap", kidnapped)):
         work_dir = os.path.join(work, "bench_" + name.split()[1])
