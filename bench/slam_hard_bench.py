@@ -291,7 +291,10 @@ def run_case(args, key, name, dataset, work):
     lost = [f for f, s, _ in states if s == "LOST"]
     row["lost_frames"] = lost
     row["lost_outside"] = [f for f in lost if f not in allowed]
-    if back_from is not None:
+    if back_from is not None and back_from >= len(states):
+        row["reloc"] = None  # the run ended first (--max-frames): n/a
+        row["span"] += " (not reached)"
+    elif back_from is not None:
         # A frame reported OK far from the truth (the tracker did not notice the jump) is not
         # relocalised: with ground truth, only a tracked frame near it counts.
         try:
@@ -374,13 +377,17 @@ def goal_lines(rows, quick):
         if "reloc" not in r or not r.get("span", "").startswith("jump"):
             continue
         back, err = r["reloc"], r.get("reloc_error_m")
+        if back is None:
+            out.append("goal %s: relocalised within %d frames: not measured (the run ended "
+                       "before the jump)" % (n, KIDNAP_FRAMES_GOAL))
+            continue
         out.append("goal %s: relocalised within %d frames: %s (%s)" % (
             n, KIDNAP_FRAMES_GOAL, verdict(back <= KIDNAP_FRAMES_GOAL),
             "never tracked again" if back == float("inf") else
             "%d frames after the jump%s" % (back, "" if err is None else
                                             ", %.1f cm from ground truth" % (100 * err))))
     for n, r in measured:
-        if r.get("span", "").startswith("covered") and "reloc" in r:
+        if r.get("span", "").startswith("covered") and r.get("reloc") is not None:
             back = r["reloc"]
             out.append("%s: tracked again %s after the lens is uncovered" % (
                 n, "never" if back == float("inf") else "%d frames" % back))
