@@ -335,12 +335,14 @@ def check_keys(label, obj, keys):
     return ["%s: JSON lacks %s" % (label, ", ".join(missing))] if missing else []
 
 
-def make_synthetic(plenox, synth_dir, timeout, frames=None):
-    """`plenox synth --out synth_dir [--frames N]`; raises CommandError when it fails or
-    writes no intrinsics.txt."""
+def make_synthetic(plenox, synth_dir, timeout, frames=None, extra=()):
+    """`plenox synth --out synth_dir [--frames N] [extra...]` (extra: more synth flags, e.g.
+    --width 640 --path walk-out); raises CommandError when it fails or writes no
+    intrinsics.txt."""
     cmd = [plenox, "synth", "--out", synth_dir]
     if frames:
         cmd += ["--frames", str(frames)]
+    cmd += list(extra)
     if not os.access(plenox, os.X_OK):
         raise CommandError("plenox binary not found or not executable: %s" % plenox)
     stdout, _ = run_cmd("synthetic synth", cmd, timeout)

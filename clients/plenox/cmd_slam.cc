@@ -1,6 +1,12 @@
 // plenox slam: online SLAM over a dataset's frames (core/slam): each frame's pose while the map
 // grows, no ground truth used except frame 0's pose as the start when the dataset has one.
+#include <algorithm>
+#include <fstream>
+#include <string>
+#include <vector>
+
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "clients/plenox/slam_output.h"
@@ -20,6 +26,8 @@ void AddInProcessSlamFlags(FlagSet& flags) {
   const SlamOptions d = DefaultSlamOptions();
   flags.Add("map-out", "MAP.plx", "write the final map here", "")
       .Add("keyframes-out", "F", "write the keyframes' (refined) poses here (TUM format)", "")
+      .Add("frames-out", "F.csv",
+           "write one line per processed frame here: frame,timestamp,state,ms,keyframe,reason", "")
       .Add("window", "N", "mapping window: half of each batch from the last N keyframes",
            absl::StrCat(d.mapping.mapper.window_keyframes))
       .Add("refine-window", "N",
@@ -37,6 +45,38 @@ absl::StatusOr<SlamDatasetOptions> OptionsFromFlags(const FlagSet& flags) {
   PLX_ASSIGN_OR_RETURN(s.mapping_nice, flags.GetInt("mapping-nice", 0, 19));
   PLX_RETURN_IF_ERROR(ValidateSlamOptions(s));
   return o;
+}
+
+// "a,b" -> "\"a,b\"": a CSV field that may hold commas or quotes.
+std::string CsvQuoted(const std::string& text) {
+  std::string out = "\"";
+  for (char c : text) {
+    if (c == '"') out += '"';
+    out += c;
+  }
+  return out + "\"";
+}
+
+// --frames-out: every processed frame's state and ProcessFrame time, for the benchmarks that
+// need more than the counts (where the LOST frames fall, the worst frame).
+absl::Status WriteFramesCsv(const std::string& path, const std::vector<SlamFrameResult>& results) {
+  std::ofstream out(path);
+  if (!out) return absl::UnavailableError(absl::StrCat("cannot write ", path));
+  out << "frame,timestamp,state,ms,keyframe,reason\n";
+  for (const SlamFrameResult& r : results) {
+    out << absl::StrFormat("%d,%.6f,%s,%.3f,%d,%s\n", r.frame, r.timestamp, SlamStateName(r.state),
+                           r.milliseconds, r.keyframe ? 1 : 0, CsvQuoted(r.reason));
+  }
+  out.close();
+  if (!out) return absl::UnavailableError(absl::StrCat("failed writing ", path));
+  return absl::OkStatus();
+}
+
+// The slowest frame's ProcessFrame time (every processed frame, LOST ones included).
+double MaxFrameMilliseconds(const std::vector<SlamFrameResult>& results) {
+  double worst = 0.0;
+  for (const SlamFrameResult& r : results) worst = std::max(worst, r.milliseconds);
+  return worst;
 }
 
 }  // namespace
@@ -67,7 +107,8 @@ int RunSlam(const std::vector<std::string>& args) {
   SlamReport report;
   report.trajectory = flags.GetString("out");
   for (const std::string& path :
-       {report.trajectory, flags.GetString("map-out"), flags.GetString("keyframes-out")}) {
+       {report.trajectory, flags.GetString("map-out"), flags.GetString("keyframes-out"),
+        flags.GetString("frames-out")}) {
     if (path.empty()) continue;
     if (absl::Status s = CheckOutputDirectory(path); !s.ok()) return ReportError(kCommand, s);
   }
@@ -109,6 +150,11 @@ int RunSlam(const std::vector<std::string>& args) {
       return ReportError(kCommand, s);
     }
   }
+  if (!flags.GetString("frames-out").empty()) {
+    if (absl::Status s = WriteFramesCsv(flags.GetString("frames-out"), result->results); !s.ok()) {
+      return ReportError(kCommand, s);
+    }
+  }
   const SlamProgress& p = result->progress;
   report.frames = result->frames;
   report.processed = static_cast<int>(result->trajectory.size());
@@ -133,7 +179,8 @@ int RunSlam(const std::vector<std::string>& args) {
                   JsonObject()
                       .Add("backend", backend->name())
                       .AddBool("deterministic", options->slam.deterministic)
-                      .AddBool("realtime", options->realtime));
+                      .AddBool("realtime", options->realtime)
+                      .Add("ms_per_frame_max", MaxFrameMilliseconds(result->results)));
   return kExitOk;
 }
 

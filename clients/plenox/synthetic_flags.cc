@@ -2,6 +2,7 @@
 
 #include <string>
 
+#include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
 
 namespace plx::cli {
@@ -13,9 +14,14 @@ void AddSyntheticFlags(FlagSet& flags, int default_frames, bool noise_by_default
   if (noise_by_default) {
     flags.AddSwitch("no-noise", "exact depth instead of sensor-like noise and holes");
   } else {
-    flags.AddSwitch("noise", "add sensor-like depth noise (1.5 mm at 1 m, growing with z^2) and holes");
+    flags.AddSwitch("noise",
+                    "add sensor-like depth noise (1.5 mm at 1 m, growing with z^2) and holes");
   }
-  flags.Add("noise-seed", "N", "seed of the depth noise", "7");
+  flags.Add("noise-seed", "N", "seed of the depth noise", "7")
+      .Add("path", "NAME",
+           "camera path: circle (around the room centre), head-turns (the circle with yaw "
+           "swings peaking at ~130 deg/s), walk-out (from the -x end into the unseen +x half)",
+           "circle");
 }
 
 absl::StatusOr<SyntheticOptions> SyntheticOptionsFromFlags(const FlagSet& flags) {
@@ -25,6 +31,11 @@ absl::StatusOr<SyntheticOptions> SyntheticOptionsFromFlags(const FlagSet& flags)
   PLX_ASSIGN_OR_RETURN(o.height, flags.GetInt("height", 16, 8192));
   PLX_ASSIGN_OR_RETURN(const int seed, flags.GetInt("noise-seed", 0, 2147483647));
   o.seed = static_cast<uint64_t>(seed);
+  absl::StatusOr<SyntheticPath> path = ParseSyntheticPath(flags.GetString("path"));
+  if (!path.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("--path: ", path.status().message()));
+  }
+  o.path = *path;
   if (flags.GetSwitch("noise") || (flags.Has("no-noise") && !flags.GetSwitch("no-noise"))) {
     o.depth_noise = 0.0015;
     o.hole_fraction = 0.05;

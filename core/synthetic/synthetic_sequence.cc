@@ -16,32 +16,6 @@ namespace plx {
 namespace {
 
 // ---------------------------------------------------------------------------------------------
-// Camera path. Every frequency is a multiple of kOmega, so the path closes after one turn.
-
-constexpr double kOmega = 2.0 * M_PI / 12.0;  // rad/s: one turn in 12 s, 1 degree/frame at 30 fps
-constexpr double kTheta0 = -0.75;  // start angle: the first 2 s sweep from the crate to the cabinet
-constexpr double kEyeRadiusX = 1.0, kEyeRadiusY = 0.7;  // ellipse of camera centres (m)
-constexpr double kEyeHeight = 1.4, kEyeBob = 0.05;      // metres
-// The camera looks back across the room centre (heading = path angle + pi), so every view holds
-// floor, boxes, walls and often a corner, at 1.5-5 m. The heading turns at the same uniform
-// rate as the path angle, plus a small wobble; the pitch swings gently around 15 degrees down.
-constexpr double kYawWobble = 0.05;                                               // rad
-constexpr double kPitch = 15.0 * M_PI / 180.0, kPitchSwing = 4.0 * M_PI / 180.0;  // rad
-
-// Camera-to-world rotation of a camera at `eye` looking at `target` with world +z up, in
-// OpenCV axes (x right, y down, z forward).
-Eigen::Matrix3d LookAt(const Eigen::Vector3d& eye, const Eigen::Vector3d& target) {
-  const Eigen::Vector3d forward = (target - eye).normalized();
-  const Eigen::Vector3d right = forward.cross(Eigen::Vector3d::UnitZ()).normalized();
-  const Eigen::Vector3d down = forward.cross(right);
-  Eigen::Matrix3d rotation;
-  rotation.col(0) = right;
-  rotation.col(1) = down;
-  rotation.col(2) = forward;
-  return rotation;
-}
-
-// ---------------------------------------------------------------------------------------------
 // Sensor corruption.
 
 uint64_t SplitMix64(uint64_t x) {
@@ -154,6 +128,11 @@ absl::Status ValidateSyntheticOptions(const SyntheticOptions& options) {
     return absl::InvalidArgumentError(
         absl::StrCat("hole_fraction must be in [0, 1), got ", options.hole_fraction));
   }
+  if (options.path != SyntheticPath::kCircle && options.path != SyntheticPath::kHeadTurns &&
+      options.path != SyntheticPath::kWalkOut) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("unknown synthetic path ", static_cast<int>(options.path)));
+  }
   for (double value : {options.fx, options.fy, options.cx, options.cy}) {
     if (!(std::isfinite(value) && value >= 0)) {
       return absl::InvalidArgumentError(
@@ -176,20 +155,8 @@ CameraCalibration SyntheticCalibration(const SyntheticOptions& options) {
   return calibration;
 }
 
-SE3 SyntheticCameraPoseAtTime(double seconds) {
-  const double phase = kOmega * seconds;
-  const double theta = kTheta0 + phase;
-  const Eigen::Vector3d eye(kEyeRadiusX * std::cos(theta), kEyeRadiusY * std::sin(theta),
-                            kEyeHeight + kEyeBob * std::sin(3.0 * phase));
-  const double heading = theta + M_PI + kYawWobble * std::sin(2.0 * phase);
-  const double pitch = -(kPitch + kPitchSwing * std::sin(phase + 1.0));
-  const Eigen::Vector3d forward(std::cos(pitch) * std::cos(heading),
-                                std::cos(pitch) * std::sin(heading), std::sin(pitch));
-  return SE3(LookAt(eye, eye + forward), eye);
-}
-
 SE3 SyntheticCameraPose(const SyntheticOptions& options, int frame_index) {
-  return SyntheticCameraPoseAtTime(frame_index / options.fps);
+  return SyntheticPathPose(options.path, frame_index / options.fps);
 }
 
 absl::StatusOr<InMemoryDataset> GenerateSyntheticSequence(const SyntheticOptions& options) {

@@ -1,6 +1,7 @@
 // Procedural RGB-D sequences of the synthetic room (core/synthetic/synthetic_scene.h) with exact
-// ground-truth poses: a camera circling the room centre at head height (an ellipse of 1 m x
-// 0.7 m), looking back across the centre and ~15 degrees down at floor, boxes and walls.
+// ground-truth poses along one of the camera paths of core/synthetic/synthetic_path.h; by
+// default a camera circling the room centre at head height (an ellipse of 1 m x 0.7 m),
+// looking back across the centre and ~15 degrees down at floor, boxes and walls.
 // Optional structured-light-like depth noise and clustered depth holes. Used by tests and
 // benchmarks that need a sequence with known geometry and poses.
 #pragma once
@@ -12,6 +13,7 @@
 #include "core/datasets/dataset.h"
 #include "core/geometry/intrinsics.h"
 #include "core/geometry/se3.h"
+#include "core/synthetic/synthetic_path.h"
 
 namespace plx {
 
@@ -28,6 +30,8 @@ struct SyntheticOptions {
   double cy = 0.0;
   int num_frames = 60;
   double fps = 30.0;
+  // The camera path; the default circle gives the same sequence as before paths existed.
+  SyntheticPath path = SyntheticPath::kCircle;
   // Standard deviation of the depth noise at 1 m (metres); it grows with z^2 like the
   // disparity error of a structured-light sensor.
   double depth_noise = 0.0;
@@ -40,19 +44,18 @@ struct SyntheticOptions {
 };
 
 // InvalidArgument unless sizes, focal lengths, fps and depth_scale are positive and finite,
-// num_frames >= 1, depth_noise >= 0 and hole_fraction in [0, 1).
+// num_frames >= 1, depth_noise >= 0, hole_fraction in [0, 1) and path is a SyntheticPath.
 absl::Status ValidateSyntheticOptions(const SyntheticOptions& options);
 
 // The calibration of the generated frames, with the defaults of `options` resolved.
 CameraCalibration SyntheticCalibration(const SyntheticOptions& options);
 
-// Ground-truth world_T_camera of the path at `seconds` after the start. The path is smooth and
-// periodic (one turn every 12 s): about 30 degrees of yaw and 0.35-0.5 m of travel per second,
+// SyntheticCameraPoseAtTime(seconds) (synthetic_path.h) is the default circle: smooth and
+// periodic (one turn every 12 s), about 30 degrees of yaw and 0.35-0.5 m of travel per second,
 // i.e. ~1 degree and 1.2-1.7 cm per frame at 30 fps.
-SE3 SyntheticCameraPoseAtTime(double seconds);
 
-// Ground-truth world_T_camera of frame `frame_index` (at frame_index / options.fps seconds);
-// options.fps must be valid.
+// Ground-truth world_T_camera of frame `frame_index` (at frame_index / options.fps seconds) on
+// options.path; options.fps must be valid.
 SE3 SyntheticCameraPose(const SyntheticOptions& options, int frame_index);
 
 // Renders the sequence "synthetic_room": frame i at i / fps seconds, every frame with its
