@@ -1,5 +1,6 @@
-// CudaBackend: forwards each Backend call to the plx::cuda kernel drivers on the backend's
-// stream and synchronises before returning (callers read results right after). See
+// CudaBackend: forwards each Backend call to its plx::cuda kernel driver on the backend's
+// stream and synchronises before returning (callers read results right after). What it checks
+// and prefetches comes from the kernel's argument struct (core/kernels/kernel_args.h). See
 // cuda/cuda_backend.h for the memory residency rules.
 #include "cuda/cuda_backend.h"
 
@@ -9,6 +10,7 @@
 #include <cstring>
 #include <mutex>
 #include <unordered_map>
+#include <variant>
 
 #include <cuda_runtime.h>
 
@@ -111,179 +113,36 @@ class CudaBackend final : public Backend {
   std::string name() const override { return name_; }
   int parallelism() const override { return sm_count_; }
 
-  absl::Status DoRenderPixels(const GridView& grid, const CameraView& camera,
-                              const int32_t* pixels, int64_t count, const RenderOptions& options,
-                              float* color, float* depth, float* opacity,
-                              float* median_depth) override {
-    PLX_RETURN_IF_ERROR(Begin("RenderPixels"));
-    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
-    PLX_RETURN_IF_ERROR(Check(pixels, "pixels"));
-    PLX_RETURN_IF_ERROR(Check(color, "color"));
-    PLX_RETURN_IF_ERROR(Check(depth, "depth"));
-    PLX_RETURN_IF_ERROR(Check(opacity, "opacity"));
-    PLX_RETURN_IF_ERROR(Check(median_depth, "median_depth"));
-    PrefetchGrid(grid);
-    cuda::RenderPixels(ctx_, grid, camera, pixels, count, options, color, depth, opacity,
-                       median_depth);
-    return Finish();
-  }
-
-  absl::Status DoMappingForwardBackward(const GridView& grid, const GridGradView& grad,
-                                        const TrainingRaysView& rays,
-                                        const MappingBatchParams& params,
-                                        MappingRayLoss* losses) override {
-    PLX_RETURN_IF_ERROR(Begin("MappingForwardBackward"));
-    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
-    PLX_RETURN_IF_ERROR(CheckGrad(grad));
-    PLX_RETURN_IF_ERROR(Check(rays.frames, "rays.frames"));
-    PLX_RETURN_IF_ERROR(Check(rays.ray_frame, "rays.ray_frame"));
-    PLX_RETURN_IF_ERROR(Check(rays.ray_pixel, "rays.ray_pixel"));
-    PLX_RETURN_IF_ERROR(Check(losses, "losses"));
-    PrefetchGrid(grid);
-    PrefetchGrad(grid, grad);
-    cuda::MappingForwardBackward(ctx_, grid, grad, rays, params, losses);
-    return Finish();
-  }
-
-  absl::Status DoRmsPropStep(const GridView& grid, const GridWriteView& write,
-                             const GridGradView& grad, const OptimizerStateView& state,
-                             const RmsPropParams& params) override {
-    PLX_RETURN_IF_ERROR(Begin("RmsPropStep"));
-    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
-    PLX_RETURN_IF_ERROR(CheckWrite(write, "write"));
-    PLX_RETURN_IF_ERROR(CheckGrad(grad));
-    PLX_RETURN_IF_ERROR(Check(state.rms_density, "state.rms_density"));
-    PLX_RETURN_IF_ERROR(Check(state.rms_sh, "state.rms_sh"));
-    PrefetchGrid(grid);
-    PrefetchGrad(grid, grad);
-    const size_t n = static_cast<size_t>(grid.num_vertices());
-    Prefetch(state.rms_density, n * sizeof(float));
-    Prefetch(state.rms_sh, n * kShCoeffCount * sizeof(float));
-    RmsPropParams sliced = params;
-    sliced.brick_slices = kRmsPropBrickSlices;
-    cuda::RmsPropStep(ctx_, grid, write, grad, state, sliced);
-    return Finish();
-  }
-
-  absl::Status DoFuseDepth(const GridView& grid, const GridWriteView& write, int64_t first_vertex,
-                           int64_t vertex_count, const TrainingFrameView* frames, int num_frames,
-                           const FusionParams& params) override {
-    PLX_RETURN_IF_ERROR(Begin("FuseDepth"));
-    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
-    PLX_RETURN_IF_ERROR(CheckWrite(write, "write"));
-    PLX_RETURN_IF_ERROR(Check(frames, "frames"));
-    // Once per allocation round, so every frame's images are checked too.
-    for (int f = 0; f < num_frames && frames != nullptr; ++f) {
-      PLX_RETURN_IF_ERROR(Check(frames[f].color, "frames[].color"));
-      PLX_RETURN_IF_ERROR(Check(frames[f].depth, "frames[].depth"));
-    }
-    PrefetchGrid(grid);
-    cuda::FuseDepth(ctx_, grid, write, first_vertex, vertex_count, frames, num_frames, params);
-    return Finish();
-  }
-
-  absl::Status DoRefreshOccupancy(const GridView& grid, const GridWriteView& write,
-                                  const int64_t* active_blocks, int64_t count,
-                                  float threshold) override {
-    PLX_RETURN_IF_ERROR(Begin("RefreshOccupancy"));
-    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
-    PLX_RETURN_IF_ERROR(Check(write.cell_bits, "write.cell_bits"));
-    PLX_RETURN_IF_ERROR(Check(active_blocks, "active_blocks"));
-    PrefetchGrid(grid);
-    cuda::RefreshOccupancy(ctx_, grid, write, active_blocks, count, threshold);
-    return Finish();
-  }
-
-  absl::Status DoComputeTrackingTerms(const GridView& grid, const TrainingFrameView& frame,
-                                      const int32_t* pixels, int64_t count,
-                                      const TrackingParams& params,
-                                      TrackingRayTerm* terms) override {
-    PLX_RETURN_IF_ERROR(Begin("ComputeTrackingTerms"));
-    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
-    PLX_RETURN_IF_ERROR(Check(frame.color, "frame.color"));
-    PLX_RETURN_IF_ERROR(Check(frame.depth, "frame.depth"));
-    PLX_RETURN_IF_ERROR(Check(pixels, "pixels"));
-    PLX_RETURN_IF_ERROR(Check(terms, "terms"));
-    PrefetchGrid(grid);
-    cuda::ComputeTrackingTerms(ctx_, grid, frame, pixels, count, params, terms);
-    return Finish();
-  }
-
-  absl::Status DoReduceTrackingTerms(const TrackingRayTerm* terms, int64_t count,
-                                     TrackingLoss loss, float huber_k, const float scale[2],
-                                     TrackingSums* sums) override {
-    PLX_RETURN_IF_ERROR(Begin("ReduceTrackingTerms"));
-    PLX_RETURN_IF_ERROR(Check(terms, "terms"));
-    PLX_RETURN_IF_ERROR(cuda::ReduceTrackingTerms(ctx_, terms, count, loss, huber_k, scale, sums));
-    return Finish();
-  }
-
-  absl::Status DoResampleGrid(const GridView& target, const GridWriteView& target_write,
-                              const GridView& source) override {
-    PLX_RETURN_IF_ERROR(Begin("ResampleGrid"));
-    PLX_RETURN_IF_ERROR(CheckGrid(target, "target"));
-    PLX_RETURN_IF_ERROR(CheckWrite(target_write, "target_write"));
-    PLX_RETURN_IF_ERROR(CheckGrid(source, "source"));
-    PrefetchGrid(target);
-    PrefetchGrid(source);
-    cuda::ResampleGrid(ctx_, target, target_write, source);
-    return Finish();
-  }
-
-  absl::Status DoAddTvGradient(const GridView& grid, const GridGradView& grad,
-                               int64_t first_vertex, int64_t vertex_count, float lambda_density,
-                               float lambda_sh) override {
-    PLX_RETURN_IF_ERROR(Begin("AddTvGradient"));
-    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
-    PLX_RETURN_IF_ERROR(CheckGrad(grad));
-    PrefetchGrid(grid);
-    PrefetchGrad(grid, grad);
-    cuda::AddTvGradient(ctx_, grid, grad, first_vertex, vertex_count, lambda_density, lambda_sh);
-    return Finish();
-  }
-
-  absl::Status DoCountIsoTriangles(const GridView& grid, int64_t first_vertex, int64_t count,
-                                   const IsoSurfaceParams& params, uint8_t* triangles) override {
-    PLX_RETURN_IF_ERROR(Begin("CountIsoTriangles"));
-    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
-    PLX_RETURN_IF_ERROR(Check(params.table, "params.table"));
-    PLX_RETURN_IF_ERROR(Check(triangles, "triangles"));
-    PrefetchGrid(grid);
-    cuda::CountIsoTriangles(ctx_, grid, first_vertex, count, params, triangles);
-    return Finish();
-  }
-
-  absl::Status DoEmitIsoTriangles(const GridView& grid, int64_t first_vertex, int64_t count,
-                                  const IsoSurfaceParams& params, const int64_t* first_triangle,
-                                  int64_t* edge_keys) override {
-    PLX_RETURN_IF_ERROR(Begin("EmitIsoTriangles"));
-    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
-    PLX_RETURN_IF_ERROR(Check(params.table, "params.table"));
-    PLX_RETURN_IF_ERROR(Check(first_triangle, "first_triangle"));
-    PLX_RETURN_IF_ERROR(Check(edge_keys, "edge_keys"));
-    PrefetchGrid(grid);
-    cuda::EmitIsoTriangles(ctx_, grid, first_vertex, count, params, first_triangle, edge_keys);
-    return Finish();
-  }
-
-  absl::Status DoComputeIsoVertices(const GridView& grid, const int64_t* edge_keys, int64_t count,
-                                    const IsoSurfaceParams& params, float* positions,
-                                    float* normals, uint8_t* colors, uint8_t* observed) override {
-    PLX_RETURN_IF_ERROR(Begin("ComputeIsoVertices"));
-    PLX_RETURN_IF_ERROR(CheckGrid(grid, "grid"));
-    PLX_RETURN_IF_ERROR(Check(params.table, "params.table"));
-    PLX_RETURN_IF_ERROR(Check(edge_keys, "edge_keys"));
-    PLX_RETURN_IF_ERROR(Check(positions, "positions"));
-    PLX_RETURN_IF_ERROR(Check(normals, "normals"));
-    PLX_RETURN_IF_ERROR(Check(colors, "colors"));
-    PLX_RETURN_IF_ERROR(Check(observed, "observed"));
-    PrefetchGrid(grid);
-    cuda::ComputeIsoVertices(ctx_, grid, edge_keys, count, params, positions, normals, colors,
-                             observed);
-    return Finish();
-  }
-
  private:
+  absl::Status Launch(const KernelArgs& call) override {
+    return std::visit([this](const auto& args) { return LaunchOnDevice(args); }, call);
+  }
+
+  // Every kernel: the arrays its argument struct lists checked for residency, the large ones
+  // prefetched, then its driver on our stream.
+  template <typename Args>
+  absl::Status LaunchOnDevice(Args args) {
+    PLX_RETURN_IF_ERROR(Begin(Args::kName));
+    absl::Status readable;
+    ForEachBuffer(args, [&](const KernelBuffer& b) {
+      if (readable.ok() && !b.host) readable.Update(CheckReadable(b));
+    });
+    PLX_RETURN_IF_ERROR(readable);
+    ForEachBuffer(args, [&](const KernelBuffer& b) {
+      if (b.prefetch) Prefetch(b.data, b.bytes());
+    });
+    TuneForDevice(args);
+    PLX_RETURN_IF_ERROR(CallDriver([&] { return cuda::Run(ctx_, args); }));
+    return Finish();
+  }
+
+  // What a GPU wants of a kernel that the CPU does not; nothing for most.
+  template <typename Args>
+  static void TuneForDevice(Args&) {}
+  static void TuneForDevice(RmsPropStepArgs& args) {
+    args.params.brick_slices = kRmsPropBrickSlices;
+  }
+
   CudaBackend(int device, const cudaDeviceProp& prop, bool pageable_access, cudaStream_t stream)
       : device_(device),
         name_(absl::StrCat("cuda:", device, " ", prop.name)),
@@ -324,9 +183,10 @@ class CudaBackend final : public Backend {
   // Views must point at memory this device can read (core/kernels/backend.h): managed memory
   // (UnifiedVector after the backend exists), its own device memory, or pinned host memory.
   // One driver lookup per pointer (about a microsecond), skipped when the device reads
-  // pageable memory anyway. A violation fails the call with the argument's name instead of faulting
-  // inside a kernel.
-  absl::Status Check(const void* p, const char* what) const {
+  // pageable memory anyway. A violation fails the call with the argument's name instead of
+  // faulting inside a kernel. Null is Backend's to check (required arrays are never null here).
+  absl::Status CheckReadable(const KernelBuffer& buffer) const {
+    const void* p = buffer.data;
     if (p == nullptr || pageable_access_) return absl::OkStatus();
     cudaPointerAttributes attr;
     const cudaError_t e = cudaPointerGetAttributes(&attr, p);
@@ -341,34 +201,10 @@ class CudaBackend final : public Backend {
         "%s::%s: `%s` (%p) is %s memory this GPU cannot read. Arrays passed to the CUDA backend "
         "must be UnifiedVector memory allocated after the backend was created "
         "(core/common/unified_allocator.h, core/kernels/backend.h).",
-        name_, method_, what, p,
+        name_, method_, ArgumentLabel(buffer.group, buffer.name), p,
         e != cudaSuccess                    ? "unknown"
         : attr.type == cudaMemoryTypeDevice ? "another device's"
                                             : "ordinary host"));
-  }
-
-  // The brick tables are checked, not each brick: bricks come from the same UnifiedVector
-  // hooks as the tables (core/grid/brick_storage.h).
-  absl::Status CheckGrid(const GridView& g, const char* what) const {
-    PLX_RETURN_IF_ERROR(Check(g.brick_density, absl::StrCat(what, ".brick_density").c_str()));
-    PLX_RETURN_IF_ERROR(Check(g.brick_sh, absl::StrCat(what, ".brick_sh").c_str()));
-    PLX_RETURN_IF_ERROR(Check(g.brick_slot, absl::StrCat(what, ".brick_slot").c_str()));
-    PLX_RETURN_IF_ERROR(Check(g.block_cells, absl::StrCat(what, ".block_cells").c_str()));
-    PLX_RETURN_IF_ERROR(Check(g.cell_bits, absl::StrCat(what, ".cell_bits").c_str()));
-    return Check(g.brick_origin, absl::StrCat(what, ".brick_origin").c_str());
-  }
-
-  absl::Status CheckWrite(const GridWriteView& w, const char* what) const {
-    PLX_RETURN_IF_ERROR(Check(w.brick_density, absl::StrCat(what, ".brick_density").c_str()));
-    PLX_RETURN_IF_ERROR(Check(w.brick_sh, absl::StrCat(what, ".brick_sh").c_str()));
-    return Check(w.cell_bits, absl::StrCat(what, ".cell_bits").c_str());
-  }
-
-  absl::Status CheckGrad(const GridGradView& g) const {
-    PLX_RETURN_IF_ERROR(Check(g.density, "grad.density"));
-    PLX_RETURN_IF_ERROR(Check(g.sh, "grad.sh"));
-    PLX_RETURN_IF_ERROR(Check(g.touched, "grad.touched"));
-    return Check(g.brick_touched, "grad.brick_touched");
   }
 
   // Managed pages move on demand (one fault per page group) or in bulk when prefetched. Each
@@ -387,20 +223,6 @@ class CudaBackend final : public Backend {
     if (cudaMemPrefetchAsync(p, bytes, location, 0, stream_) != cudaSuccess) {
       (void)cudaGetLastError();
     }
-  }
-
-  // Bricks are separate allocations (copy-on-write versions share them), too small and too
-  // many to prefetch one by one: they migrate on first touch, and stay on the device while only
-  // kernels write them (docs/GPU.md, "Copy-on-write versions").
-  void PrefetchGrid(const GridView& g) {
-    Prefetch(g.brick_slot, static_cast<size_t>(g.dims[0]) * g.dims[1] * g.dims[2] *
-                               sizeof(int32_t));
-  }
-
-  void PrefetchGrad(const GridView& g, const GridGradView& grad) {
-    const size_t n = static_cast<size_t>(g.num_vertices());
-    Prefetch(grad.density, n * sizeof(float));
-    Prefetch(grad.sh, n * kShCoeffCount * sizeof(float));
   }
 
   const int device_;

@@ -3,11 +3,7 @@
 #pragma once
 
 #include "absl/status/status.h"
-#include "core/grid/grid_view.h"
-#include "core/kernels/depth_fusion.h"
-#include "core/kernels/kernel_types.h"
-#include "core/kernels/marching_cubes.h"
-#include "core/kernels/tracking_terms.h"
+#include "core/kernels/kernel_args.h"
 #include "cuda/parallel_for.cuh"
 
 namespace plx::cuda {

@@ -75,10 +75,9 @@ __global__ void __launch_bounds__(kReduceThreads)
 
 }  // namespace
 
-absl::Status ReduceTrackingTerms(const ExecContext& ctx, const TrackingRayTerm* terms,
-                                 int64_t count, TrackingLoss loss, float huber_k,
-                                 const float scale[2], TrackingSums* sums) {
-  sums->Clear();
+absl::Status Run(const ExecContext& ctx, const ReduceTrackingTermsArgs& args) {
+  const int64_t count = args.count;
+  args.sums->Clear();
   if (count <= 0) return absl::OkStatus();
   const int blocks = static_cast<int>(
       std::min<int64_t>(kMaxReduceBlocks, (count + kReduceThreads - 1) / kReduceThreads));
@@ -87,13 +86,14 @@ absl::Status ReduceTrackingTerms(const ExecContext& ctx, const TrackingRayTerm* 
       DeviceBuffer<TrackingSums>::Create(static_cast<size_t>(blocks) + 1, ctx.stream);
   if (!partial.ok()) return partial.status();
   AccumulateTermsKernel<<<blocks, kReduceThreads, 0, ctx.stream>>>(
-      terms, count, loss, huber_k, scale[0], scale[1], partial->data());
+      args.terms, count, args.loss, args.huber_k, args.scale[0], args.scale[1], partial->data());
   PLX_CUDA_RETURN_IF_ERROR(cudaGetLastError());
   AddPartialsKernel<<<1, kReduceThreads, 0, ctx.stream>>>(partial->data(), blocks,
                                                          partial->data() + blocks);
   PLX_CUDA_RETURN_IF_ERROR(cudaGetLastError());
-  PLX_CUDA_RETURN_IF_ERROR(cudaMemcpyAsync(sums, partial->data() + blocks, sizeof(TrackingSums),
-                                           cudaMemcpyDeviceToHost, ctx.stream));
+  PLX_CUDA_RETURN_IF_ERROR(cudaMemcpyAsync(args.sums, partial->data() + blocks,
+                                           sizeof(TrackingSums), cudaMemcpyDeviceToHost,
+                                           ctx.stream));
   PLX_CUDA_RETURN_IF_ERROR(cudaStreamSynchronize(ctx.stream));
   return absl::OkStatus();
 }

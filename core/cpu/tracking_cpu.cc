@@ -9,9 +9,9 @@
 
 namespace plx::cpu {
 
-absl::Status ReduceTrackingTerms(const ExecContext& ctx, const TrackingRayTerm* terms,
-                                 int64_t count, TrackingLoss loss, float huber_k,
-                                 const float scale[2], TrackingSums* sums) {
+absl::Status Run(const ExecContext& ctx, const ReduceTrackingTermsArgs& args) {
+  const TrackingRayTerm* const terms = args.terms;
+  const int64_t count = args.count;
   // Fixed chunks, each summed by whichever thread takes it, then added in chunk order.
   constexpr int64_t kChunk = 256;
   const int64_t chunks = (count + kChunk - 1) / kChunk;
@@ -21,12 +21,12 @@ absl::Status ReduceTrackingTerms(const ExecContext& ctx, const TrackingRayTerm* 
       TrackingSums& s = partial[c];
       s.Clear();
       for (int64_t i = c * kChunk; i < std::min(count, (c + 1) * kChunk); ++i) {
-        AccumulateTrackingTerm(terms[i], loss, huber_k, scale, &s);
+        AccumulateTrackingTerm(terms[i], args.loss, args.huber_k, args.scale, &s);
       }
     }
   });
-  sums->Clear();
-  for (const TrackingSums& s : partial) sums->Add(s);
+  args.sums->Clear();
+  for (const TrackingSums& s : partial) args.sums->Add(s);
   return absl::OkStatus();
 }
 

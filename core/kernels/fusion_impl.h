@@ -7,13 +7,14 @@
 
 namespace plx::PLX_BACKEND_NS {
 
-void FuseDepth(const ExecContext& ctx, const GridView& grid, const GridWriteView& write,
-               int64_t first_vertex, int64_t vertex_count, const TrainingFrameView* frames,
-               int num_frames, const FusionParams& params) {
-  const GridView g = grid;
-  const GridWriteView w = write;
-  const FusionParams p = params;
-  ParallelFor(ctx, vertex_count, [=] PLX_HD_LAMBDA(int64_t i) {
+void Run(const ExecContext& ctx, const FuseDepthArgs& args) {
+  const GridView g = args.grid;
+  const GridWriteView w = args.write;
+  const FusionParams p = args.params;
+  const int64_t first_vertex = args.first_vertex;
+  const TrainingFrameView* const frames = args.frames;
+  const int num_frames = args.num_frames;
+  ParallelFor(ctx, args.vertex_count, [=] PLX_HD_LAMBDA(int64_t i) {
     const int64_t vertex = first_vertex + i;
     int v[3];
     g.VertexCoords(vertex, v);

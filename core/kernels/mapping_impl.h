@@ -11,13 +11,12 @@
 
 namespace plx::PLX_BACKEND_NS {
 
-void MappingForwardBackward(const ExecContext& ctx, const GridView& grid, const GridGradView& grad,
-                            const TrainingRaysView& rays, const MappingBatchParams& params,
-                            MappingRayLoss* losses) {
-  const GridView g = grid;
-  const GridGradView gg = grad;
-  const TrainingRaysView set = rays;
-  const MappingBatchParams p = params;
+void Run(const ExecContext& ctx, const MappingForwardBackwardArgs& args) {
+  const GridView g = args.grid;
+  const GridGradView gg = args.grad;
+  const TrainingRaysView set = args.rays;
+  const MappingBatchParams p = args.params;
+  MappingRayLoss* const losses = args.losses;
   const float inv_batch = 1.0f / static_cast<float>(p.batch_size);
   ParallelFor(ctx, p.batch_size, [=] PLX_HD_LAMBDA(int64_t i) {
     const int64_t recent = set.num_rays - set.recent_begin;

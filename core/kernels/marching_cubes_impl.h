@@ -8,23 +8,25 @@
 
 namespace plx::PLX_BACKEND_NS {
 
-void CountIsoTriangles(const ExecContext& ctx, const GridView& grid, int64_t first_vertex,
-                       int64_t count, const IsoSurfaceParams& params, uint8_t* triangles) {
-  const GridView g = grid;
-  const IsoSurfaceParams p = params;
-  ParallelFor(ctx, count, [=] PLX_HD_LAMBDA(int64_t i) {
+void Run(const ExecContext& ctx, const CountIsoTrianglesArgs& args) {
+  const GridView g = args.grid;
+  const IsoSurfaceParams p = args.params;
+  const int64_t first_vertex = args.first_vertex;
+  uint8_t* const triangles = args.triangles;
+  ParallelFor(ctx, args.count, [=] PLX_HD_LAMBDA(int64_t i) {
     int cell[3];
     const int mask = IsoCellCase(g, first_vertex + i, p.iso_level, cell);
     triangles[i] = mask < 0 ? 0 : p.table->triangle_count[mask];
   });
 }
 
-void EmitIsoTriangles(const ExecContext& ctx, const GridView& grid, int64_t first_vertex,
-                      int64_t count, const IsoSurfaceParams& params,
-                      const int64_t* first_triangle, int64_t* edge_keys) {
-  const GridView g = grid;
-  const IsoSurfaceParams p = params;
-  ParallelFor(ctx, count, [=] PLX_HD_LAMBDA(int64_t i) {
+void Run(const ExecContext& ctx, const EmitIsoTrianglesArgs& args) {
+  const GridView g = args.grid;
+  const IsoSurfaceParams p = args.params;
+  const int64_t first_vertex = args.first_vertex;
+  const int64_t* const first_triangle = args.first_triangle;
+  int64_t* const edge_keys = args.edge_keys;
+  ParallelFor(ctx, args.count, [=] PLX_HD_LAMBDA(int64_t i) {
     int cell[3];
     const int mask = IsoCellCase(g, first_vertex + i, p.iso_level, cell);
     if (mask <= 0) return;
@@ -35,12 +37,15 @@ void EmitIsoTriangles(const ExecContext& ctx, const GridView& grid, int64_t firs
   });
 }
 
-void ComputeIsoVertices(const ExecContext& ctx, const GridView& grid, const int64_t* edge_keys,
-                        int64_t count, const IsoSurfaceParams& params, float* positions,
-                        float* normals, uint8_t* colors, uint8_t* observed) {
-  const GridView g = grid;
-  const IsoSurfaceParams p = params;
-  ParallelFor(ctx, count, [=] PLX_HD_LAMBDA(int64_t i) {
+void Run(const ExecContext& ctx, const ComputeIsoVerticesArgs& args) {
+  const GridView g = args.grid;
+  const IsoSurfaceParams p = args.params;
+  const int64_t* const edge_keys = args.edge_keys;
+  float* const positions = args.positions;
+  float* const normals = args.normals;
+  uint8_t* const colors = args.colors;
+  uint8_t* const observed = args.observed;
+  ParallelFor(ctx, args.count, [=] PLX_HD_LAMBDA(int64_t i) {
     const IsoVertex v = ComputeIsoVertex(g, edge_keys[i], p);
     positions[3 * i + 0] = v.position.x;
     positions[3 * i + 1] = v.position.y;

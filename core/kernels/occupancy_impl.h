@@ -7,11 +7,12 @@
 
 namespace plx::PLX_BACKEND_NS {
 
-void RefreshOccupancy(const ExecContext& ctx, const GridView& grid, const GridWriteView& write,
-                      const int64_t* active_blocks, int64_t count, float threshold) {
-  const GridView g = grid;
-  uint64_t* const cell_bits = write.cell_bits;
-  ParallelFor(ctx, count, [=] PLX_HD_LAMBDA(int64_t i) {
+void Run(const ExecContext& ctx, const RefreshOccupancyArgs& args) {
+  const GridView g = args.grid;
+  uint64_t* const cell_bits = args.write.cell_bits;
+  const int64_t* const active_blocks = args.active_blocks;
+  const float threshold = args.threshold;
+  ParallelFor(ctx, args.count, [=] PLX_HD_LAMBDA(int64_t i) {
     const int64_t block = active_blocks[i];
     uint64_t bits[kBrickEdge];
     ComputeBlockOccupancy(g, block, threshold, bits);

@@ -47,14 +47,12 @@ PLX_HD void UpdateVertex(const GridView& g, const GridWriteView& w, const GridGr
 
 namespace plx::PLX_BACKEND_NS {
 
-void RmsPropStep(const ExecContext& ctx, const GridView& grid, const GridWriteView& write,
-                 const GridGradView& grad, const OptimizerStateView& state,
-                 const RmsPropParams& params) {
-  const GridView g = grid;
-  const GridWriteView w = write;
-  const GridGradView gg = grad;
-  const OptimizerStateView s = state;
-  const RmsPropParams p = params;
+void Run(const ExecContext& ctx, const RmsPropStepArgs& args) {
+  const GridView g = args.grid;
+  const GridWriteView w = args.write;
+  const GridGradView gg = args.grad;
+  const OptimizerStateView s = args.state;
+  const RmsPropParams p = args.params;
   // brick_slices work items per brick, each a contiguous run of its vertices: most bricks
   // receive no gradient in a batch and are skipped whole. The bricks' touched flags are cleared
   // in a second pass, once every slice has read them.

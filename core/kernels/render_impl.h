@@ -6,13 +6,16 @@
 
 namespace plx::PLX_BACKEND_NS {
 
-void RenderPixels(const ExecContext& ctx, const GridView& grid, const CameraView& camera,
-                  const int32_t* pixels, int64_t count, const RenderOptions& options,
-                  float* color, float* depth, float* opacity, float* median_depth) {
-  const GridView g = grid;
-  const CameraView cam = camera;
-  const RenderOptions opt = options;
-  ParallelFor(ctx, count, [=] PLX_HD_LAMBDA(int64_t i) {
+void Run(const ExecContext& ctx, const RenderPixelsArgs& args) {
+  const GridView g = args.grid;
+  const CameraView cam = args.camera;
+  const RenderOptions opt = args.options;
+  const int32_t* const pixels = args.pixels;
+  float* const color = args.color;
+  float* const depth = args.depth;
+  float* const opacity = args.opacity;
+  float* const median_depth = args.median_depth;
+  ParallelFor(ctx, args.count, [=] PLX_HD_LAMBDA(int64_t i) {
     const int64_t pixel = pixels != nullptr ? pixels[i] : i;
     const int u = static_cast<int>(pixel % cam.width);
     const int v = static_cast<int>(pixel / cam.width);

@@ -7,11 +7,10 @@
 
 namespace plx::PLX_BACKEND_NS {
 
-void ResampleGrid(const ExecContext& ctx, const GridView& target,
-                  const GridWriteView& target_write, const GridView& source) {
-  const GridView dst = target;
-  const GridWriteView out = target_write;
-  const GridView src = source;
+void Run(const ExecContext& ctx, const ResampleGridArgs& args) {
+  const GridView dst = args.target;
+  const GridWriteView out = args.target_write;
+  const GridView src = args.source;
   ParallelFor(ctx, dst.num_vertices(), [=] PLX_HD_LAMBDA(int64_t vertex) {
     int v[3];
     dst.VertexCoords(vertex, v);

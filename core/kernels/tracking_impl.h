@@ -8,13 +8,13 @@
 
 namespace plx::PLX_BACKEND_NS {
 
-void ComputeTrackingTerms(const ExecContext& ctx, const GridView& grid,
-                          const TrainingFrameView& frame, const int32_t* pixels, int64_t count,
-                          const TrackingParams& params, TrackingRayTerm* terms) {
-  const GridView g = grid;
-  const TrainingFrameView f = frame;
-  const TrackingParams p = params;
-  ParallelFor(ctx, count, [=] PLX_HD_LAMBDA(int64_t i) {
+void Run(const ExecContext& ctx, const ComputeTrackingTermsArgs& args) {
+  const GridView g = args.grid;
+  const TrainingFrameView f = args.frame;
+  const TrackingParams p = args.params;
+  const int32_t* const pixels = args.pixels;
+  TrackingRayTerm* const terms = args.terms;
+  ParallelFor(ctx, args.count, [=] PLX_HD_LAMBDA(int64_t i) {
     TrackingRayTerm& out = terms[i];
     for (int n = 0; n < kTrackingResiduals; ++n) out.weight[n] = 0.0f;
     const int32_t pixel = pixels[i];

@@ -9,13 +9,14 @@
 
 namespace plx::PLX_BACKEND_NS {
 
-void AddTvGradient(const ExecContext& ctx, const GridView& grid, const GridGradView& grad,
-                   int64_t first_vertex, int64_t vertex_count, float lambda_density,
-                   float lambda_sh) {
-  const GridView g = grid;
-  const GridGradView gg = grad;
+void Run(const ExecContext& ctx, const AddTvGradientArgs& args) {
+  const GridView g = args.grid;
+  const GridGradView gg = args.grad;
   const int64_t total = g.num_vertices();
-  ParallelFor(ctx, vertex_count, [=] PLX_HD_LAMBDA(int64_t i) {
+  const int64_t first_vertex = args.first_vertex;
+  const float lambda_density = args.lambda_density;
+  const float lambda_sh = args.lambda_sh;
+  ParallelFor(ctx, args.vertex_count, [=] PLX_HD_LAMBDA(int64_t i) {
     const int64_t vertex = (first_vertex + i) % total;
     int v[3];
     g.VertexCoords(vertex, v);
