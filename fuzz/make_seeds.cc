@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -24,7 +25,7 @@
 #include "core/formats/trajectory_file.h"
 #include "core/io/image_io.h"
 #include "plenoxd/v1/plenoxd.pb.h"
-#include "proto/pose_codec.h"
+#include "proto/frame_codec.h"
 
 namespace {
 
@@ -104,29 +105,19 @@ void ImageSeeds(const fs::path& dir) {
   Write(dir, "depth.png", OrDie(plx::EncodeDepthImage(Depth(), 5000.0)));
 }
 
+// Frames as the CLI sends them (proto/frame_codec.h FrameToProto), in each encoding.
 void FrameSeeds(const fs::path& dir) {
   auto frame = [](pb::ColorEncoding color, pb::DepthEncoding depth, bool with_pose) {
-    pb::Frame f;
-    f.set_camera_id("cam0");
-    f.set_timestamp(1.5);
-    pb::Intrinsics* k = f.mutable_intrinsics();
-    k->set_fx(6.0);
-    k->set_fy(6.0);
-    k->set_cx(4.0);
-    k->set_cy(3.0);
-    k->set_width(kWidth);
-    k->set_height(kHeight);
-    k->set_depth_scale(5000.0);
-    f.set_color_encoding(color);
-    f.set_color(color == pb::COLOR_ENCODING_RAW_RGB8
-                    ? plx::ColorImageToRgb8Bytes(Color())
-                    : OrDie(plx::EncodeColorImage(
-                          Color(), color == pb::COLOR_ENCODING_JPEG ? ".jpg" : ".png")));
-    f.set_depth_encoding(depth);
-    f.set_depth(depth == pb::DEPTH_ENCODING_RAW_U16 ? plx::DepthImageToU16Bytes(Depth(), 5000.0)
-                                                    : OrDie(plx::EncodeDepthImage(Depth(), 5000.0)));
-    if (with_pose) plx::PoseToProto(Pose(1.0), f.mutable_pose());
-    return f.SerializeAsString();
+    plx::RgbdFrame f;
+    f.timestamp = 1.5;
+    f.color = Color();
+    f.depth = Depth();
+    plx::CameraCalibration c;
+    c.pinhole = {6.0, 6.0, 4.0, 3.0, kWidth, kHeight};
+    c.depth_scale = 5000.0;
+    const std::optional<plx::SE3> pose =
+        with_pose ? std::optional<plx::SE3>(Pose(1.0)) : std::nullopt;
+    return OrDie(plx::FrameToProto(f, c, pose, {color, depth}, "cam0")).SerializeAsString();
   };
   Write(dir, "png_png16_pose", frame(pb::COLOR_ENCODING_PNG, pb::DEPTH_ENCODING_PNG16, true));
   Write(dir, "jpeg_raw", frame(pb::COLOR_ENCODING_JPEG, pb::DEPTH_ENCODING_RAW_U16, false));

@@ -100,16 +100,29 @@ absl::StatusOr<DepthImage> DecodeDepth(const pb::Frame& frame, const std::string
 
 }  // namespace
 
+void IntrinsicsToProto(const PinholeIntrinsics& k, double depth_scale, pb::Intrinsics* out) {
+  out->set_fx(k.fx);
+  out->set_fy(k.fy);
+  out->set_cx(k.cx);
+  out->set_cy(k.cy);
+  out->set_width(static_cast<uint32_t>(k.width));
+  out->set_height(static_cast<uint32_t>(k.height));
+  out->set_depth_scale(depth_scale);
+}
+
 absl::StatusOr<CameraCalibration> IntrinsicsFromProto(const pb::Intrinsics& k,
                                                       const std::string& field,
                                                       bool require_depth_scale) {
   CameraCalibration c;
   c.pinhole = PinholeIntrinsics{k.fx(), k.fy(), k.cx(), k.cy(), static_cast<int>(k.width()),
                                 static_cast<int>(k.height())};
-  c.depth_scale = require_depth_scale ? k.depth_scale() : 1000.0;
-  if (k.width() > 16384 || k.height() > 16384) {
+  // Without one (Render: no depth comes in), core's default keeps the calibration valid.
+  c.depth_scale = require_depth_scale ? k.depth_scale() : CameraCalibration().depth_scale;
+  // Checked on the wire's uint32 before the cast to int could wrap.
+  const uint32_t max_side = static_cast<uint32_t>(kMaxImageSide);
+  if (k.width() > max_side || k.height() > max_side) {
     return Invalid(field, absl::StrCat("image size ", k.width(), "x", k.height(),
-                                       " is larger than 16384x16384"));
+                                       " is larger than ", kMaxImageSide, "x", kMaxImageSide));
   }
   if (absl::Status s = ValidateCalibration(c); !s.ok()) return Invalid(field, std::string(s.message()));
   return c;
@@ -135,6 +148,41 @@ absl::StatusOr<CheckedFrame> CheckFrame(pb::Frame frame, const std::string& fiel
   }
   out.frame = std::move(frame);
   out.field = field;
+  return out;
+}
+
+absl::StatusOr<pb::Frame> FrameToProto(const RgbdFrame& frame, const CameraCalibration& calibration,
+                                       const std::optional<SE3>& pose,
+                                       const FrameEncoding& encoding,
+                                       const std::string& camera_id) {
+  pb::Frame out;
+  out.set_camera_id(camera_id);
+  out.set_timestamp(frame.timestamp);
+  IntrinsicsToProto(calibration.pinhole, calibration.depth_scale, out.mutable_intrinsics());
+  switch (encoding.color) {
+    case pb::COLOR_ENCODING_RAW_RGB8: out.set_color(ColorImageToRgb8Bytes(frame.color)); break;
+    case pb::COLOR_ENCODING_PNG:
+    case pb::COLOR_ENCODING_JPEG: {
+      const char* extension = encoding.color == pb::COLOR_ENCODING_PNG ? ".png" : ".jpg";
+      PLX_ASSIGN_OR_RETURN(*out.mutable_color(), EncodeColorImage(frame.color, extension));
+      break;
+    }
+    default: return Invalid("color_encoding", "must be PNG, JPEG or RAW_RGB8");
+  }
+  out.set_color_encoding(encoding.color);
+  switch (encoding.depth) {
+    case pb::DEPTH_ENCODING_RAW_U16:
+      out.set_depth(DepthImageToU16Bytes(frame.depth, calibration.depth_scale));
+      break;
+    case pb::DEPTH_ENCODING_PNG16: {
+      PLX_ASSIGN_OR_RETURN(*out.mutable_depth(),
+                           EncodeDepthImage(frame.depth, calibration.depth_scale));
+      break;
+    }
+    default: return Invalid("depth_encoding", "must be PNG16 or RAW_U16");
+  }
+  out.set_depth_encoding(encoding.depth);
+  if (pose) PoseToProto(*pose, out.mutable_pose());
   return out;
 }
 

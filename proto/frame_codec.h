@@ -1,7 +1,8 @@
-// plenoxd.v1 Frame and Intrinsics -> core's frames and calibrations. Every check on a client's
-// frame lives here and names the field it rejects (e.g. "frame.intrinsics.fx"), so handlers only
-// convert, call core and map the status. (Render responses: proto/render_codec.h; map names:
-// proto/map_codec.h; poses: proto/pose_codec.h.)
+// plenoxd.v1 Frame and Intrinsics <-> core's frames and calibrations. From the wire (the
+// daemon): every check on a client's frame lives here and names the field it rejects (e.g.
+// "frame.intrinsics.fx"), so handlers only convert, call core and map the status. To the wire
+// (the CLI, the fuzzers' seeds): a frame's images encoded as PNG, JPEG or raw bytes.
+// (Render responses: proto/render_codec.h; maps: proto/map_codec.h; poses: proto/pose_codec.h.)
 #pragma once
 
 #include <cstdint>
@@ -16,6 +17,8 @@
 #include "proto/wire.h"
 
 namespace plx {
+
+void IntrinsicsToProto(const PinholeIntrinsics& k, double depth_scale, pb::Intrinsics* out);
 
 // With require_depth_scale, depth_scale must be positive (incoming depth images).
 absl::StatusOr<CameraCalibration> IntrinsicsFromProto(const pb::Intrinsics& intrinsics,
@@ -48,6 +51,20 @@ struct DecodedFrame {
 // RESOURCE_EXHAUSTED; every other failure is INVALID_ARGUMENT naming the field.
 absl::StatusOr<CheckedFrame> CheckFrame(pb::Frame frame, const std::string& field,
                                         bool require_pose, int64_t max_pixels);
+
+// How a frame's images travel: colour as PNG, JPEG (lossy, smallest) or raw RGB8; depth as
+// 16-bit PNG or raw little-endian uint16, both in units of the calibration's depth_scale.
+struct FrameEncoding {
+  pb::ColorEncoding color = pb::COLOR_ENCODING_PNG;
+  pb::DepthEncoding depth = pb::DEPTH_ENCODING_PNG16;
+};
+
+// `frame` as a Frame message that CheckFrame accepts: its timestamp, the calibration's
+// intrinsics and depth_scale, the images in `encoding`, `camera_id`, and `pose` when given.
+// INVALID_ARGUMENT for an encoding other than the ones above; the image codec's errors.
+absl::StatusOr<pb::Frame> FrameToProto(const RgbdFrame& frame, const CameraCalibration& calibration,
+                                       const std::optional<SE3>& pose,
+                                       const FrameEncoding& encoding, const std::string& camera_id);
 
 // Decodes a checked frame's images (INVALID_ARGUMENT naming the field when the data behind a
 // good header is corrupt; RESOURCE_EXHAUSTED when memory runs out).

@@ -10,6 +10,10 @@ absl::StatusOr<MappingSessionOptions> MappingSessionOptionsFromProto(
     const pb::IntegrateOptions& o, float voxel_size, int64_t max_map_bytes) {
   MappingSessionOptions options;
   options.mapper = MapperOptionsForVoxelSize(voxel_size);
+  if (o.rays_per_iteration() > static_cast<uint32_t>(kMaxBatchSize)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("options.rays_per_iteration: at most ", kMaxBatchSize));
+  }
   if (o.rays_per_iteration() > 0) {
     options.mapper.batch_size = static_cast<int>(o.rays_per_iteration());
   }
@@ -34,6 +38,28 @@ absl::StatusOr<MappingSessionOptions> MappingSessionOptionsFromProto(
     return absl::InvalidArgumentError(absl::StrCat("options: ", s.message()));
   }
   return options;
+}
+
+pb::IntegrateOptions IntegrateOptionsToProto(const MappingSessionOptions& options) {
+  pb::IntegrateOptions wire;
+  wire.set_iterations_per_keyframe(static_cast<uint32_t>(options.iterations_per_keyframe));
+  wire.set_rays_per_iteration(static_cast<uint32_t>(options.mapper.batch_size));
+  wire.set_max_depth(options.mapper.allocation.max_depth);
+  return wire;
+}
+
+pb::MappingProgress MappingProgressToProto(const MappingSessionProgress& p,
+                                           const std::string& job_id, uint64_t map_version,
+                                           double elapsed_s) {
+  pb::MappingProgress progress;
+  progress.set_job_id(job_id);
+  progress.set_keyframes_integrated(static_cast<uint32_t>(p.keyframes_integrated));
+  progress.set_iterations(static_cast<uint32_t>(p.iterations));
+  progress.set_train_psnr(p.train_psnr);
+  progress.set_train_depth_l1_m(p.train_depth_l1_m);
+  progress.set_map_version(map_version);
+  progress.set_elapsed_s(elapsed_s);
+  return progress;
 }
 
 }  // namespace plx

@@ -13,6 +13,9 @@ absl::Status Invalid(const std::string& field, const std::string& what) {
   return absl::InvalidArgumentError(absl::StrCat(field, ": ", what));
 }
 
+// A RenderResponse's depth is in millimetres (plenoxd.proto): 1000 units per metre.
+constexpr double kRenderDepthScale = 1000.0;
+
 }  // namespace
 
 absl::Status RenderedViewToProto(const RenderedView& view, pb::ColorEncoding color_encoding,
@@ -42,12 +45,13 @@ absl::Status RenderedViewToProto(const RenderedView& view, pb::ColorEncoding col
   switch (depth_encoding) {
     case pb::DEPTH_ENCODING_UNSPECIFIED:
     case pb::DEPTH_ENCODING_PNG16: {
-      PLX_ASSIGN_OR_RETURN(*out->mutable_depth(), EncodeDepthImage(view.z_depth, 1000.0));
+      PLX_ASSIGN_OR_RETURN(*out->mutable_depth(),
+                           EncodeDepthImage(view.z_depth, kRenderDepthScale));
       out->set_depth_encoding(pb::DEPTH_ENCODING_PNG16);
       break;
     }
     case pb::DEPTH_ENCODING_RAW_U16: {
-      *out->mutable_depth() = DepthImageToU16Bytes(view.z_depth, 1000.0);
+      *out->mutable_depth() = DepthImageToU16Bytes(view.z_depth, kRenderDepthScale);
       out->set_depth_encoding(pb::DEPTH_ENCODING_RAW_U16);
       break;
     }

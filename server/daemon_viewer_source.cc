@@ -10,14 +10,7 @@
 
 namespace plx::server {
 
-std::vector<web::ViewerMapInfo> DaemonViewerSource::ListMaps() const {
-  std::vector<web::ViewerMapInfo> out;
-  for (const MapStatus& s : state_->maps->List()) {
-    out.push_back({s.name, s.voxel_size, s.version, s.bricks, s.memory_bytes, s.keyframes,
-                   s.mapping, s.source});
-  }
-  return out;
-}
+std::vector<MapStatus> DaemonViewerSource::ListMaps() const { return state_->maps->List(); }
 
 absl::StatusOr<web::ViewerMap> DaemonViewerSource::Latest(const std::string& name) const {
   absl::StatusOr<MapVersion> latest = state_->maps->Latest(name);

@@ -19,7 +19,7 @@ class DaemonViewerSource final : public web::ViewerSource {
       : state_(state), title_(std::move(title)) {}
 
   std::string Title() const override { return title_; }
-  std::vector<web::ViewerMapInfo> ListMaps() const override;
+  std::vector<MapStatus> ListMaps() const override;
   absl::StatusOr<web::ViewerMap> Latest(const std::string& name) const override;
   absl::StatusOr<web::ViewerTrajectories> Trajectories(const std::string& name) const override;
   absl::Status RunOnDevice(const DeviceWork& work, absl::Duration timeout) override;

@@ -123,14 +123,7 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
   }
   const MappingSessionProgress p = session_ ? session_->progress() : MappingSessionProgress();
   const bool finishing = input_closed && session_ != nullptr && !session_->has_work();
-  pb::MappingProgress progress;
-  progress.set_job_id(job_id_);
-  progress.set_keyframes_integrated(static_cast<uint32_t>(p.keyframes_integrated));
-  progress.set_iterations(static_cast<uint32_t>(p.iterations));
-  progress.set_train_psnr(p.train_psnr);
-  progress.set_train_depth_l1_m(p.train_depth_l1_m);
-  progress.set_map_version(version_);
-  progress.set_elapsed_s(SecondsSince(start_));
+  pb::MappingProgress progress = MappingProgressToProto(p, job_id_, version_, SecondsSince(start_));
   integrated_ = p.keyframes_integrated;
 
   std::lock_guard<std::mutex> lock(mutex_);

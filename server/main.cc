@@ -14,6 +14,7 @@
 #include "absl/strings/str_cat.h"
 #include "app/flags.h"
 #include "app/make_backend.h"
+#include "core/geometry/intrinsics.h"
 #include "server/daemon.h"
 #include "server/secret_files.h"
 #include "server/stop_watchdog.h"
@@ -114,10 +115,10 @@ int main(int argc, char** argv) {
   auto max_map_mb = flags.GetInt("max-map-mb", 1, 1 << 24);
   auto max_streams = flags.GetInt("max-streams", 1, 100000);
   auto max_message_mb = flags.GetInt("max-message-mb", 1, 2047);
-  // Frames are at most 16384 pixels a side (IntrinsicsFromProto).
-  auto max_frame_pixels = flags.GetInt("max-frame-pixels", 1, 16384 * 16384);
-  // Up to the largest view the API accepts (16384 x 16384).
-  auto max_render_pixels = flags.GetInt("max-render-pixels", 1, 16384 * 16384);
+  // Frames and views are at most kMaxImageSide pixels a side (IntrinsicsFromProto).
+  constexpr int kMaxImagePixels = plx::kMaxImageSide * plx::kMaxImageSide;
+  auto max_frame_pixels = flags.GetInt("max-frame-pixels", 1, kMaxImagePixels);
+  auto max_render_pixels = flags.GetInt("max-render-pixels", 1, kMaxImagePixels);
   auto threads = flags.GetInt("threads", 0, 4096);
   auto mapping_nice = flags.GetInt("mapping-nice", 0, 19);
   auto drain = flags.GetDouble("drain-seconds", 0.0, 3600.0);

@@ -44,16 +44,11 @@ absl::StatusOr<const MapStore::Entry*> MapStore::Find(const std::string& name) c
 }
 
 MapStatus MapStore::StatusOf(const std::string& name, const Entry& e) const {
-  MapStatus s;
-  s.name = name;
-  s.voxel_size = e.map->grid.voxel_size();
+  MapStatus s = MapStatusOf(name, *e.map);
   s.version = e.version;
-  s.bricks = e.map->grid.num_bricks();
-  s.memory_bytes = e.map->grid.Memory().total_bytes();
   s.keyframes = e.keyframes;
   s.dirty = e.dirty;
   s.mapping = e.mapping;
-  s.source = e.map->source;
   return s;
 }
 

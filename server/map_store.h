@@ -13,6 +13,7 @@
 
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
+#include "core/grid/map_status.h"
 #include "core/grid/plenoxel_map.h"
 #include "core/io/atomic_write.h"
 
@@ -27,22 +28,12 @@ struct MapStoreOptions {
   absl::Duration test_only_save_delay = absl::ZeroDuration();
 };
 
+// Maps are listed as core's MapStatus (core/grid/map_status.h).
+
 // A dirty map that could not be saved, and why.
 struct UnsavedMap {
   std::string name;
   absl::Status reason;
-};
-
-struct MapStatus {
-  std::string name;
-  float voxel_size = 0.0f;
-  uint64_t version = 0;
-  int64_t bricks = 0;
-  int64_t memory_bytes = 0;
-  int keyframes = 0;
-  bool dirty = false;    // changed since saved
-  bool mapping = false;  // a mapping job holds the writer lease
-  std::string source;
 };
 
 // What holds a map's mapping lease: errors about a busy map name it, so the client knows what to

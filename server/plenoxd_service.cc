@@ -24,20 +24,9 @@
 namespace plx::server {
 namespace {
 
-void ToProto(const MapStatus& s, pb::MapInfo* out) {
-  out->set_name(s.name);
-  out->set_voxel_size(s.voxel_size);
-  out->set_version(s.version);
-  out->set_bricks(static_cast<uint64_t>(s.bricks));
-  out->set_memory_bytes(static_cast<uint64_t>(s.memory_bytes));
-  out->set_keyframes(static_cast<uint32_t>(s.keyframes));
-  out->set_dirty(s.dirty);
-  out->set_mapping(s.mapping);
-  out->set_source(s.source);
-}
-
+// A map RPC's reply: the map's MapInfo, or the error.
 absl::Status StatusToProto(const absl::StatusOr<MapStatus>& status, pb::MapInfo* out) {
-  if (status.ok()) ToProto(*status, out);
+  if (status.ok()) *out = MapStatusToProto(*status);
   return status.status();
 }
 
@@ -59,10 +48,10 @@ grpc::ServerUnaryReactor* PlenoxdService::CreateMap(grpc::CallbackServerContext*
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   absl::Status status = CheckCall(*state_, context);
   if (status.ok()) {
-    // Only exactly 0 means the default; negative and NaN sizes reach the store's range check.
-    const float voxel =
-        request->voxel_size() == 0.0f ? MapperOptions{}.voxel_size : request->voxel_size();
-    status = StatusToProto(state_->maps->Create(request->name(), voxel), response);
+    const absl::StatusOr<float> voxel =
+        VoxelSizeFromProto(request->voxel_size(), MapperOptions{}.voxel_size, "voxel_size");
+    status = voxel.ok() ? StatusToProto(state_->maps->Create(request->name(), *voxel), response)
+                        : voxel.status();
   }
   Finish(reactor, "CreateMap", status);
   return reactor;
@@ -84,7 +73,7 @@ grpc::ServerUnaryReactor* PlenoxdService::ListMaps(grpc::CallbackServerContext* 
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   const absl::Status status = CheckCall(*state_, context);
   if (status.ok()) {
-    for (const MapStatus& s : state_->maps->List()) ToProto(s, response->add_maps());
+    for (const MapStatus& s : state_->maps->List()) *response->add_maps() = MapStatusToProto(s);
   }
   Finish(reactor, "ListMaps", status);
   return reactor;

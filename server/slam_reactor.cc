@@ -9,90 +9,16 @@
 #include "core/common/status_macros.h"
 #include "core/geometry/world_pose.h"
 #include "core/slam/slam_session.h"
-#include "proto/track_codec.h"
+#include "proto/slam_codec.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
 
 namespace plx::server {
 namespace {
 
-pb::SlamState ToProto(SlamState state) {
-  switch (state) {
-    case SlamState::kOk: return pb::SLAM_STATE_OK;
-    case SlamState::kDegraded: return pb::SLAM_STATE_DEGRADED;
-    case SlamState::kLost: return pb::SLAM_STATE_LOST;
-    case SlamState::kRelocalised: return pb::SLAM_STATE_RELOCALISED;
-    case SlamState::kWaiting: return pb::SLAM_STATE_WAITING;
-  }
-  return pb::SLAM_STATE_UNSPECIFIED;
-}
-
-void MappingToProto(const SlamJobStatus& s, pb::SlamMapping* out) {
-  out->set_job_id(s.job_id);
-  out->set_keyframes(static_cast<uint32_t>(s.mapping.keyframes));
-  out->set_keyframes_integrated(static_cast<uint32_t>(s.mapping.keyframes_integrated));
-  out->set_iterations(static_cast<uint32_t>(s.mapping.mapping_iterations));
-  out->set_map_version(static_cast<uint64_t>(s.mapping.map_version));
-  out->set_map_bytes(static_cast<uint64_t>(s.mapping.map_bytes));
-  out->set_streams(static_cast<uint32_t>(s.streams));
-  out->set_finished(s.finished);
-}
-
-// A non-negative finite number, 0 meaning the default.
-absl::Status CheckOptional(double value, const char* field) {
-  if (std::isfinite(value) && value >= 0.0) return absl::OkStatus();
-  return absl::InvalidArgumentError(
-      absl::StrCat("options.", field, ": must be finite and >= 0 (0 = the default), got ", value));
-}
-
-// The stream's options on top of SLAM's defaults at the map's voxel size (core/slam).
-absl::StatusOr<SlamOptions> SlamOptionsFromProto(const pb::SlamOptions& o, float voxel_size,
-                                                 int64_t max_map_bytes) {
-  PLX_ASSIGN_OR_RETURN(const TrackerOptions tracker,
-                       TrackerOptionsFromProto(o.tracking(), "options.tracking"));
-  SlamOptions s = SlamOptionsFor(voxel_size, tracker);
-  PLX_RETURN_IF_ERROR(CheckOptional(o.kf_translation_m(), "kf_translation_m"));
-  PLX_RETURN_IF_ERROR(CheckOptional(o.kf_rotation_deg(), "kf_rotation_deg"));
-  PLX_RETURN_IF_ERROR(CheckOptional(o.kf_unmapped_fraction(), "kf_unmapped_fraction"));
-  PLX_RETURN_IF_ERROR(CheckOptional(o.kf_interval_s(), "kf_interval_s"));
-  PLX_RETURN_IF_ERROR(CheckOptional(o.max_depth(), "max_depth"));
-  if (o.kf_translation_m() > 0) s.keyframes.max_translation_m = o.kf_translation_m();
-  if (o.kf_rotation_deg() > 0) s.keyframes.max_rotation_rad = o.kf_rotation_deg() * M_PI / 180.0;
-  if (o.kf_unmapped_fraction() > 0) s.keyframes.max_unmapped_fraction = o.kf_unmapped_fraction();
-  if (o.kf_interval_s() > 0) s.keyframes.max_interval_s = o.kf_interval_s();
-  if (absl::Status st = ValidateKeyframePolicy(s.keyframes); !st.ok()) {
-    return absl::InvalidArgumentError(absl::StrCat("options: ", st.message()));
-  }
-  if (o.iterations_per_keyframe() > static_cast<uint32_t>(kMaxIterationsPerKeyframe)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.iterations_per_keyframe: at most ", kMaxIterationsPerKeyframe));
-  }
-  if (o.iterations_per_keyframe() > 0) {
-    s.mapping.iterations_per_keyframe = static_cast<int>(o.iterations_per_keyframe());
-  }
-  if (o.rays_per_iteration() > 0) {
-    s.mapping.mapper.batch_size = static_cast<int>(o.rays_per_iteration());
-  }
-  if (o.max_depth() > 0) {
-    s.mapping.mapper.allocation.max_depth = o.max_depth();
-    s.mapping.mapper.fusion.max_depth = o.max_depth();
-  }
-  // --max-map-mb is checked before each keyframe's bricks are allocated.
-  s.mapping.mapper.max_map_bytes = max_map_bytes;
-  if (o.realtime() && o.deterministic()) {
-    return absl::InvalidArgumentError(
-        "options: realtime and deterministic exclude each other (lock-step waits for mapping)");
-  }
-  s.deterministic = o.deterministic();
-  if (o.has_max_pending_keyframes()) {
-    // Checked with the rest below (ValidateSlamOptions: range, lock-step); a value past int's
-    // range becomes negative here and is refused there.
-    s.max_pending_keyframes = static_cast<int>(o.max_pending_keyframes());
-  }
-  if (absl::Status st = ValidateSlamOptions(s); !st.ok()) {
-    return absl::InvalidArgumentError(absl::StrCat("options: ", st.message()));
-  }
-  return s;
+// The job's mapping as an update carries it.
+pb::SlamMapping MappingToProto(const SlamJobStatus& s) {
+  return SlamMappingToProto(s.mapping, s.job_id, s.streams, s.finished);
 }
 
 }  // namespace
@@ -108,16 +34,11 @@ SlamReactor::~SlamReactor() {
 
 absl::Status SlamReactor::HandleFirstMessage() {
   const pb::SlamOptions& o = request_.options();
-  if (!std::isfinite(o.voxel_size()) || o.voxel_size() < 0) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.voxel_size: must be finite and >= 0 (0 = the default), got ", o.voxel_size()));
-  }
   // The options and the initial pose are checked before the store is touched (a refused
   // stream creates no map, which would count against --max-maps); the lengths that scale with
-  // the voxel size are set again at the map's own below.
-  // 0 = SLAM's default voxel size (the proto's 0.02 m), for a new map and for these checks.
-  const float voxel_size =
-      o.voxel_size() > 0 ? o.voxel_size() : DefaultSlamOptions().mapping.mapper.voxel_size;
+  // the voxel size are set again at the map's own below. The voxel size asked for (SLAM's
+  // default for 0) is a new map's, and the one these checks use.
+  PLX_ASSIGN_OR_RETURN(const float voxel_size, SlamVoxelSizeFromProto(o));
   PLX_RETURN_IF_ERROR(
       SlamOptionsFromProto(o, voxel_size, state_->maps->max_map_bytes()).status());
   std::optional<SE3> initial_pose;
@@ -145,8 +66,7 @@ absl::Status SlamReactor::HandleFirstMessage() {
   if (initial_pose) tracker_options_.initial_pose = initial_pose;
   realtime_ = o.realtime();
   max_pending_keyframes_ = split.gate.max_pending_keyframes;
-  const bool mapping_set =
-      o.iterations_per_keyframe() > 0 || o.rays_per_iteration() > 0 || o.max_depth() > 0;
+  const bool mapping_set = SlamMappingOptionsChosen(o);
   listener_ = std::make_shared<SlamJobListener>([this] { OnJobChanged(); });
   PLX_ASSIGN_OR_RETURN(job_, state_->slam_jobs->Join(map_name_, split, mapping_set, listener_));
   state_->metrics->slam_streams++;
@@ -225,11 +145,8 @@ void SlamReactor::AdvanceLocked() {
   // The last stream waits for the job to finish the map (OnJobChanged); with others still on
   // it, mapping goes on for them.
   if (!s.finished && s.streams == 0) return;
-  pb::SlamUpdate done;
-  done.set_done(true);
-  MappingToProto(s, done.mutable_mapping());
   done_sent_ = true;
-  WriteLocked(std::move(done));
+  WriteLocked(SlamDoneToProto(MappingToProto(s)));
   MaybeFinishLocked();
 }
 
@@ -263,7 +180,6 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
     job = job_;
     ResumeReadingLocked();
   }
-  pb::SlamUpdate update;
   bool client_error = false;  // the frame's data was bad: no error log, the stream just ends
   bool retry = false;         // the map has no version yet: the frame waits for it
   SlamFrameResult result;
@@ -319,18 +235,9 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
   }
   job_->trajectory().Record(camera_, camera_label, result.timestamp, result.pose, result.state);
   ++processed_;
-  update.set_frame(work->index);
-  update.set_timestamp(result.timestamp);
-  PoseToProto(result.pose, update.mutable_pose());
-  update.set_state(ToProto(result.state));
-  update.set_reason(result.reason);
-  update.set_keyframe(result.keyframe);
-  update.set_map_version(static_cast<uint64_t>(result.map_version));
-  update.set_latency_ms(1000.0 * seconds);
-  update.set_dropped(dropped_);
+  pb::SlamUpdate update = SlamUpdateToProto(result, work->index, 1000.0 * seconds, dropped_,
+                                            MappingToProto(job_->Status()));
   dropped_ = 0;
-  update.set_valid_rays(static_cast<uint32_t>(result.tracking.valid_rays));
-  MappingToProto(job_->Status(), update.mutable_mapping());
   state_->metrics->ObserveSlamFrame(static_cast<int>(result.state), seconds);
   if (result.keyframe) {
     ++keyframes_;

@@ -103,15 +103,9 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
       if (!tracked.ok()) return tracked.status();  // the backend's (memory, device)
       result = *std::move(tracked);
     }
-    estimate.set_timestamp(frame.timestamp);
-    PoseToProto(result.pose, estimate.mutable_pose());
-    estimate.set_state(TrackingStateToProto(result.state));
-    estimate.set_reason(result.reason);
-    estimate.set_valid_rays(static_cast<uint32_t>(result.valid_rays));
-    estimate.set_map_version(map_.version);
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - work->received).count();
-    estimate.set_latency_ms(1000.0 * seconds);
+    estimate = PoseEstimateToProto(result, frame.timestamp, map_.version, 1000.0 * seconds);
     state_->metrics->frames_tracked++;
     if (result.state == TrackingState::kLost) state_->metrics->frames_lost++;
     state_->metrics->ObserveTrackLatency(seconds);

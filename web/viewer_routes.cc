@@ -149,7 +149,7 @@ HttpResponse Viewer::Maps() {
   json.Key("max_render_pixels").Int(options_.max_render_pixels);
   json.Key("max_mesh_triangles").Int(options_.max_mesh_triangles);
   json.Key("maps").BeginArray();
-  for (const ViewerMapInfo& m : source_->ListMaps()) {
+  for (const MapStatus& m : source_->ListMaps()) {
     json.BeginObject()
         .Key("name").String(m.name)
         .Key("voxel_size").Number(m.voxel_size)

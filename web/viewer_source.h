@@ -17,22 +17,11 @@
 #include "absl/time/time.h"
 #include "core/geometry/intrinsics.h"
 #include "core/geometry/se3.h"
+#include "core/grid/map_status.h"
 #include "core/grid/plenoxel_map.h"
 #include "core/kernels/backend.h"
 
 namespace plx::web {
-
-// One map of the list (plenoxd's ListMaps, without gRPC).
-struct ViewerMapInfo {
-  std::string name;
-  float voxel_size = 0.0f;
-  uint64_t version = 0;
-  int64_t bricks = 0;
-  int64_t memory_bytes = 0;
-  int keyframes = 0;
-  bool mapping = false;  // a mapping job (Integrate, SLAM) holds the map
-  std::string source;
-};
 
 // A published, immutable map version.
 struct ViewerMap {
@@ -68,7 +57,8 @@ class ViewerSource {
 
   // Shown in the page's title: "plenoxd 0.1.0", "plenox view room.plx".
   virtual std::string Title() const = 0;
-  virtual std::vector<ViewerMapInfo> ListMaps() const = 0;
+  // The maps, as plenoxd's ListMaps lists them (without gRPC).
+  virtual std::vector<MapStatus> ListMaps() const = 0;
   // The newest published version; NotFound for an unknown map.
   virtual absl::StatusOr<ViewerMap> Latest(const std::string& name) const = 0;
   // NotFound for an unknown map; a map without SLAM streams has no cameras.

@@ -276,10 +276,10 @@ absl::StatusOr<TrackerOptions> TrackerOptionsFromFlags(const FlagSet& flags) {
   TrackerOptions options =
       TrackerOptionsForMode(mode == "adam" ? TrackingMode::kAdam : TrackingMode::kGaussNewton);
   if (flags.IsSet("rays")) {
-    PLX_ASSIGN_OR_RETURN(options.rays, flags.GetInt("rays", 16, 1 << 22));
+    PLX_ASSIGN_OR_RETURN(options.rays, flags.GetInt("rays", kMinTrackerRays, kMaxTrackerRays));
   }
   if (flags.IsSet("iterations")) {
-    PLX_ASSIGN_OR_RETURN(options.iterations, flags.GetInt("iterations", 1, 10000));
+    PLX_ASSIGN_OR_RETURN(options.iterations, flags.GetInt("iterations", 1, kMaxTrackerIterations));
   }
   return options;
 }

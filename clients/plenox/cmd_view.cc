@@ -16,6 +16,7 @@
 #include "absl/time/clock.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
+#include "core/grid/map_status.h"
 #include "web/http_server.h"
 #include "web/three_js.h"
 #include "web/viewer_routes.h"
@@ -37,15 +38,10 @@ class FileViewerSource final : public web::ViewerSource {
 
   std::string Title() const override { return "plenox view " + file_; }
 
-  std::vector<web::ViewerMapInfo> ListMaps() const override {
-    web::ViewerMapInfo info;
-    info.name = name_;
-    info.voxel_size = map_->grid.voxel_size();
-    info.version = 1;
-    info.bricks = map_->grid.num_bricks();
-    info.memory_bytes = map_->grid.Memory().total_bytes();
-    info.source = map_->source;
-    return {info};
+  std::vector<MapStatus> ListMaps() const override {
+    MapStatus status = MapStatusOf(name_, *map_);
+    status.version = 1;
+    return {status};
   }
 
   absl::StatusOr<web::ViewerMap> Latest(const std::string& name) const override {

@@ -24,12 +24,14 @@ absl::StatusOr<double> VoxelSizeFromFlags(const FlagSet& flags) {
 }
 
 void AddBatchAndMaxDepthFlags(FlagSet& flags) {
-  flags.Add("batch", "N", "rays per iteration", "8192")
-      .Add("max-depth", "M", "ignore depth measurements beyond this (metres)", "10");
+  const MapperOptions defaults;
+  flags.Add("batch", "N", "rays per iteration", absl::StrCat(defaults.batch_size))
+      .Add("max-depth", "M", "ignore depth measurements beyond this (metres)",
+           absl::StrCat(defaults.allocation.max_depth));
 }
 
 absl::StatusOr<int> BatchFromFlags(const FlagSet& flags) {
-  return flags.GetInt("batch", 1, 1 << 22);
+  return flags.GetInt("batch", 1, kMaxBatchSize);
 }
 
 absl::StatusOr<double> MaxDepthFromFlags(const FlagSet& flags) {

@@ -9,6 +9,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <sstream>
 
 #include <grpc/support/log.h>
@@ -18,9 +19,7 @@
 #include "absl/strings/str_format.h"
 #include "clients/plenox/cli_common.h"
 #include "core/common/status_macros.h"
-#include "core/io/image_io.h"
-#include "core/slam/slam_tracker.h"
-#include "core/tracking/tracker.h"
+#include "proto/slam_codec.h"
 
 namespace plx::cli {
 namespace {
@@ -247,87 +246,36 @@ std::unique_ptr<RemoteClient> ConnectOrReport(const std::string& command,
   return std::move(*client);
 }
 
-void IntrinsicsToProto(const PinholeIntrinsics& k, double depth_scale, pb::Intrinsics* out) {
-  out->set_fx(k.fx);
-  out->set_fy(k.fy);
-  out->set_cx(k.cx);
-  out->set_cy(k.cy);
-  out->set_width(static_cast<uint32_t>(k.width));
-  out->set_height(static_cast<uint32_t>(k.height));
-  out->set_depth_scale(depth_scale);
-}
-
-absl::StatusOr<WireEncoding> ParseWireEncoding(const std::string& text) {
-  if (text == "png") return WireEncoding::kPng;
-  if (text == "raw") return WireEncoding::kRaw;
+absl::StatusOr<FrameEncoding> ParseWireEncoding(const std::string& text) {
+  if (text == "png") return FrameEncoding{pb::COLOR_ENCODING_PNG, pb::DEPTH_ENCODING_PNG16};
+  if (text == "raw") return FrameEncoding{pb::COLOR_ENCODING_RAW_RGB8, pb::DEPTH_ENCODING_RAW_U16};
   return absl::InvalidArgumentError(
       absl::StrFormat("--encoding must be png or raw, got \"%s\"", text));
 }
 
-absl::StatusOr<pb::Frame> FrameToProto(const RgbdFrame& frame, const CameraCalibration& calibration,
-                                       bool with_pose, WireEncoding encoding) {
-  pb::Frame out;
-  out.set_camera_id("plenox");
-  out.set_timestamp(frame.timestamp);
-  IntrinsicsToProto(calibration.pinhole, calibration.depth_scale, out.mutable_intrinsics());
-  if (encoding == WireEncoding::kRaw) {
-    out.set_color(ColorImageToRgb8Bytes(frame.color));
-    out.set_color_encoding(pb::COLOR_ENCODING_RAW_RGB8);
-    out.set_depth(DepthImageToU16Bytes(frame.depth, calibration.depth_scale));
-    out.set_depth_encoding(pb::DEPTH_ENCODING_RAW_U16);
-  } else {
-    absl::StatusOr<std::string> color = EncodeColorImage(frame.color, ".png");
-    if (!color.ok()) return color.status();
-    absl::StatusOr<std::string> depth = EncodeDepthImage(frame.depth, calibration.depth_scale);
-    if (!depth.ok()) return depth.status();
-    out.set_color(std::move(*color));
-    out.set_color_encoding(pb::COLOR_ENCODING_PNG);
-    out.set_depth(std::move(*depth));
-    out.set_depth_encoding(pb::DEPTH_ENCODING_PNG16);
-  }
-  if (with_pose) {
-    if (!frame.ground_truth) {
-      return absl::InvalidArgumentError(
-          absl::StrFormat("frame at t=%.6f has no ground-truth pose", frame.timestamp));
-    }
-    PoseToProto(*frame.ground_truth, out.mutable_pose());
-  }
-  return out;
-}
-
 absl::StatusOr<pb::Frame> LoadFrameToProto(const RgbdDataset& dataset, int index, bool with_pose,
-                                           WireEncoding encoding) {
+                                           const FrameEncoding& encoding) {
   PLX_ASSIGN_OR_RETURN(const RgbdFrame frame, dataset.LoadFrame(index));
-  return FrameToProto(frame, dataset.calibration(), with_pose, encoding);
+  if (with_pose && !frame.ground_truth) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("frame at t=%.6f has no ground-truth pose", frame.timestamp));
+  }
+  return FrameToProto(frame, dataset.calibration(),
+                      with_pose ? frame.ground_truth : std::optional<SE3>(), encoding, "plenox");
 }
 
 const char* TrackingStateText(pb::TrackingState state) {
-  switch (state) {
-    case pb::TRACKING_STATE_OK: return TrackingStateName(TrackingState::kOk);
-    case pb::TRACKING_STATE_DEGRADED: return TrackingStateName(TrackingState::kDegraded);
-    case pb::TRACKING_STATE_LOST: return TrackingStateName(TrackingState::kLost);
-    default: return "?";
-  }
+  const std::optional<TrackingState> core = TrackingStateFromProto(state);
+  return core ? TrackingStateName(*core) : "?";
 }
 
 const char* SlamStateText(pb::SlamState state) {
-  switch (state) {
-    case pb::SLAM_STATE_OK: return SlamStateName(SlamState::kOk);
-    case pb::SLAM_STATE_DEGRADED: return SlamStateName(SlamState::kDegraded);
-    case pb::SLAM_STATE_LOST: return SlamStateName(SlamState::kLost);
-    case pb::SLAM_STATE_RELOCALISED: return SlamStateName(SlamState::kRelocalised);
-    case pb::SLAM_STATE_WAITING: return SlamStateName(SlamState::kWaiting);
-    default: return "?";
-  }
+  const std::optional<SlamState> core = SlamStateFromProto(state);
+  return core ? SlamStateName(*core) : "?";
 }
 
-pb::TrackOptions TrackOptionsToProto(const FlagSet& flags, const TrackerOptions& options) {
-  pb::TrackOptions wire;
-  wire.set_mode(options.mode == TrackingMode::kAdam ? pb::TrackOptions::MODE_ADAM
-                                                    : pb::TrackOptions::MODE_GAUSS_NEWTON);
-  if (flags.IsSet("rays")) wire.set_rays(static_cast<uint32_t>(options.rays));
-  if (flags.IsSet("iterations")) wire.set_iterations(static_cast<uint32_t>(options.iterations));
-  return wire;
+TrackOptionsFields TrackOptionsFieldsFromFlags(const FlagSet& flags) {
+  return {.rays = flags.IsSet("rays"), .iterations = flags.IsSet("iterations")};
 }
 
 }  // namespace plx::cli

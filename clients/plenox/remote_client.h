@@ -27,7 +27,9 @@
 #include "core/geometry/se3.h"
 #include "core/tracking/tracker.h"
 #include "plenoxd/v1/plenoxd.grpc.pb.h"
+#include "proto/frame_codec.h"
 #include "proto/pose_codec.h"
+#include "proto/track_codec.h"
 
 namespace plx::cli {
 
@@ -93,24 +95,20 @@ class RemoteClient {
 std::unique_ptr<RemoteClient> ConnectOrReport(const std::string& command,
                                               const RemoteOptions& options, int* exit_code);
 
-// Wire conversions; poses: PoseToProto / PoseFromProto (proto/pose_codec.h, shared with the
-// daemon).
-void IntrinsicsToProto(const PinholeIntrinsics& k, double depth_scale, pb::Intrinsics* out);
+// Wire conversions are proto/'s codecs, shared with the daemon (poses: pose_codec.h; frames and
+// intrinsics: frame_codec.h; options: track_codec.h, slam_codec.h, integrate_codec.h); what is
+// here is the flags' side of them.
 
-// How frames travel: PNG (colour 8-bit, depth 16-bit; small on the wire, costs an encode here
-// and a decode on the daemon) or raw (RAW_RGB8 + RAW_U16; 1.5 MB at 640x480, no codec).
-enum class WireEncoding { kPng, kRaw };
-absl::StatusOr<WireEncoding> ParseWireEncoding(const std::string& text);
+// --encoding png|raw: how frames travel, PNG (colour 8-bit, depth 16-bit; small on the wire,
+// costs an encode here and a decode on the daemon) or raw (RAW_RGB8 + RAW_U16; 1.5 MB at
+// 640x480, no codec).
+absl::StatusOr<FrameEncoding> ParseWireEncoding(const std::string& text);
 
-// A decoded dataset frame as a Frame message: colour and depth (with the calibration's depth
-// scale) in `encoding`, the calibration's intrinsics, and the frame's ground-truth pose when
-// `with_pose` (InvalidArgument when it has none).
-absl::StatusOr<pb::Frame> FrameToProto(const RgbdFrame& frame, const CameraCalibration& calibration,
-                                       bool with_pose, WireEncoding encoding = WireEncoding::kPng);
-// Frame `index` of `dataset`, loaded and encoded as FrameToProto does with the dataset's
-// calibration; a frame that does not load is its error.
+// Frame `index` of `dataset` as a Frame message (FrameToProto with the dataset's calibration,
+// camera id "plenox"), with the frame's ground-truth pose when `with_pose` (InvalidArgument when
+// it has none); a frame that does not load is its error.
 absl::StatusOr<pb::Frame> LoadFrameToProto(const RgbdDataset& dataset, int index, bool with_pose,
-                                           WireEncoding encoding = WireEncoding::kPng);
+                                           const FrameEncoding& encoding = FrameEncoding());
 
 // The name of a TrackingState for progress lines ("OK", "DEGRADED", "LOST").
 const char* TrackingStateText(pb::TrackingState state);
@@ -118,9 +116,9 @@ const char* TrackingStateText(pb::TrackingState state);
 // SLAM names them.
 const char* SlamStateText(pb::SlamState state);
 
-// The tracker settings of the --mode/--rays/--iterations flags (AddTrackerFlags) as the wire's
-// TrackOptions: the mode always, rays and iterations only when the flags were given (0 = the
-// daemon's defaults for the mode, which are TrackerOptionsForMode's too).
-pb::TrackOptions TrackOptionsToProto(const FlagSet& flags, const TrackerOptions& options);
+// Which tracker settings the user chose with --rays/--iterations (AddTrackerFlags): only those
+// go on the wire (TrackOptionsToProto; the others are the daemon's defaults for the mode, which
+// are TrackerOptionsForMode's too).
+TrackOptionsFields TrackOptionsFieldsFromFlags(const FlagSet& flags);
 
 }  // namespace plx::cli

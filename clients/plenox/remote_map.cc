@@ -12,6 +12,8 @@
 #include "clients/plenox/map_flags.h"
 #include "clients/plenox/remote_client.h"
 #include "core/eval/map_metrics.h"
+#include "core/mapping/mapping_session.h"
+#include "proto/integrate_codec.h"
 
 namespace plx::cli {
 namespace {
@@ -59,7 +61,8 @@ FlagSet RemoteMapFlags() {
             true);
   AddEveryFlag(flags, "K");
   AddVoxelSizeFlag(flags, "voxel edge in metres of a new map (an existing map keeps its own)");
-  flags.Add("iterations-per-keyframe", "N", "optimisation iterations per keyframe", "50");
+  flags.Add("iterations-per-keyframe", "N", "optimisation iterations per keyframe",
+            absl::StrCat(kDefaultIterationsPerKeyframe));
   AddBatchAndMaxDepthFlags(flags);
   AddJsonAndQuietSwitches(flags);
   return flags;
@@ -204,7 +207,8 @@ int RunRemoteMap(const RemoteOptions& remote, const std::vector<std::string>& ar
   if (!every.ok()) return ReportError(kCommand, every.status(), true);
   absl::StatusOr<double> voxel = VoxelSizeFromFlags(flags);
   if (!voxel.ok()) return ReportError(kCommand, voxel.status(), true);
-  absl::StatusOr<int> iterations = flags.GetInt("iterations-per-keyframe", 1, 100000);
+  absl::StatusOr<int> iterations =
+      flags.GetInt("iterations-per-keyframe", 1, kMaxIterationsPerKeyframe);
   if (!iterations.ok()) return ReportError(kCommand, iterations.status(), true);
   absl::StatusOr<int> batch = BatchFromFlags(flags);
   if (!batch.ok()) return ReportError(kCommand, batch.status(), true);
@@ -213,10 +217,11 @@ int RunRemoteMap(const RemoteOptions& remote, const std::vector<std::string>& ar
   absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);
   if (!dataset_options.ok()) return ReportError(kCommand, dataset_options.status(), true);
   const std::string name = flags.GetString("name");
-  pb::IntegrateOptions options;
-  options.set_iterations_per_keyframe(static_cast<uint32_t>(*iterations));
-  options.set_rays_per_iteration(static_cast<uint32_t>(*batch));
-  options.set_max_depth(static_cast<float>(*max_depth));
+  MappingSessionOptions mapping;
+  mapping.iterations_per_keyframe = *iterations;
+  mapping.mapper.batch_size = *batch;
+  mapping.mapper.allocation.max_depth = static_cast<float>(*max_depth);
+  const pb::IntegrateOptions options = IntegrateOptionsToProto(mapping);
 
   std::unique_ptr<RemoteClient> client = ConnectOrReport(kCommand, remote, &exit_code);
   if (!client) return exit_code;

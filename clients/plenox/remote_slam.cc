@@ -2,7 +2,6 @@
 // stream into map N): the same trajectory, summary and JSON as in-process `plenox slam`, plus
 // the round trip seen here.
 #include <algorithm>
-#include <cmath>
 #include <iostream>
 #include <string>
 
@@ -17,6 +16,7 @@
 #include "core/common/status_macros.h"
 #include "core/formats/trajectory_file.h"
 #include "core/io/atomic_write.h"
+#include "proto/slam_codec.h"
 
 namespace plx::cli {
 namespace {
@@ -42,35 +42,18 @@ const std::vector<UnavailableFlag>& InProcessOnlyFlags() {
   return flags;
 }
 
-// The options on the wire. Only what the user set is sent (0 = the daemon's default, which is
-// DefaultSlamOptions' too), so that an existing map's voxel size or a running mapping job's
-// budget is not contradicted by a value nobody chose; the replay switches always are.
-pb::SlamOptions SlamOptionsToProto(const FlagSet& flags, const SlamDatasetOptions& options) {
-  const SlamOptions& s = options.slam;
-  pb::SlamOptions wire;
-  if (flags.IsSet("voxel-size")) wire.set_voxel_size(s.mapping.mapper.voxel_size);
-  *wire.mutable_tracking() = TrackOptionsToProto(flags, s.tracker);
-  if (flags.IsSet("kf-translation")) {
-    wire.set_kf_translation_m(static_cast<float>(s.keyframes.max_translation_m));
-  }
-  if (flags.IsSet("kf-rotation")) {
-    wire.set_kf_rotation_deg(static_cast<float>(s.keyframes.max_rotation_rad * 180.0 / M_PI));
-  }
-  if (flags.IsSet("kf-unmapped")) {
-    wire.set_kf_unmapped_fraction(static_cast<float>(s.keyframes.max_unmapped_fraction));
-  }
-  if (flags.IsSet("kf-interval")) {
-    wire.set_kf_interval_s(static_cast<float>(s.keyframes.max_interval_s));
-  }
-  if (flags.IsSet("iterations-per-keyframe")) {
-    wire.set_iterations_per_keyframe(static_cast<uint32_t>(s.mapping.iterations_per_keyframe));
-  }
-  if (flags.IsSet("max-pending-keyframes")) {
-    wire.set_max_pending_keyframes(static_cast<uint32_t>(s.max_pending_keyframes));
-  }
-  wire.set_realtime(options.realtime);
-  wire.set_deterministic(s.deterministic);
-  return wire;
+// The settings the user chose with flags: only those go on the wire (SlamOptionsToProto), so
+// that an existing map's voxel size or a running mapping job's budget is not contradicted by a
+// default nobody chose.
+SlamOptionsFields SlamOptionsFieldsFromFlags(const FlagSet& flags) {
+  return {.voxel_size = flags.IsSet("voxel-size"),
+          .tracking = TrackOptionsFieldsFromFlags(flags),
+          .kf_translation = flags.IsSet("kf-translation"),
+          .kf_rotation = flags.IsSet("kf-rotation"),
+          .kf_unmapped_fraction = flags.IsSet("kf-unmapped"),
+          .kf_interval = flags.IsSet("kf-interval"),
+          .iterations_per_keyframe = flags.IsSet("iterations-per-keyframe"),
+          .max_pending_keyframes = flags.IsSet("max-pending-keyframes")};
 }
 
 FlagSet RemoteSlamFlags() {
@@ -108,7 +91,7 @@ struct SlamStream {
   const RgbdDataset* dataset;
   std::string map_name;
   pb::SlamOptions wire;
-  WireEncoding encoding;
+  FrameEncoding encoding;
   std::optional<SE3> start_pose;
   bool realtime = false;
   double speed = 1.0;
@@ -275,7 +258,7 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
   absl::StatusOr<SlamDatasetOptions> options = SlamOptionsFromFlags(flags);
   if (!options.ok()) return ReportError(kCommand, options.status(), true);
-  absl::StatusOr<WireEncoding> encoding = ParseWireEncoding(flags.GetString("encoding"));
+  absl::StatusOr<FrameEncoding> encoding = ParseWireEncoding(flags.GetString("encoding"));
   if (!encoding.ok()) return ReportError(kCommand, encoding.status(), true);
   absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);
   if (!dataset_options.ok()) return ReportError(kCommand, dataset_options.status(), true);
@@ -297,7 +280,8 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
   report.frames = SlamFrameCount(*dataset, *options);
   SlamStream stream{.dataset = dataset.get(),
                     .map_name = flags.GetString("name"),
-                    .wire = SlamOptionsToProto(flags, *options),
+                    .wire = SlamOptionsToProto(options->slam, options->realtime,
+                                               SlamOptionsFieldsFromFlags(flags)),
                     .encoding = *encoding,
                     .start_pose = dataset->ground_truth(0),
                     .realtime = options->realtime,

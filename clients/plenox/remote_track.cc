@@ -38,7 +38,7 @@ struct TrackStream {
   const RgbdDataset* dataset;
   std::string map_name;
   pb::TrackOptions wire;
-  WireEncoding encoding;
+  FrameEncoding encoding;
   std::optional<SE3> start_pose;
   int rays = 0;
 
@@ -153,7 +153,7 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
   // the summary names what actually ran; only flags the user set go on the wire.
   absl::StatusOr<TrackerOptions> options = TrackerOptionsFromFlags(flags);
   if (!options.ok()) return ReportError(kCommand, options.status(), true);
-  absl::StatusOr<WireEncoding> encoding = ParseWireEncoding(flags.GetString("encoding"));
+  absl::StatusOr<FrameEncoding> encoding = ParseWireEncoding(flags.GetString("encoding"));
   if (!encoding.ok()) return ReportError(kCommand, encoding.status(), true);
   absl::StatusOr<DatasetOptions> dataset_options = DatasetOptionsFromFlags(flags);
   if (!dataset_options.ok()) return ReportError(kCommand, dataset_options.status(), true);
@@ -178,7 +178,7 @@ int RunRemoteTrack(const RemoteOptions& remote, const std::vector<std::string>& 
   TrackStream stream{.client = client.get(),
                      .dataset = dataset.get(),
                      .map_name = flags.GetString("map"),
-                     .wire = TrackOptionsToProto(flags, *options),
+                     .wire = TrackOptionsToProto(*options, TrackOptionsFieldsFromFlags(flags)),
                      .encoding = *encoding,
                      .start_pose = dataset->ground_truth(0),
                      .rays = options->rays};

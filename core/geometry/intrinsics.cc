@@ -19,9 +19,9 @@ absl::Status ValidateCalibration(const CameraCalibration& c) {
   if (!std::isfinite(k.cx) || !std::isfinite(k.cy)) {
     return absl::InvalidArgumentError("principal point must be finite");
   }
-  if (k.width <= 0 || k.height <= 0 || k.width > 16384 || k.height > 16384) {
+  if (k.width <= 0 || k.height <= 0 || k.width > kMaxImageSide || k.height > kMaxImageSide) {
     return absl::InvalidArgumentError(
-        absl::StrCat("image size must be in 1..16384, got ", k.width, "x", k.height));
+        absl::StrCat("image size must be in 1..", kMaxImageSide, ", got ", k.width, "x", k.height));
   }
   if (!(std::isfinite(c.depth_scale) && c.depth_scale > 0)) {
     return absl::InvalidArgumentError(

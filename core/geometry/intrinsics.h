@@ -7,6 +7,10 @@
 
 namespace plx {
 
+// The largest image side a calibration may have (ValidateCalibration; the daemon's frames and
+// renders).
+inline constexpr int kMaxImageSide = 16384;
+
 // Pinhole model; pixel centres sit at (u + 0.5, v + 0.5) (DESIGN.md §4).
 struct PinholeIntrinsics {
   double fx = 0, fy = 0, cx = 0, cy = 0;

@@ -179,7 +179,7 @@ absl::Status Mapper::ValidateOptions(const MapperOptions& o) {
   if (o.max_iterations == 0 && o.time_budget_s == 0) {
     return absl::InvalidArgumentError("set an iteration budget, a time budget, or both");
   }
-  if (o.batch_size <= 0 || o.batch_size > (1 << 24)) {
+  if (o.batch_size <= 0 || o.batch_size > kMaxBatchSize) {
     return absl::InvalidArgumentError(absl::StrCat("batch size out of range: ", o.batch_size));
   }
   if (o.window_keyframes < 0 || !(o.window_fraction >= 0.0f && o.window_fraction <= 1.0f)) {

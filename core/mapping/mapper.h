@@ -52,6 +52,10 @@ inline bool VoxelSizeInRange(double voxel_size) {
   return voxel_size >= kMinVoxelSize && voxel_size <= kMaxVoxelSize;
 }
 
+// The most rays one mapping iteration may sample (MapperOptions::batch_size; the daemon's
+// rays_per_iteration).
+inline constexpr int kMaxBatchSize = 1 << 24;
+
 struct MapperOptions {
   float voxel_size = 0.02f;  // metres
   AllocationOptions allocation;

@@ -38,12 +38,13 @@ Tracker::Tracker(const PlenoxelMap* map, Backend* backend, const TrackerOptions&
     : map_(map), backend_(backend), options_(options) {}
 
 absl::Status Tracker::ValidateOptions(const TrackerOptions& o) {
-  if (o.rays < 16 || o.rays > (1 << 22)) {
-    return absl::InvalidArgumentError(absl::StrCat("rays must be in [16, 4194304], got ", o.rays));
+  if (o.rays < kMinTrackerRays || o.rays > kMaxTrackerRays) {
+    return absl::InvalidArgumentError(absl::StrCat("rays must be in [", kMinTrackerRays, ", ",
+                                                   kMaxTrackerRays, "], got ", o.rays));
   }
-  if (o.iterations < 1 || o.iterations > 10000) {
+  if (o.iterations < 1 || o.iterations > kMaxTrackerIterations) {
     return absl::InvalidArgumentError(
-        absl::StrCat("iterations must be in [1, 10000], got ", o.iterations));
+        absl::StrCat("iterations must be in [1, ", kMaxTrackerIterations, "], got ", o.iterations));
   }
   if (!(o.huber_k > 0) || !(o.params.color_sigma > 0) || o.coarse_divisor < 1) {
     return absl::InvalidArgumentError("huber_k, colour sigma and coarse divisor must be positive");

@@ -29,6 +29,12 @@ enum class TrackingCause { kNone, kFewValidRays, kDiverged, kHighResidual };
 
 enum class TrackingMode { kGaussNewton, kAdam };
 
+// The range of TrackerOptions::rays and the cap on its iterations (Tracker::ValidateOptions):
+// the daemon's TrackOptions and the CLI's --rays/--iterations are held to them.
+inline constexpr int kMinTrackerRays = 16;
+inline constexpr int kMaxTrackerRays = 1 << 22;
+inline constexpr int kMaxTrackerIterations = 10000;
+
 struct TrackerOptions {
   TrackingMode mode = TrackingMode::kGaussNewton;
   int rays = 4096;       // rays per frame (GN: at the fine level; Adam: per iteration)

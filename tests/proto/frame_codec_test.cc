@@ -1,13 +1,17 @@
-// The frame and map-name codecs (proto/frame_codec.h, proto/map_codec.h): a frame the CLI would
-// send comes back through CheckFrame and DecodeCheckedFrame as the same images, calibration and
-// pose; refusals are INVALID_ARGUMENT (RESOURCE_EXHAUSTED over the pixel limit) naming the field.
+// The frame and map-name codecs (proto/frame_codec.h, proto/map_codec.h): a frame the CLI sends
+// (FrameToProto, in every encoding) comes back through CheckFrame and DecodeCheckedFrame as the
+// same images, calibration and pose; refusals are INVALID_ARGUMENT (RESOURCE_EXHAUSTED over the
+// pixel limit) naming the field.
 #include "proto/frame_codec.h"
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <optional>
 #include <string>
 
+#include "absl/strings/str_cat.h"
 #include "core/io/image_io.h"
 #include "proto/map_codec.h"
 
@@ -94,6 +98,122 @@ TEST(FrameCodecTest, IntrinsicsWithoutDepthScaleTakeTheDefault) {
   c = IntrinsicsFromProto(k, "intrinsics", false);
   ASSERT_FALSE(c.ok());
   EXPECT_THAT(Message(c.status()), StartsWith("intrinsics: image size 16385x"));
+}
+
+// An RgbdFrame whose images are exactly representable on the wire: colour in 8-bit steps,
+// depth in steps of 1 / kDepthScale (so PNG and raw round trips are exact).
+RgbdFrame QuantisedFrame() {
+  RgbdFrame f;
+  f.timestamp = 7.125;
+  f.color = ColorImage(kW, kH, 3);
+  f.depth = DepthImage(kW, kH, 1);
+  for (size_t i = 0; i < f.color.data.size(); ++i) f.color.data[i] = (37 * i % 256) / 255.0f;
+  for (size_t i = 0; i < f.depth.data.size(); ++i) {
+    f.depth.data[i] = i == 5 ? 0.0f : static_cast<float>((800 + 13 * i) / kDepthScale);
+  }
+  return f;
+}
+
+CameraCalibration Calibration() {
+  CameraCalibration c;
+  c.pinhole = PinholeIntrinsics{9.5, 10.25, 3.75, 2.5, kW, kH};
+  c.depth_scale = kDepthScale;
+  return c;
+}
+
+absl::StatusOr<DecodedFrame> ThroughTheDaemon(const pb::Frame& f) {
+  absl::StatusOr<CheckedFrame> checked = CheckFrame(f, "frame", false, 1 << 20);
+  if (!checked.ok()) return checked.status();
+  return DecodeCheckedFrame(*std::move(checked));
+}
+
+TEST(FrameCodecTest, EncodedFramesDecodeToTheSameFrame) {
+  const RgbdFrame frame = QuantisedFrame();
+  const SE3 pose(Eigen::Quaterniond(Eigen::AngleAxisd(0.2, Eigen::Vector3d::UnitX())),
+                 Eigen::Vector3d(-1, 0.5, 2));
+  for (const FrameEncoding encoding :
+       {FrameEncoding{pb::COLOR_ENCODING_PNG, pb::DEPTH_ENCODING_PNG16},
+        FrameEncoding{pb::COLOR_ENCODING_RAW_RGB8, pb::DEPTH_ENCODING_RAW_U16},
+        FrameEncoding{pb::COLOR_ENCODING_PNG, pb::DEPTH_ENCODING_RAW_U16},
+        FrameEncoding{pb::COLOR_ENCODING_RAW_RGB8, pb::DEPTH_ENCODING_PNG16}}) {
+    SCOPED_TRACE(absl::StrCat(pb::ColorEncoding_Name(encoding.color), " + ",
+                              pb::DepthEncoding_Name(encoding.depth)));
+    const absl::StatusOr<pb::Frame> wire = FrameToProto(frame, Calibration(), pose, encoding, "c1");
+    ASSERT_TRUE(wire.ok()) << wire.status();
+    EXPECT_EQ(wire->color_encoding(), encoding.color);
+    EXPECT_EQ(wire->depth_encoding(), encoding.depth);
+    const absl::StatusOr<DecodedFrame> back = ThroughTheDaemon(*wire);
+    ASSERT_TRUE(back.ok()) << back.status();
+    EXPECT_EQ(back->camera_id, "c1");
+    EXPECT_EQ(back->frame.timestamp, frame.timestamp);
+    EXPECT_EQ(back->calibration.pinhole, Calibration().pinhole);
+    EXPECT_EQ(back->calibration.depth_scale, kDepthScale);
+    ASSERT_TRUE(back->client_pose.has_value());
+    EXPECT_LT((back->client_pose->translation() - pose.translation()).norm(), 1e-12);
+    EXPECT_LT(back->client_pose->rotation().angularDistance(pose.rotation()), 1e-9);
+    ASSERT_EQ(back->frame.color.data.size(), frame.color.data.size());
+    for (size_t i = 0; i < frame.color.data.size(); ++i) {
+      ASSERT_FLOAT_EQ(back->frame.color.data[i], frame.color.data[i]) << i;
+    }
+    ASSERT_EQ(back->frame.depth.data.size(), frame.depth.data.size());
+    for (size_t i = 0; i < frame.depth.data.size(); ++i) {
+      ASSERT_NEAR(back->frame.depth.data[i], frame.depth.data[i], 1e-6) << i;
+    }
+  }
+}
+
+TEST(FrameCodecTest, JpegColourDecodesClose) {
+  const RgbdFrame frame = QuantisedFrame();
+  const absl::StatusOr<pb::Frame> wire =
+      FrameToProto(frame, Calibration(), std::nullopt,
+                   {pb::COLOR_ENCODING_JPEG, pb::DEPTH_ENCODING_PNG16}, "c1");
+  ASSERT_TRUE(wire.ok()) << wire.status();
+  EXPECT_FALSE(wire->has_pose());
+  const absl::StatusOr<DecodedFrame> back = ThroughTheDaemon(*wire);
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_FALSE(back->client_pose.has_value());
+  ASSERT_EQ(back->frame.color.data.size(), frame.color.data.size());
+  double error = 0.0;
+  for (size_t i = 0; i < frame.color.data.size(); ++i) {
+    error += std::abs(back->frame.color.data[i] - frame.color.data[i]);
+  }
+  // Lossy, but the same picture: a wrong channel order or size would be far off.
+  EXPECT_LT(error / frame.color.data.size(), 0.25);
+}
+
+TEST(FrameCodecTest, UnknownEncodingsAreRefused) {
+  const absl::StatusOr<pb::Frame> color =
+      FrameToProto(QuantisedFrame(), Calibration(), std::nullopt,
+                   {pb::COLOR_ENCODING_UNSPECIFIED, pb::DEPTH_ENCODING_PNG16}, "c1");
+  ASSERT_FALSE(color.ok());
+  EXPECT_EQ(color.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(Message(color.status()), StartsWith("color_encoding: "));
+  const absl::StatusOr<pb::Frame> depth =
+      FrameToProto(QuantisedFrame(), Calibration(), std::nullopt,
+                   {pb::COLOR_ENCODING_PNG, static_cast<pb::DepthEncoding>(9)}, "c1");
+  ASSERT_FALSE(depth.ok());
+  EXPECT_EQ(depth.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(Message(depth.status()), StartsWith("depth_encoding: "));
+}
+
+TEST(FrameCodecTest, IntrinsicsRoundTrip) {
+  pb::Intrinsics wire;
+  IntrinsicsToProto(Calibration().pinhole, 5000.0, &wire);
+  const absl::StatusOr<CameraCalibration> back = IntrinsicsFromProto(wire, "intrinsics", true);
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(back->pinhole, Calibration().pinhole);
+  EXPECT_EQ(back->depth_scale, 5000.0);
+}
+
+TEST(FrameCodecTest, ImageSideIsHeldToCoresLimit) {
+  pb::Intrinsics k;
+  IntrinsicsToProto(PinholeIntrinsics{100, 100, 50, 50, kMaxImageSide, 4}, 1000.0, &k);
+  EXPECT_TRUE(IntrinsicsFromProto(k, "intrinsics", true).ok());
+  k.set_height(kMaxImageSide + 1);
+  const absl::StatusOr<CameraCalibration> c = IntrinsicsFromProto(k, "intrinsics", true);
+  ASSERT_FALSE(c.ok());
+  EXPECT_EQ(c.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(Message(c.status()), StartsWith("intrinsics: image size "));
 }
 
 TEST(MapCodecTest, MapNames) {

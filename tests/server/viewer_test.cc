@@ -314,7 +314,7 @@ class CountingSource final : public web::ViewerSource {
   CountingSource(std::shared_ptr<const PlenoxelMap> map, std::unique_ptr<Backend> backend)
       : map_(std::move(map)), backend_(std::move(backend)) {}
   std::string Title() const override { return "test"; }
-  std::vector<web::ViewerMapInfo> ListMaps() const override { return {}; }
+  std::vector<MapStatus> ListMaps() const override { return {}; }
   absl::StatusOr<web::ViewerMap> Latest(const std::string& name) const override {
     if (name != "room") return absl::NotFoundError("no map " + name);
     return web::ViewerMap{map_, version};
