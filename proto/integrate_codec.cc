@@ -55,8 +55,8 @@ pb::MappingProgress MappingProgressToProto(const MappingSessionProgress& p,
   progress.set_job_id(job_id);
   progress.set_keyframes_integrated(static_cast<uint32_t>(p.keyframes_integrated));
   progress.set_iterations(static_cast<uint32_t>(p.iterations));
-  progress.set_train_psnr(p.train_psnr);
-  progress.set_train_depth_l1_m(p.train_depth_l1_m);
+  progress.set_train_psnr(p.last_batch.psnr);
+  progress.set_train_depth_l1_m(p.last_batch.depth_l1_m);
   progress.set_map_version(map_version);
   progress.set_elapsed_s(elapsed_s);
   return progress;

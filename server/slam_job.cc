@@ -75,11 +75,13 @@ SlamJobStatus SlamJob::Status() const {
   return s;
 }
 
-void SlamJob::Enter(std::shared_ptr<SlamJobListener> listener) {
+bool SlamJob::Enter(std::shared_ptr<SlamJobListener> listener) {
   std::lock_guard<std::mutex> lock(mutex_);
+  if (status_.finished) return false;
   members_.push_back(listener);
   listeners_.push_back(std::move(listener));
   status_.streams = static_cast<int>(members_.size());
+  return true;
 }
 
 void SlamJob::Leave(const std::shared_ptr<SlamJobListener>& listener) {
@@ -231,8 +233,9 @@ absl::StatusOr<std::shared_ptr<SlamJob>> SlamJobs::Join(const std::string& map,
           "options.deterministic: the running SLAM job on map \"", map, "\" is ",
           job->deterministic() ? "" : "not ", "deterministic"));
     }
-    job->Enter(std::move(listener));
-    return job;
+    // It may have ended since the check above (its task needs no registry lock for that).
+    if (job->Enter(listener)) return job;
+    jobs_.erase(it);
   }
   PLX_RETURN_IF_ERROR(state_->maps->BeginMapping(map, MappingJobKind::kSlam));
   const std::string job_id = state_->jobs->Create("slam", map);
@@ -246,7 +249,7 @@ absl::StatusOr<std::shared_ptr<SlamJob>> SlamJobs::Join(const std::string& map,
   auto trajectory = std::make_shared<TrajectoryRecord>();
   trajectories_[map] = trajectory;
   auto job = std::make_shared<SlamJob>(state_, map, job_id, split, trajectory);
-  job->Enter(std::move(listener));
+  job->Enter(std::move(listener));  // a new job has not ended
   jobs_[map] = job;
   LogEvent("info", "slam_mapping_started", {{"map", map}, {"job", job_id}});
   return job;

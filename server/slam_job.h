@@ -90,8 +90,9 @@ class SlamJob : public std::enable_shared_from_this<SlamJob> {
   SlamJobStatus Status() const;
 
   // Stream membership (SlamJobs does the joining). A stream that leaves is still notified (it
-  // may wait for the job's end); Leave is idempotent per listener.
-  void Enter(std::shared_ptr<SlamJobListener> listener);
+  // may wait for the job's end); Leave is idempotent per listener. Enter refuses (false) a job
+  // that has ended: checked under the job's lock, since a job's task may end it at any time.
+  bool Enter(std::shared_ptr<SlamJobListener> listener);
   void Leave(const std::shared_ptr<SlamJobListener>& listener);
 
  private:

@@ -155,8 +155,9 @@ int RunDemo(const std::vector<std::string>& args) {
   absl::StatusOr<TrajectoryEvalResult> slam_ate = EvaluateTrajectory(slam->trajectory, ground_truth);
   if (!slam_ate.ok()) return ReportError("demo", slam_ate.status());
   line.Finish(absl::StrFormat("slam: %d frames, %d keyframes, %d lost, ATE %.2f mm",
-                              static_cast<int>(slam->trajectory.size()), slam->progress.keyframes,
-                              slam->progress.lost, 1000 * slam_ate->ate.translation_m.rmse));
+                              static_cast<int>(slam->trajectory.size()),
+                              slam->progress.mapping.keyframes, slam->progress.tracking.lost,
+                              1000 * slam_ate->ate.translation_m.rmse));
 
   const MappingSummary& sum = mapped->summary;
   std::cout << absl::StrFormat(
@@ -179,7 +180,7 @@ int RunDemo(const std::vector<std::string>& args) {
       100 * eval->depth_l1_median_m, eval->coverage, dataset->size(),
       1000 * ate->ate.translation_m.rmse, tracked->ms_per_frame_median, tracked->lost,
       static_cast<int>(slam->trajectory.size()), 1000 * slam_ate->ate.translation_m.rmse,
-      slam->progress.keyframes, slam->progress.lost,
+      slam->progress.mapping.keyframes, slam->progress.tracking.lost,
       slam->wall_s > 0 ? slam->trajectory.size() / slam->wall_s : 0.0, out.string(),
       sequence_dir, map_path,
       render_color, render_depth, shown, truth_color, truth_depth, trajectory_path, slam_path);
@@ -197,8 +198,8 @@ int RunDemo(const std::vector<std::string>& args) {
         .Add("ms_per_frame_median", tracked->ms_per_frame_median)
         .Add("lost", tracked->lost)
         .Add("slam_ate_rmse_m", slam_ate->ate.translation_m.rmse)
-        .Add("slam_keyframes", slam->progress.keyframes)
-        .Add("slam_lost", slam->progress.lost)
+        .Add("slam_keyframes", slam->progress.mapping.keyframes)
+        .Add("slam_lost", slam->progress.tracking.lost)
         .Add("map", map_path)
         .Add("backend", backend->name());
     std::cout << json.str() << "\n";

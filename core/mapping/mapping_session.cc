@@ -216,8 +216,7 @@ MappingSessionProgress MappingSession::progress() const {
                    ? std::min(1.0, static_cast<double>(p.iterations) / p.iteration_budget)
                    : 0.0;
   p.schedule = mapper_->schedule_fraction();
-  p.train_psnr = last_.psnr;
-  p.train_depth_l1_m = last_.depth_l1_m;
+  p.last_batch = last_;
   p.published_versions = published_versions_;
   p.map_bytes = mapper_->map().grid.Memory().total_bytes();
   p.cloned_bricks = mapper_->summary().cloned_bricks;

@@ -76,8 +76,9 @@ struct MappingSessionProgress {
   int iteration_budget = 0;      // iterations_per_keyframe * keyframes integrated
   double fraction = 0.0;         // iterations / budget, capped at 1
   double schedule = 0.0;         // learning-rate schedule position (never decreases)
-  double train_psnr = 0.0;       // last batch (see MappingProgress)
-  double train_depth_l1_m = 0.0;
+  // The last optimisation chunk's last batch: its PSNR, depth L1 and opacity (its iteration
+  // and fraction are the mapper's, not the session's counters above).
+  MappingProgress last_batch;
   int published_versions = 0;
   int64_t map_bytes = 0;
   int64_t cloned_bricks = 0;     // copy-on-write clones so far

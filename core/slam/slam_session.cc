@@ -255,23 +255,10 @@ std::vector<StampedPose> SlamSession::keyframe_poses() const {
 }
 
 SlamProgress SlamSession::progress() const {
-  const SlamMapperProgress m = coordinator_.progress();
   SlamProgress p;
-  p.keyframes = m.keyframes;
-  p.keyframes_integrated = m.keyframes_integrated;
-  p.pending_keyframes = m.pending_keyframes;
-  p.mapping_iterations = m.mapping_iterations;
-  p.refined_keyframes = m.refined_keyframes;
-  p.map_version = m.map_version;
-  p.map_bytes = m.map_bytes;
-  p.keyframe_bytes = m.keyframe_bytes;
+  p.mapping = coordinator_.progress();
   std::lock_guard<std::mutex> lock(mutex_);
-  p.frames = counts_.frames;
-  p.ok = counts_.ok;
-  p.degraded = counts_.degraded;
-  p.lost = counts_.lost;
-  p.relocalised = counts_.relocalised;
-  p.waiting = counts_.waiting;
+  p.tracking = counts_;
   return p;
 }
 

@@ -96,18 +96,11 @@ absl::Status ValidateSlamOptions(const SlamOptions& options);
 
 // The halves' options: SplitSlamOptions (core/slam/slam_coordinator.h).
 
+// The session's counters: the camera's (SlamTracker::counts) and the map's
+// (SlamCoordinator::progress), each as its half keeps it.
 struct SlamProgress {
-  int frames = 0;
-  int keyframes = 0;              // accepted
-  int keyframes_integrated = 0;   // by mapping
-  int pending_keyframes = 0;      // accepted, not yet integrated (mapping lag)
-  int ok = 0, degraded = 0, lost = 0, relocalised = 0;
-  int waiting = 0;                // no map yet, too little depth to start one (SlamState)
-  int mapping_iterations = 0;
-  int refined_keyframes = 0;      // pose updates applied by refinement
-  int64_t map_version = 0;
-  int64_t map_bytes = 0;
-  int64_t keyframe_bytes = 0;     // images and ray lists kept for mapping
+  SlamTrackerCounts tracking;  // frames, and how each was tracked
+  SlamMapperProgress mapping;  // keyframes, their integration, the map's version and size
 };
 
 class SlamSession {

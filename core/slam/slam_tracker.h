@@ -116,7 +116,8 @@ struct SlamFrameResult {
   double milliseconds = 0.0;    // tracking time (SlamSession: the whole ProcessFrame)
 };
 
-// Per-camera counts.
+// Per-camera counts: frames tracked, and how many ended in each SlamState (waiting: no map
+// yet and too little depth to start one).
 struct SlamTrackerCounts {
   int frames = 0;
   int ok = 0, degraded = 0, lost = 0, relocalised = 0, waiting = 0;

@@ -227,8 +227,8 @@ TEST(IntegrateCodecTest, ProgressCarriesTheSessions) {
   MappingSessionProgress p;
   p.keyframes_integrated = 6;
   p.iterations = 250;
-  p.train_psnr = 27.5;
-  p.train_depth_l1_m = 0.0125;
+  p.last_batch.psnr = 27.5;
+  p.last_batch.depth_l1_m = 0.0125;
   const pb::MappingProgress m = MappingProgressToProto(p, "integrate-4", 3, 1.5);
   EXPECT_EQ(m.job_id(), "integrate-4");
   EXPECT_EQ(m.keyframes_integrated(), 6u);

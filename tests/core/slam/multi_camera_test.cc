@@ -1,6 +1,6 @@
-// Two cameras in one map: each has its own SlamTracker, their keyframes go to one SlamMapper
-// (the daemon's wiring for several Slam streams on a map). Lock-step mapping after each
-// keyframe, so the numbers are the same run to run.
+// Two cameras in one map: each has its own SlamTracker, their keyframes go to one map's
+// SlamCoordinator (the daemon's wiring for several Slam streams on a map). Lock-step mapping
+// after each keyframe, so the numbers are the same run to run.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -11,7 +11,7 @@
 
 #include "core/cpu/cpu_backend.h"
 #include "core/eval/trajectory_metrics.h"
-#include "core/slam/slam_mapper.h"
+#include "core/slam/slam_coordinator.h"
 #include "core/slam/slam_session.h"
 #include "core/slam/slam_tracker.h"
 #include "tests/synthetic_room.h"
@@ -31,15 +31,23 @@ SlamOptions TestOptions() {
   return o;
 }
 
-SlamMapView ViewOf(const SlamMapper& mapper) {
-  SlamMapView view;
-  const SlamMapVersion latest = mapper.latest();
-  view.map = latest.map;
-  view.version = latest.version;
-  view.accepted_keyframes = mapper.accepted_keyframes();
-  view.keyframe_poses = mapper.keyframe_poses();
-  view.mapping_behind = mapper.progress().pending_keyframes > 0;
-  return view;
+// The map's coordinator with its mapper started on `backend` (lock-step: the options are
+// deterministic).
+std::unique_ptr<SlamCoordinator> StartedCoordinator(const SlamOptions& options, Backend* backend) {
+  const SlamSplitOptions split = SplitSlamOptions(options);
+  auto coordinator = std::make_unique<SlamCoordinator>(split.mapper, split.gate);
+  const absl::Status started = coordinator->StartMapper(backend);
+  EXPECT_TRUE(started.ok()) << started;
+  return started.ok() ? std::move(coordinator) : nullptr;
+}
+
+// Steps in `mode` until the coordinator is out of work (it then has published what changed).
+void RunOut(SlamCoordinator& coordinator, SlamStepMode mode) {
+  for (;;) {
+    absl::StatusOr<SlamStepResult> step = coordinator.Step(mode);
+    ASSERT_TRUE(step.ok()) << step.status();
+    if (step->out_of_work) return;
+  }
 }
 
 double AteRmse(const std::vector<StampedPose>& estimate, const std::vector<StampedPose>& gt) {
@@ -48,16 +56,17 @@ double AteRmse(const std::vector<StampedPose>& estimate, const std::vector<Stamp
   return eval.ok() ? eval->ate.translation_m.rmse : 1e9;
 }
 
-// One camera's frame: tracked in the mapper's latest version; a keyframe is handed to the
-// mapper, which then runs to the end of its work (lock-step).
-SlamFrameResult Process(SlamTracker& tracker, SlamMapper& mapper, const RgbdFrame& frame,
+// One camera's frame: tracked in the map's view; a keyframe is handed to the coordinator,
+// whose mapper then runs to the end of its work (lock-step).
+SlamFrameResult Process(SlamTracker& tracker, SlamCoordinator& coordinator, const RgbdFrame& frame,
                         const PinholeIntrinsics& k) {
-  absl::StatusOr<SlamFrameResult> r = tracker.Track(frame, k, std::nullopt, ViewOf(mapper));
+  absl::StatusOr<SlamFrameResult> r = tracker.Track(frame, k, std::nullopt, coordinator.View());
   EXPECT_TRUE(r.ok()) << r.status();
   if (!r.ok()) return SlamFrameResult();
   if (r->keyframe) {
-    EXPECT_TRUE(mapper.AddKeyframe(frame, r->pose, k).ok());
-    EXPECT_TRUE(mapper.RunToEnd(false).ok());
+    EXPECT_TRUE(coordinator.AddKeyframe(frame, r->pose, k).ok());
+    RunOut(coordinator, SlamStepMode::kMap);
+    EXPECT_TRUE(coordinator.MayCameraProceed()) << "lock-step mapping left work";
   }
   return *r;
 }
@@ -72,9 +81,8 @@ TEST(SlamMultiCameraTest, TwoCamerasTrackInOneGrowingMap) {
   std::unique_ptr<Backend> tracking = MakeCpuBackend(2);
   std::unique_ptr<Backend> mapping = MakeCpuBackend(1);
   const SlamOptions options = TestOptions();
-  absl::StatusOr<std::unique_ptr<SlamMapper>> mapper =
-      SlamMapper::Create(SplitSlamOptions(options).mapper, mapping.get());
-  ASSERT_TRUE(mapper.ok()) << mapper.status();
+  std::unique_ptr<SlamCoordinator> map = StartedCoordinator(options, mapping.get());
+  ASSERT_NE(map, nullptr);
 
   SlamTrackerOptions a_options = SplitSlamOptions(options).tracker;
   a_options.initial_pose = *room->ground_truth(0);
@@ -88,7 +96,7 @@ TEST(SlamMultiCameraTest, TwoCamerasTrackInOneGrowingMap) {
   int b_keyframes = 0;
   for (int i = 0; i < room->size(); ++i) {
     const RgbdFrame& fa = room->frames()[i];
-    SlamFrameResult ra = Process(a, **mapper, fa, k);
+    SlamFrameResult ra = Process(a, *map, fa, k);
     EXPECT_NE(ra.state, SlamState::kLost) << "camera A, frame " << i;
     a_trajectory.push_back({fa.timestamp, ra.pose});
     a_truth.push_back({fa.timestamp, *fa.ground_truth});
@@ -98,7 +106,7 @@ TEST(SlamMultiCameraTest, TwoCamerasTrackInOneGrowingMap) {
     RgbdFrame fb = room->frames()[40 - j];
     fb.timestamp = room->timestamp(40 + j);
     const SE3 truth = *fb.ground_truth;
-    SlamFrameResult rb = Process(b, **mapper, fb, k);
+    SlamFrameResult rb = Process(b, *map, fb, k);
     if (j == 0) {
       EXPECT_EQ(rb.state, SlamState::kRelocalised) << rb.reason;
     } else {
@@ -108,11 +116,11 @@ TEST(SlamMultiCameraTest, TwoCamerasTrackInOneGrowingMap) {
     b_trajectory.push_back({fb.timestamp, rb.pose});
     b_truth.push_back({fb.timestamp, truth});
   }
-  ASSERT_TRUE((*mapper)->RunToEnd(true).ok());
+  RunOut(*map, SlamStepMode::kFinish);
 
   const double ate_a = AteRmse(a_trajectory, a_truth);
   const double ate_b = AteRmse(b_trajectory, b_truth);
-  const SlamMapperProgress p = (*mapper)->progress();
+  const SlamMapperProgress p = map->progress();
   std::printf("camera A ATE %.2f mm, camera B ATE %.2f mm; %d keyframes (%d from B)\n",
               1000 * ate_a, 1000 * ate_b, p.keyframes, b_keyframes);
   // Single-camera SLAM on this path: 4.0 mm (slam_session_test); B only revisits A's map.
@@ -123,7 +131,9 @@ TEST(SlamMultiCameraTest, TwoCamerasTrackInOneGrowingMap) {
   EXPECT_EQ(p.keyframes_integrated, p.keyframes);
   EXPECT_EQ(a.counts().frames, 90);
   EXPECT_EQ(b.counts().frames, 41);
-  EXPECT_EQ(static_cast<int>((*mapper)->keyframe_poses().size()), p.keyframes);
+  EXPECT_EQ(p.pending_keyframes, 0);
+  EXPECT_TRUE(p.idle);
+  EXPECT_EQ(static_cast<int>(map->keyframe_poses().size()), p.keyframes);
 }
 
 TEST(SlamMultiCameraTest, BootstrapNeedsEnoughDepth) {
@@ -154,9 +164,8 @@ TEST(SlamMultiCameraTest, AWaitingCameraJoinsTheMapAnotherBootstrapped) {
   const PinholeIntrinsics k = room->calibration().pinhole;
   std::unique_ptr<Backend> backend = MakeCpuBackend(2);
   const SlamOptions options = TestOptions();
-  absl::StatusOr<std::unique_ptr<SlamMapper>> mapper =
-      SlamMapper::Create(SplitSlamOptions(options).mapper, backend.get());
-  ASSERT_TRUE(mapper.ok()) << mapper.status();
+  std::unique_ptr<SlamCoordinator> map = StartedCoordinator(options, backend.get());
+  ASSERT_NE(map, nullptr);
   SlamTrackerOptions a_options = SplitSlamOptions(options).tracker;
   a_options.initial_pose = *room->ground_truth(2);
   SlamTrackerOptions b_options = SplitSlamOptions(options).tracker;
@@ -168,38 +177,45 @@ TEST(SlamMultiCameraTest, AWaitingCameraJoinsTheMapAnotherBootstrapped) {
   for (int v = sparse.depth.height / 5; v < sparse.depth.height; ++v) {
     for (int u = 0; u < sparse.depth.width; ++u) *sparse.depth.pixel(u, v) = 0.0f;
   }
-  const SlamFrameResult waiting = Process(a, **mapper, sparse, k);
+  const SlamFrameResult waiting = Process(a, *map, sparse, k);
   EXPECT_EQ(waiting.state, SlamState::kWaiting) << waiting.reason;
   EXPECT_FALSE(waiting.keyframe);
   EXPECT_EQ(waiting.pose.matrix(), room->ground_truth(2)->matrix());
-  EXPECT_TRUE((*mapper)->accepted_keyframes().empty());
+  EXPECT_TRUE(map->View().accepted_keyframes.empty());
 
-  const SlamFrameResult first = Process(b, **mapper, room->frames()[0], k);
+  const SlamFrameResult first = Process(b, *map, room->frames()[0], k);
   EXPECT_TRUE(first.keyframe);
   EXPECT_EQ(first.state, SlamState::kOk);
-  const SlamFrameResult joined = Process(a, **mapper, room->frames()[3], k);
+  const SlamFrameResult joined = Process(a, *map, room->frames()[3], k);
   EXPECT_EQ(joined.state, SlamState::kRelocalised) << joined.reason;
   EXPECT_FALSE(joined.keyframe && joined.keyframes == 1) << "a second keyframe 0";
   EXPECT_LT((joined.pose.translation() - room->ground_truth(3)->translation()).norm(), 0.02);
   EXPECT_EQ(a.counts().waiting, 1);
   EXPECT_EQ(a.counts().relocalised, 1);
   EXPECT_EQ(a.counts().frames, 2);
-  EXPECT_EQ((*mapper)->progress().keyframes, 1 + static_cast<int>(joined.keyframe));
+  EXPECT_EQ(map->progress().keyframes, 1 + static_cast<int>(joined.keyframe));
 }
 
 TEST(SlamMultiCameraTest, TrackerRefusesAFrameBeforeTheFirstVersion) {
   // A second camera whose first frame comes while the map has accepted its first keyframe but
-  // not published it: it is told so, not bootstrapped as a second keyframe 0.
+  // not published it (here: its mapper has not even started, as in the daemon before the
+  // job's first task): it is told so, not bootstrapped as a second keyframe 0.
   std::unique_ptr<InMemoryDataset> room = testing::MakeSyntheticRoom(64, 48, 2);
   ASSERT_NE(room, nullptr);
   std::unique_ptr<Backend> backend = MakeCpuBackend(1);
-  SlamTracker tracker(SplitSlamOptions(TestOptions()).tracker, backend.get());
-  SlamMapView view;  // no version yet
-  view.accepted_keyframes.push_back({0.0, SE3::Identity()});
-  absl::StatusOr<SlamFrameResult> r =
-      tracker.Track(room->frames()[0], room->calibration().pinhole, std::nullopt, view);
+  const SlamSplitOptions split = SplitSlamOptions(TestOptions());
+  SlamCoordinator map(split.mapper, split.gate);
+  const PinholeIntrinsics& k = room->calibration().pinhole;
+  ASSERT_TRUE(map.AddKeyframe(room->frames()[0], SE3::Identity(), k).ok());
+  const SlamMapView view = map.View();
+  ASSERT_EQ(view.map, nullptr);
+  ASSERT_EQ(view.accepted_keyframes.size(), 1u);
+  SlamTracker tracker(split.tracker, backend.get());
+  EXPECT_TRUE(tracker.NeedsVersion(view));
+  absl::StatusOr<SlamFrameResult> r = tracker.Track(room->frames()[1], k, std::nullopt, view);
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.status().code(), absl::StatusCode::kFailedPrecondition) << r.status();
+  EXPECT_EQ(tracker.frames(), 0) << "a refused frame changes nothing";
 }
 
 }  // namespace

@@ -84,12 +84,12 @@ TEST_F(SlamSessionTest, DeterministicRecoversTheTrajectoryAndTheMap) {
   ASSERT_TRUE(result->started_from_ground_truth);
   ASSERT_EQ(result->trajectory.size(), 90u);
   const double ate = AteRmse(result->trajectory, GroundTruth(*dataset_));
-  std::printf("ATE %.2f mm over %d keyframes\n", 1000 * ate, result->progress.keyframes);
+  std::printf("ATE %.2f mm over %d keyframes\n", 1000 * ate, result->progress.mapping.keyframes);
   EXPECT_LE(ate, 0.005);  // measured 4.0 mm
-  EXPECT_EQ(result->progress.lost, 0);
-  EXPECT_GE(result->progress.keyframes, 3);
-  EXPECT_LE(result->progress.keyframes, 30);
-  EXPECT_EQ(result->progress.keyframes_integrated, result->progress.keyframes);
+  EXPECT_EQ(result->progress.tracking.lost, 0);
+  EXPECT_GE(result->progress.mapping.keyframes, 3);
+  EXPECT_LE(result->progress.mapping.keyframes, 30);
+  EXPECT_EQ(result->progress.mapping.keyframes_integrated, result->progress.mapping.keyframes);
   ASSERT_NE(result->map, nullptr);
   // Frames between keyframes, rendered at their ground-truth poses (the trajectory started at
   // frame 0's, so the map is in the ground-truth frame).
@@ -117,7 +117,7 @@ TEST_F(SlamSessionTest, DeterministicRunsAreBitIdentical) {
   for (size_t i = 0; i < a->trajectory.size(); ++i) {
     EXPECT_EQ(a->trajectory[i].pose.matrix(), b->trajectory[i].pose.matrix()) << "frame " << i;
   }
-  EXPECT_EQ(a->progress.keyframes, b->progress.keyframes);
+  EXPECT_EQ(a->progress.mapping.keyframes, b->progress.mapping.keyframes);
   // The same map, value for value (brick slots may be numbered in another order).
   ASSERT_EQ(a->map->grid.num_bricks(), b->map->grid.num_bricks());
   std::vector<float> da = a->map->grid.DensityValues(), db = b->map->grid.DensityValues();
@@ -184,8 +184,8 @@ TEST_F(SlamSessionTest, BlankStretchIsLostNeverIntegratedThenRelocalises) {
   EXPECT_GE(relocalised_at, 46);
   EXPECT_LE(relocalised_at, 50) << "relocalised too late";
   const SlamProgress p = (*session)->progress();
-  EXPECT_EQ(p.lost, 6);
-  EXPECT_EQ(p.relocalised, 1);
+  EXPECT_EQ(p.tracking.lost, 6);
+  EXPECT_EQ(p.tracking.relocalised, 1);
   ASSERT_TRUE((*session)->Finish().ok());
 }
 
@@ -239,11 +239,12 @@ TEST_F(SlamSessionTest, FramesWithoutDepthWaitAndTheFirstGoodFrameBootstraps) {
   }
   ASSERT_TRUE((*session)->Finish().ok());
   const SlamProgress p = (*session)->progress();
-  EXPECT_EQ(p.frames, kFrames);
-  EXPECT_EQ(p.waiting, kEmpty);
-  EXPECT_EQ(p.lost, 0);
-  EXPECT_EQ(p.ok + p.degraded + p.relocalised + p.waiting, kFrames);
-  EXPECT_GT(p.keyframes, 1) << "the map never grew past keyframe 0";
+  const SlamTrackerCounts& frames = p.tracking;
+  EXPECT_EQ(frames.frames, kFrames);
+  EXPECT_EQ(frames.waiting, kEmpty);
+  EXPECT_EQ(frames.lost, 0);
+  EXPECT_EQ(frames.ok + frames.degraded + frames.relocalised + frames.waiting, kFrames);
+  EXPECT_GT(p.mapping.keyframes, 1) << "the map never grew past keyframe 0";
   ASSERT_NE((*session)->latest_map(), nullptr);
   EXPECT_GT((*session)->latest_map()->grid.num_bricks(), 0);
 }
@@ -269,9 +270,9 @@ TEST_F(SlamSessionTest, PartialDepthStillBootstraps) {
   }
   ASSERT_TRUE((*session)->Finish().ok());
   const SlamProgress p = (*session)->progress();
-  EXPECT_EQ(p.waiting, 0);
-  EXPECT_EQ(p.lost, 0);
-  EXPECT_GT(p.keyframes, 1);
+  EXPECT_EQ(p.tracking.waiting, 0);
+  EXPECT_EQ(p.tracking.lost, 0);
+  EXPECT_GT(p.mapping.keyframes, 1);
 }
 
 TEST_F(SlamSessionTest, RefinementReducesAnInjectedKeyframePoseError) {
@@ -345,14 +346,14 @@ TEST_F(SlamSessionTest, ConcurrentMappingTracksTheSequence) {
   absl::StatusOr<SlamDatasetResult> result =
       RunSlamOnDataset(*dataset_, *backend_, CpuFactory(2), options);
   ASSERT_TRUE(result.ok()) << result.status();
-  EXPECT_EQ(result->progress.lost, 0);
+  EXPECT_EQ(result->progress.tracking.lost, 0);
   // Timing decides which version each frame meets, so the bound is looser than lock-step's.
   EXPECT_LE(AteRmse(result->trajectory, GroundTruth(*dataset_)), 0.02);
   // Finish integrated every accepted keyframe and published the end of the budget.
-  EXPECT_EQ(result->progress.keyframes_integrated, result->progress.keyframes);
-  EXPECT_EQ(result->progress.pending_keyframes, 0);
-  EXPECT_GE(result->progress.mapping_iterations,
-            options.slam.mapping.iterations_per_keyframe * result->progress.keyframes);
+  EXPECT_EQ(result->progress.mapping.keyframes_integrated, result->progress.mapping.keyframes);
+  EXPECT_EQ(result->progress.mapping.pending_keyframes, 0);
+  EXPECT_GE(result->progress.mapping.mapping_iterations,
+            options.slam.mapping.iterations_per_keyframe * result->progress.mapping.keyframes);
 }
 
 // Two laps of the circling path: the second lap sees only mapped space, so it adds (almost) no
@@ -378,12 +379,13 @@ TEST(SlamMemoryTest, RevisitedPlacesAddNoKeyframes) {
     ASSERT_NE(r->state, SlamState::kLost) << "frame " << i << ": " << r->reason;
     if (i == 119) after_first_lap = (*session)->progress();
   }
-  const SlamProgress end = (*session)->progress();
-  std::printf("keyframes %d -> %d, map %.1f -> %.1f MB, keyframes %.1f -> %.1f MB\n",
-              after_first_lap.keyframes, end.keyframes, after_first_lap.map_bytes / 1e6,
-              end.map_bytes / 1e6, after_first_lap.keyframe_bytes / 1e6, end.keyframe_bytes / 1e6);
-  EXPECT_LE(end.keyframes - after_first_lap.keyframes, 2);
-  EXPECT_LE(end.map_bytes, after_first_lap.map_bytes * 11 / 10);
+  const SlamMapperProgress lap = after_first_lap.mapping;
+  const SlamMapperProgress end = (*session)->progress().mapping;
+  std::printf("keyframes %d -> %d, map %.1f -> %.1f MB, keyframes %.1f -> %.1f MB\n", lap.keyframes,
+              end.keyframes, lap.map_bytes / 1e6, end.map_bytes / 1e6, lap.keyframe_bytes / 1e6,
+              end.keyframe_bytes / 1e6);
+  EXPECT_LE(end.keyframes - lap.keyframes, 2);
+  EXPECT_LE(end.map_bytes, lap.map_bytes * 11 / 10);
 }
 
 }  // namespace
