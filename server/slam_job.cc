@@ -54,7 +54,8 @@ SlamJob::~SlamJob() {
 }
 
 absl::Status SlamJob::AddKeyframe(const RgbdFrame& frame, const SE3& pose,
-                                  const PinholeIntrinsics& k) {
+                                  const PinholeIntrinsics& k,
+                                  std::shared_ptr<const FrameFeatures> features) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     if (status_.finished) {
@@ -62,7 +63,7 @@ absl::Status SlamJob::AddKeyframe(const RgbdFrame& frame, const SE3& pose,
           absl::StrCat("the SLAM job on map \"", map_, "\" has ended"));
     }
   }
-  PLX_RETURN_IF_ERROR(coordinator_->AddKeyframe(frame, pose, k));
+  PLX_RETURN_IF_ERROR(coordinator_->AddKeyframe(frame, pose, k, std::move(features)));
   std::lock_guard<std::mutex> lock(mutex_);
   ScheduleLocked();
   return absl::OkStatus();

@@ -77,8 +77,9 @@ class SlamJob : public std::enable_shared_from_this<SlamJob> {
   // view of the job); it outlives the job in the registry (SlamJobs::Trajectory).
   TrajectoryRecord& trajectory() const { return *trajectory_; }
 
-  // Queues a keyframe (any thread) and schedules mapping.
-  absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k);
+  // Queues a keyframe with its relocalisation features (any thread) and schedules mapping.
+  absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k,
+                           std::shared_ptr<const FrameFeatures> features = nullptr);
   // What a camera tracks against now (the newest version with the store's number, keyframes
   // accepted and refined).
   SlamMapView View() const { return coordinator_->View(); }

@@ -211,7 +211,9 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
         tracker_->Track(frame, k, decoded->client_pose, view);
     if (!tracked.ok()) return tracked.status();  // the backend's (memory, device)
     result = *std::move(tracked);
-    if (result.keyframe) PLX_RETURN_IF_ERROR(job->AddKeyframe(frame, result.pose, k));
+    if (result.keyframe) {
+      PLX_RETURN_IF_ERROR(job->AddKeyframe(frame, result.pose, k, result.features));
+    }
     return absl::OkStatus();
   });
   const double seconds =

@@ -34,7 +34,12 @@ void AddInProcessSlamFlags(FlagSet& flags) {
            "re-align the last N keyframes' poses to the map after each keyframe (0 = off)",
            absl::StrCat(d.refinement.window))
       .Add("mapping-nice", "N", "priority of the mapping thread below tracking (0-19)",
-           absl::StrCat(d.mapping_nice));
+           absl::StrCat(d.mapping_nice))
+      .AddSwitch("no-odometry",
+                 "track against the map alone, without the map-free odometry (to measure it)")
+      .AddSwitch("no-feature-relocalisation",
+                 "relocalise only near the last good pose, not by keyframe features (to "
+                 "measure them)");
 }
 
 absl::StatusOr<SlamDatasetOptions> OptionsFromFlags(const FlagSet& flags) {
@@ -43,6 +48,8 @@ absl::StatusOr<SlamDatasetOptions> OptionsFromFlags(const FlagSet& flags) {
   PLX_ASSIGN_OR_RETURN(s.mapping.mapper.window_keyframes, flags.GetInt("window", 0, 1000));
   PLX_ASSIGN_OR_RETURN(s.refinement.window, flags.GetInt("refine-window", 0, 1000));
   PLX_ASSIGN_OR_RETURN(s.mapping_nice, flags.GetInt("mapping-nice", 0, 19));
+  s.odometry = !flags.GetSwitch("no-odometry");
+  s.feature_relocalisation = !flags.GetSwitch("no-feature-relocalisation");
   PLX_RETURN_IF_ERROR(ValidateSlamOptions(s));
   return o;
 }

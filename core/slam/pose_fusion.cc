@@ -16,14 +16,19 @@ const char* PoseSourceName(PoseSource source) {
 FusedPose FusePoses(const TrackingResult& map, const std::optional<OdometryPose>& odometry,
                     const PoseFusionOptions& options) {
   FusedPose out;
+  const bool odometry_ok = odometry && odometry->ok;
   if (map.state == TrackingState::kOk) {
     out.pose = map.pose;
     out.state = SlamState::kOk;
     out.source = PoseSource::kMap;
-    out.may_be_keyframe = true;
+    // After a jump in the stream the map tracker may converge far from its start on a view it
+    // explains well enough (a kidnap tracked OK at a wrong place, 0.5 m off, in the tests);
+    // as a keyframe that pose would corrupt the map.
+    out.confirm = odometry && !odometry->ok;
+    out.may_be_keyframe = !out.confirm;
+    if (out.confirm) out.reason = absl::StrCat("odometry: ", odometry->reason);
     return out;
   }
-  const bool odometry_ok = odometry && odometry->ok;
   if (!odometry_ok) {
     out.pose = map.pose;
     out.reason = map.reason;

@@ -5,7 +5,13 @@
 // starting point it gives).
 //
 //   map tracker        odometry   pose              state     may be a keyframe
-//   OK                 any        map               OK        yes (keyframe policy)
+//   OK                 OK or none map               OK        yes (keyframe policy)
+//   OK                 failed     map               OK        only once confirmed: the motion
+//                                                             is unknown (a jump, a blur), and
+//                                                             the map tracker can settle on a
+//                                                             wrong pose that it explains well
+//                                                             (`confirm`: SlamTracker checks it
+//                                                             against the keyframes' features)
 //   few rays, agrees   OK         map               DEGRADED  yes: the view is unmapped, the
 //   few rays           OK         odometry          DEGRADED  yes  pose is sure: exactly when
 //                                                                  the map needs a keyframe
@@ -50,6 +56,9 @@ struct FusedPose {
   std::string reason;
   PoseSource source = PoseSource::kPrediction;
   bool may_be_keyframe = false;
+  // The pose is the map's but nothing independent backs it (the odometry failed): the caller
+  // confirms it (relocalisation by features) before it may be a keyframe.
+  bool confirm = false;
 };
 
 // `map`: the map tracker's result (its pose is the prediction when LOST); `odometry`: absent

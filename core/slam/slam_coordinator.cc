@@ -19,6 +19,8 @@ SlamSplitOptions SplitSlamOptions(const SlamOptions& o) {
   out.tracker.keyframes = o.keyframes;
   out.tracker.relocalisation_keyframes = o.relocalisation_keyframes;
   out.tracker.relocalisation_radius_m = o.relocalisation_radius_m;
+  out.tracker.odometry = o.odometry;
+  out.tracker.feature_relocalisation = o.feature_relocalisation;
   out.tracker.initial_pose = o.initial_pose;
   // A pixel helps the bootstrap only if the tracker uses it and the mapper maps it.
   out.tracker.bootstrap_max_depth =
@@ -65,7 +67,8 @@ absl::Status SlamCoordinator::StartMapper(Backend* backend) {
 }
 
 absl::Status SlamCoordinator::AddKeyframe(const RgbdFrame& frame, const SE3& pose,
-                                          const PinholeIntrinsics& k) {
+                                          const PinholeIntrinsics& k,
+                                          std::shared_ptr<const FrameFeatures> features) {
   std::lock_guard<std::mutex> lock(mutex_);
   if (mapper_ == nullptr) {
     // The mapper is made by the step-runner, with its backend (the daemon's first task).
@@ -74,6 +77,7 @@ absl::Status SlamCoordinator::AddKeyframe(const RgbdFrame& frame, const SE3& pos
   } else {
     PLX_RETURN_IF_ERROR(mapper_->AddKeyframe(frame, pose, k));
   }
+  keyframe_features_.push_back(std::move(features));
   ++progress_.keyframes;
   ++progress_.pending_keyframes;
   has_work_ = true;
@@ -144,6 +148,7 @@ SlamMapView SlamCoordinator::View() const {
   } else {
     view.accepted_keyframes = mapper_->accepted_keyframes();
     view.keyframe_poses = mapper_->keyframe_poses();
+    view.keyframe_features = keyframe_features_;
   }
   view.mapping_behind = progress_.pending_keyframes > 0;
   return view;

@@ -105,14 +105,16 @@ class SlamCoordinator {
   absl::Status StartMapper(Backend* backend);
   bool mapper_started() const;
 
-  // Queues a keyframe (any thread); before StartMapper it waits in the coordinator.
-  absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k);
+  // Queues a keyframe (any thread); before StartMapper it waits in the coordinator. `features`
+  // (SlamFrameResult::features) are kept for relocalisation; null: this keyframe has none.
+  absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k,
+                           std::shared_ptr<const FrameFeatures> features = nullptr);
 
   // One bounded step of `mode` (StartMapper first). Step-runner.
   absl::StatusOr<SlamStepResult> Step(SlamStepMode mode);
 
   // What a camera tracks against now: the newest numbered version, the keyframes as accepted
-  // and as refined, and whether mapping is behind.
+  // and as refined with their features, and whether mapping is behind.
   SlamMapView View() const;
 
   // Whether a camera waiting after a keyframe (or for a first version) may track its next
@@ -149,6 +151,8 @@ class SlamCoordinator {
   mutable std::mutex mutex_;  // guards what follows (before the mapper's own lock)
   std::unique_ptr<SlamMapper> mapper_;  // set once by StartMapper
   std::vector<EarlyKeyframe> early_;    // added before the mapper exists
+  // Every accepted keyframe's features, in the order accepted (immutable once shared).
+  std::vector<std::shared_ptr<const FrameFeatures>> keyframe_features_;
   SlamMapVersion published_;            // the newest map with the map's number for it
   bool has_work_ = false;               // the mapper's, after the last step (or a keyframe)
   SlamMapperProgress progress_;         // the mapper's after the last step, our numbering

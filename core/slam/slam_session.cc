@@ -189,8 +189,9 @@ absl::Status SlamSession::MappingError() const {
 }
 
 absl::Status SlamSession::AddKeyframe(const RgbdFrame& frame, const SE3& pose,
-                                      const PinholeIntrinsics& k) {
-  PLX_RETURN_IF_ERROR(coordinator_.AddKeyframe(frame, pose, k));
+                                      const PinholeIntrinsics& k,
+                                      std::shared_ptr<const FrameFeatures> features) {
+  PLX_RETURN_IF_ERROR(coordinator_.AddKeyframe(frame, pose, k, std::move(features)));
   {
     std::lock_guard<std::mutex> lock(mutex_);
     ++wakeups_;
@@ -222,7 +223,7 @@ absl::StatusOr<SlamFrameResult> SlamSession::ProcessFrame(RgbdFrame frame,
   return CatchAllocationFailure("SLAM frame", [&]() -> absl::StatusOr<SlamFrameResult> {
     PLX_ASSIGN_OR_RETURN(SlamFrameResult out,
                          tracker_.Track(frame, k, prior, coordinator_.View()));
-    if (out.keyframe) PLX_RETURN_IF_ERROR(AddKeyframe(frame, out.pose, k));
+    if (out.keyframe) PLX_RETURN_IF_ERROR(AddKeyframe(frame, out.pose, k, out.features));
     {
       std::lock_guard<std::mutex> lock(mutex_);
       counts_ = tracker_.counts();

@@ -79,6 +79,10 @@ struct SlamOptions {
   int relocalisation_keyframes = 4;
   // An attempt that ends further than this from its starting pose is a false match.
   double relocalisation_radius_m = 0.25;
+  // The front-end's parts (SlamTrackerOptions): the map-free odometry and relocalisation by
+  // keyframe features. Both on by default; off only to measure what each brings.
+  bool odometry = true;
+  bool feature_relocalisation = true;
 
   // Where keyframe 0 sits (world_T_camera); the frame's prior wins, else the identity.
   std::optional<SE3> initial_pose;
@@ -145,7 +149,8 @@ class SlamSession {
   absl::Status RunMappingToEnd(bool finish);
   // Hands a keyframe to the coordinator, maps it (lock-step) and waits until the camera may go
   // on (SlamCoordinator::MayCameraProceed).
-  absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k);
+  absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k,
+                           std::shared_ptr<const FrameFeatures> features);
   absl::Status MappingError() const;
   void NotifyChanged();
 

@@ -56,6 +56,15 @@ absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& o) {
     return absl::InvalidArgumentError(absl::StrCat(
         "relocalisation_radius_m must be positive, got ", o.relocalisation_radius_m));
   }
+  if (o.relocalisation_attempts_per_frame < 1 || o.relocalisation_attempts_per_frame > 16) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("relocalisation_attempts_per_frame must be in [1, 16], got ",
+                     o.relocalisation_attempts_per_frame));
+  }
+  if (o.feature_relocalisation) {
+    PLX_RETURN_IF_ERROR(ValidateFrameFeatureOptions(o.features));
+    PLX_RETURN_IF_ERROR(ValidateFeatureRelocaliserOptions(o.feature_relocaliser));
+  }
   if (!(o.bootstrap_max_depth > 0.0f) || !std::isfinite(o.bootstrap_max_depth)) {
     return absl::InvalidArgumentError(absl::StrCat(
         "bootstrap_max_depth must be positive, got ", o.bootstrap_max_depth));
@@ -98,9 +107,9 @@ absl::StatusOr<std::optional<OdometryPose>> SlamTracker::RunOdometry(
 }
 
 void SlamTracker::Remember(OdometryPyramid pyramid, const std::optional<SE3>& pose,
-                           double timestamp) {
+                           double timestamp, bool continues) {
   if (!options_.odometry) return;
-  if (pose && previous_ && previous_->pose && timestamp > previous_->timestamp) {
+  if (continues && pose && previous_ && previous_->pose && timestamp > previous_->timestamp) {
     last_motion_ = previous_->pose->Inverse() * *pose;
     last_motion_dt_ = timestamp - previous_->timestamp;
   } else {
@@ -129,13 +138,81 @@ absl::Status SlamTracker::CheckFrame(const RgbdFrame& frame, const PinholeIntrin
   return absl::OkStatus();
 }
 
+absl::StatusOr<std::shared_ptr<const FrameFeatures>> SlamTracker::FeaturesOf(
+    const RgbdFrame& frame, const PinholeIntrinsics& k) {
+  if (!options_.feature_relocalisation) return std::shared_ptr<const FrameFeatures>();
+  if (frame_features_ == nullptr) {
+    PLX_ASSIGN_OR_RETURN(FrameFeatures features,
+                         ExtractFrameFeatures(frame, k, options_.features));
+    frame_features_ = std::make_shared<const FrameFeatures>(std::move(features));
+  }
+  return frame_features_;
+}
+
+absl::StatusOr<std::optional<TrackingResult>> SlamTracker::TryRelocalisationFrom(
+    const SE3& start, const RgbdFrame& frame, const PinholeIntrinsics& k) {
+  // The first attempt that tracks OK without wandering far from where it started wins. The
+  // adaptive noise scale makes a residual test weak evidence on its own (it stretches to
+  // whatever spread it finds), so a start that slid half a metre along a wall is a false
+  // match, not a relocalisation.
+  TrackerOptions attempt_options = options_.tracker;
+  attempt_options.iterations = std::max(attempt_options.iterations, 20);
+  attempt_options.constant_velocity = false;
+  Tracker attempt(tracked_map_.get(), backend_, attempt_options);
+  attempt.Reset(start, frame.timestamp);
+  PLX_ASSIGN_OR_RETURN(TrackingResult r, attempt.Track(frame, k, start));
+  if (r.state != TrackingState::kOk) return std::optional<TrackingResult>();
+  if ((r.pose.translation() - start.translation()).norm() > options_.relocalisation_radius_m) {
+    return std::optional<TrackingResult>();
+  }
+  // Verify at the sensor's own noise: a true match explains the frame within it, a pose that
+  // slid along a surface leaves residuals far above it.
+  TrackerOptions verify_options = attempt_options;
+  verify_options.adaptive_scale = false;
+  verify_options.iterations = 2;
+  Tracker verify(tracked_map_.get(), backend_, verify_options);
+  verify.Reset(r.pose, frame.timestamp);
+  PLX_ASSIGN_OR_RETURN(TrackingResult check, verify.Track(frame, k, r.pose));
+  if (check.state != TrackingState::kOk) return std::optional<TrackingResult>();
+  return std::optional<TrackingResult>(std::move(r));
+}
+
+absl::StatusOr<std::optional<TrackingResult>> SlamTracker::RelocaliseByKeyframes(
+    const RgbdFrame& frame, const PinholeIntrinsics& k, const SlamMapView& view,
+    std::string* reason) {
+  if (!options_.feature_relocalisation || view.keyframe_features.empty()) {
+    return std::optional<TrackingResult>();
+  }
+  PLX_ASSIGN_OR_RETURN(std::shared_ptr<const FrameFeatures> features, FeaturesOf(frame, k));
+  // Index i is keyframe i: features and refined poses are both in the order accepted.
+  std::vector<RelocalisationKeyframe> keyframes;
+  const size_t n = std::min(view.keyframe_features.size(), view.keyframe_poses.size());
+  for (size_t i = 0; i < n; ++i) {
+    keyframes.push_back({view.keyframe_features[i].get(), view.keyframe_poses[i].pose});
+  }
+  const std::optional<FeatureRelocalisation> found =
+      RelocaliseByFeatures(*features, keyframes, k, options_.feature_relocaliser);
+  if (!found) return std::optional<TrackingResult>();
+  PLX_ASSIGN_OR_RETURN(std::optional<TrackingResult> verified,
+                       TryRelocalisationFrom(found->pose, frame, k));
+  if (verified) {
+    *reason = absl::StrFormat("relocalised by features (keyframe %d: %d of %d matches)",
+                              found->keyframe, found->inliers, found->matches);
+  }
+  return verified;
+}
+
 absl::StatusOr<std::optional<TrackingResult>> SlamTracker::Relocalise(
     const RgbdFrame& frame, const PinholeIntrinsics& k, const std::optional<SE3>& prior,
-    const SlamMapView& view) {
+    const SlamMapView& view, std::string* reason) {
+  PLX_ASSIGN_OR_RETURN(std::optional<TrackingResult> by_features,
+                       RelocaliseByKeyframes(frame, k, view, reason));
+  if (by_features) return by_features;
+
+  // Near where the camera was: the prior, where the motion before the loss would have carried
+  // it (a covered lens, a blur), where it was last seen, the keyframes nearest to that.
   std::vector<SE3> candidates;
   if (prior) candidates.push_back(*prior);
-  // Where the motion before the loss would have carried the camera (a covered lens, a blur),
-  // then where it was last seen.
   candidates.push_back(tracker_.Predict(frame.timestamp));
   if (last_good_pose_) candidates.push_back(*last_good_pose_);
   std::vector<StampedPose> keyframes = view.keyframe_poses;
@@ -150,32 +227,19 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::Relocalise(
       std::min<int>(options_.relocalisation_keyframes, static_cast<int>(keyframes.size()));
   for (int i = 0; i < tries; ++i) candidates.push_back(keyframes[i].pose);
 
-  // Candidates in order of how likely they are; the first that tracks OK without wandering far
-  // from where it started wins. The adaptive noise scale makes a residual test weak evidence
-  // on its own (it stretches to whatever spread it finds), so a start that slid half a metre
-  // along a wall is a false match, not a relocalisation.
-  TrackerOptions attempt_options = options_.tracker;
-  attempt_options.iterations = std::max(attempt_options.iterations, 20);
-  attempt_options.constant_velocity = false;
-  TrackerOptions verify_options = attempt_options;
-  verify_options.adaptive_scale = false;
-  verify_options.iterations = 2;
-  for (const SE3& start : candidates) {
-    Tracker attempt(tracked_map_.get(), backend_, attempt_options);
-    attempt.Reset(start, frame.timestamp);
-    PLX_ASSIGN_OR_RETURN(TrackingResult r, attempt.Track(frame, k, start));
-    if (r.state != TrackingState::kOk) continue;
-    if ((r.pose.translation() - start.translation()).norm() > options_.relocalisation_radius_m) {
-      continue;
+  // This frame's share of the list; the next LOST frame goes on where it stopped.
+  const int count = static_cast<int>(candidates.size());
+  const int attempts = std::min(options_.relocalisation_attempts_per_frame, count);
+  for (int a = 0; a < attempts; ++a) {
+    const int index = (relocalisation_cursor_ + a) % count;
+    PLX_ASSIGN_OR_RETURN(std::optional<TrackingResult> r,
+                         TryRelocalisationFrom(candidates[index], frame, k));
+    if (r) {
+      *reason = "relocalised near the last good pose";
+      return r;
     }
-    // Verify at the sensor's own noise: a true match explains the frame within it, a pose that
-    // slid along a surface leaves residuals far above it.
-    Tracker verify(tracked_map_.get(), backend_, verify_options);
-    verify.Reset(r.pose, frame.timestamp);
-    PLX_ASSIGN_OR_RETURN(TrackingResult check, verify.Track(frame, k, r.pose));
-    if (check.state != TrackingState::kOk) continue;
-    return std::optional<TrackingResult>(r);
   }
+  relocalisation_cursor_ = (relocalisation_cursor_ + attempts) % count;
   return std::optional<TrackingResult>();
 }
 
@@ -230,8 +294,15 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
     return absl::FailedPreconditionError(
         "the map has no published version yet: its first keyframe is still being integrated");
   }
+  frame_features_.reset();
   PLX_ASSIGN_OR_RETURN(OdometryPyramid pyramid, PyramidOf(frame, k));
-  if (BootstrapCandidate(view)) return Bootstrap(frame, prior, std::move(pyramid), std::move(out));
+  if (BootstrapCandidate(view)) {
+    out = Bootstrap(frame, prior, std::move(pyramid), std::move(out));
+    if (out.keyframe) {
+      PLX_ASSIGN_OR_RETURN(out.features, FeaturesOf(frame, k));
+    }
+    return out;
+  }
   ++counts_.frames;
   if (!started_) {
     // The camera joins a map it did not bootstrap (one with content, or another camera's
@@ -247,13 +318,15 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   std::optional<TrackingResult> result;
   bool may_be_keyframe = false;
   if (lost_) {
-    PLX_ASSIGN_OR_RETURN(result, Relocalise(frame, k, prior, view));
+    std::string how;
+    PLX_ASSIGN_OR_RETURN(result, Relocalise(frame, k, prior, view, &how));
     if (result) {
       tracker_.Reset(result->pose, frame.timestamp);
       out.state = SlamState::kRelocalised;
       out.source = PoseSource::kMap;
-      out.reason = "relocalised";
+      out.reason = how;
       lost_ = false;
+      relocalisation_cursor_ = 0;
     } else {
       // Still lost: the prediction (the prior, else where tracking was last good).
       result.emplace();
@@ -287,15 +360,48 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
     may_be_keyframe = fused.may_be_keyframe;
     result = std::move(tracked);
     result->pose = fused.pose;
+    // The map renders the view but contradicts the odometry's pose (moving things do that,
+    // and so does a kidnap the odometry followed with confidence: a jump in the stream that
+    // its gates could not tell from motion), or the map's pose has nothing to back it (the
+    // odometry failed): the keyframes' features decide, and the dense tracker must confirm
+    // what they find.
+    const bool contradicted =
+        fused.source == PoseSource::kOdometry && result->cause != TrackingCause::kFewValidRays;
+    if (contradicted || fused.confirm) {
+      std::string how;
+      PLX_ASSIGN_OR_RETURN(std::optional<TrackingResult> found,
+                           RelocaliseByKeyframes(frame, k, view, &how));
+      if (!found && fused.confirm) {
+        out.state = SlamState::kDegraded;
+        out.reason = absl::StrCat(fused.reason, "; the keyframes' features do not confirm the "
+                                                "map's pose");
+      }
+      if (found) {
+        const bool moved =
+            (found->pose.translation() - fused.pose.translation()).norm() >
+                options_.fusion.agree_translation_m ||
+            RotationAngleBetween(found->pose, fused.pose) > options_.fusion.agree_rotation_rad;
+        tracker_.Reset(found->pose, frame.timestamp);
+        out.state = moved ? SlamState::kRelocalised : SlamState::kOk;
+        out.source = PoseSource::kMap;
+        out.reason = moved ? how : "the map confirms the pose where the features put it";
+        may_be_keyframe = !moved;
+        result = std::move(found);
+      }
+    }
   }
   out.tracking = *result;
   out.pose = result->pose;
   if (out.state == SlamState::kLost) {
+    if (!lost_) relocalisation_cursor_ = 0;  // a new loss starts at the likeliest pose
     lost_ = true;
     Remember(std::move(pyramid), std::nullopt, frame.timestamp);
   } else {
     last_good_pose_ = out.pose;
-    Remember(std::move(pyramid), out.pose, frame.timestamp);
+    // A relocalised pose is no motion from the previous frame's: the jump must not become
+    // the next frame's constant-velocity guess.
+    Remember(std::move(pyramid), out.pose, frame.timestamp,
+             /*continues=*/out.state != SlamState::kRelocalised);
   }
   if (may_be_keyframe) {
     // While keyframes wait for mapping, the part of the view the map does not render yet is
@@ -311,6 +417,7 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       out.keyframe = true;
       out.keyframes += 1;
       out.reason = decision.reason;
+      PLX_ASSIGN_OR_RETURN(out.features, FeaturesOf(frame, k));
     }
   }
   counts_.ok += out.state == SlamState::kOk;

@@ -10,11 +10,18 @@
 //   - Tracking: constant-velocity prediction, or the caller's prior (e.g. a headset's VIO).
 //   - Keyframes: only frames tracked OK, by the policy (core/slam/keyframe_policy.h) against
 //     every keyframe the map has accepted.
-//   - Relocalisation: after a LOST frame (or from the first frame of a camera joining a map
-//     it did not bootstrap: one with content, or another camera's first keyframe) each frame is tried from the prior, the motion model's
-//     prediction, the last good pose and the nearest keyframes; the first that tracks OK, stays
-//     near its start and passes a check at the sensor's noise is RELOCALISED. Until then
-//     frames are LOST with the prediction, never an unconverged estimate.
+//   - Relocalisation (docs/SLAM.md, "Relocalisation"): every keyframe carries ORB features
+//     (core/relocalisation/frame_features.h; SlamFrameResult::features, kept by the
+//     coordinator). After a LOST frame (or from the first frame of a camera joining a map it
+//     did not bootstrap), and on a frame the map contradicts although the odometry is sure
+//     (a kidnap the odometry followed), the frame's features are matched against the most
+//     similar keyframes and RANSAC PnP gives a pose from anywhere in the map; the dense
+//     tracker verifies and refines it. A LOST frame also tries, at most
+//     relocalisation_attempts_per_frame at a time, the poses near where the camera was (the
+//     prior, the motion model's prediction, the last good pose, the nearest keyframes), taking
+//     up on the next LOST frame where this one stopped. An attempt that tracks OK, stays near
+//     its start and passes a check at the sensor's noise is RELOCALISED. Until then frames are
+//     LOST with the prediction, never an unconverged estimate; the work per frame is bounded.
 //
 // Threads: one caller at a time.
 #pragma once
@@ -34,6 +41,8 @@
 #include "core/kernels/backend.h"
 #include "core/odometry/odometry_pyramid.h"
 #include "core/odometry/rgbd_odometry.h"
+#include "core/relocalisation/feature_relocaliser.h"
+#include "core/relocalisation/frame_features.h"
 #include "core/slam/keyframe_policy.h"
 #include "core/slam/pose_fusion.h"
 #include "core/slam/slam_state.h"
@@ -74,6 +83,14 @@ struct SlamTrackerOptions {
   int relocalisation_keyframes = 4;
   // An attempt that ends further than this from its starting pose is a false match.
   double relocalisation_radius_m = 0.25;
+  // Dense attempts from the poses near the last good one, per LOST frame (each a map tracking
+  // run): the rest wait for the next LOST frame, so no frame pays for the whole list.
+  int relocalisation_attempts_per_frame = 1;
+  // Relocalisation by keyframe features (and features on every keyframe). Off: only the
+  // attempts near the last good pose.
+  bool feature_relocalisation = true;
+  FrameFeatureOptions features;
+  FeatureRelocaliserOptions feature_relocaliser;
   // Where the camera starts (world_T_camera); the first frame's prior wins, else the identity.
   std::optional<SE3> initial_pose;
   // Depth beyond this does not count towards the bootstrap minimum (BootstrapDepth): the
@@ -96,6 +113,8 @@ struct SlamMapView {
   int64_t version = 0;
   std::vector<StampedPose> accepted_keyframes;  // for the keyframe policy
   std::vector<StampedPose> keyframe_poses;      // refined, for relocalisation
+  // The keyframes' features, in the same order as keyframe_poses (null: none were extracted).
+  std::vector<std::shared_ptr<const FrameFeatures>> keyframe_features;
   // Keyframes wait for integration: the part of the view the map does not render yet is
   // mostly what they will fill in, so it does not count towards a keyframe.
   bool mapping_behind = false;
@@ -108,7 +127,9 @@ struct SlamFrameResult {
   SlamState state = SlamState::kLost;
   PoseSource source = PoseSource::kPrediction;  // which estimate `pose` is
   std::string reason;  // why DEGRADED / LOST, how it relocalised, or what made a keyframe
-  bool keyframe = false;        // the caller hands this frame to the mapper
+  bool keyframe = false;        // the caller hands this frame to the mapper ...
+  // ... with these (SlamCoordinator::AddKeyframe); null when feature relocalisation is off.
+  std::shared_ptr<const FrameFeatures> features;
   int keyframes = 0;            // keyframes accepted so far, this one included
   int64_t map_version = 0;      // the published version the frame was tracked against
   TrackingResult tracking;      // the map tracker's rays, iterations, residual and state
@@ -161,10 +182,26 @@ class SlamTracker {
   // A bootstrap candidate: keyframe 0, or WAITING without enough depth.
   SlamFrameResult Bootstrap(const RgbdFrame& frame, const std::optional<SE3>& prior,
                             OdometryPyramid pyramid, SlamFrameResult out);
+  // A relocalised pose for a LOST frame: features first, then this frame's share of the
+  // attempts near the last good pose. `reason` says how it was found.
   absl::StatusOr<std::optional<TrackingResult>> Relocalise(const RgbdFrame& frame,
                                                             const PinholeIntrinsics& k,
                                                             const std::optional<SE3>& prior,
-                                                            const SlamMapView& view);
+                                                            const SlamMapView& view,
+                                                            std::string* reason);
+  // The pose RANSAC PnP finds against the keyframes' features, verified densely (none when
+  // the features find nothing or the map does not confirm it).
+  absl::StatusOr<std::optional<TrackingResult>> RelocaliseByKeyframes(
+      const RgbdFrame& frame, const PinholeIntrinsics& k, const SlamMapView& view,
+      std::string* reason);
+  // A dense attempt from `start`: tracks OK, ends within relocalisation_radius_m of it and
+  // explains the frame at the sensor's noise.
+  absl::StatusOr<std::optional<TrackingResult>> TryRelocalisationFrom(const SE3& start,
+                                                                       const RgbdFrame& frame,
+                                                                       const PinholeIntrinsics& k);
+  // This frame's features, extracted once (null when feature relocalisation is off).
+  absl::StatusOr<std::shared_ptr<const FrameFeatures>> FeaturesOf(const RgbdFrame& frame,
+                                                                   const PinholeIntrinsics& k);
 
   // The frame's pyramid when the odometry is on (else empty).
   absl::StatusOr<OdometryPyramid> PyramidOf(const RgbdFrame& frame,
@@ -175,7 +212,10 @@ class SlamTracker {
                                                            const std::optional<SE3>& prior,
                                                            OdometryResult* result) const;
   // Keeps `pyramid` as the next frame's reference, at `pose` (none: the frame was LOST).
-  void Remember(OdometryPyramid pyramid, const std::optional<SE3>& pose, double timestamp);
+  // `continues`: the pose follows from the previous frame's (not a relocalisation's jump), so
+  // the motion between them is the next frame's constant-velocity guess.
+  void Remember(OdometryPyramid pyramid, const std::optional<SE3>& pose, double timestamp,
+                bool continues = true);
 
   // The previous frame, as the odometry's reference.
   struct PreviousFrame {
@@ -196,6 +236,9 @@ class SlamTracker {
   bool started_ = false;  // bootstrapped the map or tracked a frame in it
   bool lost_ = false;
   std::optional<SE3> last_good_pose_;
+  int relocalisation_cursor_ = 0;  // the next attempt near the last good pose
+  // The current frame's features once extracted (FeaturesOf), reset per frame.
+  std::shared_ptr<const FrameFeatures> frame_features_;
   SlamTrackerCounts counts_;
 };
 

@@ -64,7 +64,7 @@ SlamFrameResult Process(SlamTracker& tracker, SlamCoordinator& coordinator, cons
   EXPECT_TRUE(r.ok()) << r.status();
   if (!r.ok()) return SlamFrameResult();
   if (r->keyframe) {
-    EXPECT_TRUE(coordinator.AddKeyframe(frame, r->pose, k).ok());
+    EXPECT_TRUE(coordinator.AddKeyframe(frame, r->pose, k, r->features).ok());
     RunOut(coordinator, SlamStepMode::kMap);
     EXPECT_TRUE(coordinator.MayCameraProceed()) << "lock-step mapping left work";
   }

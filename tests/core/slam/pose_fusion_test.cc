@@ -25,6 +25,24 @@ TEST(PoseFusionTest, AnOkMapWinsAndMayMakeAKeyframe) {
   EXPECT_EQ(f.source, PoseSource::kMap);
   EXPECT_EQ(f.pose.translation().x(), 1.0);
   EXPECT_TRUE(f.may_be_keyframe);
+  EXPECT_FALSE(f.confirm);
+  // No odometry at all (the first frame after a LOST one): the map alone, as before it existed.
+  const FusedPose alone = FusePoses(Map(TrackingState::kOk, TrackingCause::kNone, 1.0),
+                                    std::nullopt, PoseFusionOptions());
+  EXPECT_TRUE(alone.may_be_keyframe);
+  EXPECT_FALSE(alone.confirm);
+}
+
+TEST(PoseFusionTest, AnOkMapAfterTheOdometryFailedWaitsForConfirmation) {
+  // A jump in the stream: the odometry gives up, the map tracker settles somewhere it explains.
+  const FusedPose f = FusePoses(Map(TrackingState::kOk, TrackingCause::kNone, 1.0),
+                                Odometry(false, 3.0), PoseFusionOptions());
+  EXPECT_EQ(f.state, SlamState::kOk);
+  EXPECT_EQ(f.source, PoseSource::kMap);
+  EXPECT_EQ(f.pose.translation().x(), 1.0);
+  EXPECT_TRUE(f.confirm);
+  EXPECT_FALSE(f.may_be_keyframe);
+  EXPECT_NE(f.reason.find("blind"), std::string::npos) << f.reason;
 }
 
 TEST(PoseFusionTest, UnmappedViewWithOdometryIsDegradedButMayMakeAKeyframe) {

@@ -189,6 +189,64 @@ TEST_F(SlamSessionTest, BlankStretchIsLostNeverIntegratedThenRelocalises) {
   ASSERT_TRUE((*session)->Finish().ok());
 }
 
+// After frame 59 the stream jumps back to frame 10 (timestamps go on at 30 Hz): a kidnap to a
+// place the map has seen, 0.5-0.8 m and ~40 degrees from where the camera was. Runs the
+// stream with and without keyframe features; returns the index of the first RELOCALISED frame
+// after the jump (-1: none within the 30 frames).
+struct KidnapRun {
+  int relocalised_at = -1;
+  double worst_error_after_m = 0.0;  // from the relocalisation on
+  int lost_after = 0;                // LOST frames after the relocalisation
+  bool keyframe_while_lost = false;
+};
+
+KidnapRun RunKidnap(const InMemoryDataset& dataset, Backend* backend, bool features) {
+  SlamOptions o = TestOptions();
+  o.initial_pose = SE3();
+  o.feature_relocalisation = features;
+  absl::StatusOr<std::unique_ptr<SlamSession>> session =
+      SlamSession::Create(o, backend, CpuFactory());
+  EXPECT_TRUE(session.ok()) << session.status();
+  KidnapRun run;
+  if (!session.ok()) return run;
+  const PinholeIntrinsics& k = dataset.calibration().pinhole;
+  const SE3 to_estimate = dataset.ground_truth(0)->Inverse();
+  for (int i = 0; i < 90; ++i) {
+    const int source = i < 60 ? i : i - 50;  // frames 0..59, then 10..39
+    RgbdFrame frame = dataset.frames()[source];
+    frame.timestamp = i / 30.0;
+    absl::StatusOr<SlamFrameResult> r = (*session)->ProcessFrame(std::move(frame), k);
+    EXPECT_TRUE(r.ok()) << r.status();
+    if (!r.ok()) return run;
+    if (i < 60) continue;
+    if (r->state == SlamState::kLost && r->keyframe) run.keyframe_while_lost = true;
+    if (run.relocalised_at < 0 && r->state == SlamState::kRelocalised) run.relocalised_at = i;
+    if (run.relocalised_at >= 0) {
+      run.lost_after += r->state == SlamState::kLost;
+      run.worst_error_after_m = std::max(
+          run.worst_error_after_m, Distance(r->pose, to_estimate * *dataset.ground_truth(source)));
+    }
+  }
+  EXPECT_TRUE((*session)->Finish().ok());
+  return run;
+}
+
+TEST_F(SlamSessionTest, AKidnapRelocalisesByKeyframeFeaturesWithinAFewFrames) {
+  const KidnapRun with = RunKidnap(*dataset_, backend_.get(), true);
+  std::printf("kidnap with features: relocalised at frame %d, worst error after %.1f mm\n",
+              with.relocalised_at, 1000 * with.worst_error_after_m);
+  ASSERT_GE(with.relocalised_at, 60);
+  EXPECT_LE(with.relocalised_at, 61) << "relocalised too late";  // measured: at the jump
+  EXPECT_EQ(with.lost_after, 0);
+  EXPECT_LT(with.worst_error_after_m, 0.02);
+  EXPECT_FALSE(with.keyframe_while_lost);
+  // Near the last good pose alone, the same jump takes longer or never relocalises: the
+  // features are what finds the place.
+  const KidnapRun without = RunKidnap(*dataset_, backend_.get(), false);
+  std::printf("kidnap without features: relocalised at frame %d\n", without.relocalised_at);
+  EXPECT_TRUE(without.relocalised_at < 0 || without.relocalised_at > with.relocalised_at);
+}
+
 // Keeps the depth of the top `fraction` of the rows (a partly covered lens); the rest reads 0.
 RgbdFrame KeepDepthRows(RgbdFrame frame, double fraction) {
   const int keep = static_cast<int>(fraction * frame.depth.height);
