@@ -82,7 +82,8 @@ std::string FlagSet::Usage() const {
   std::string out = absl::StrCat("usage: ", command_, " [flags]\n\n", summary_, "\n\nflags:\n");
   for (const std::string& name : order_) {
     const Flag& f = flags_.at(name);
-    std::string left = absl::StrCat("  --", name, f.is_switch ? "" : absl::StrCat(" ", f.value_name));
+    std::string left =
+        absl::StrCat("  --", name, f.is_switch ? "" : absl::StrCat(" ", f.value_name));
     std::string right = f.help;
     if (f.required) absl::StrAppend(&right, " (required)");
     if (f.default_value && !f.default_value->empty()) {

@@ -165,7 +165,9 @@ class CudaBackend final : public Backend {
   // only; a sticky device error (an illegal address) fails every later call of this backend
   // too, each with the same message, while the other backends of the process keep working.
   absl::Status Finish() {
-    if (const cudaError_t e = cudaGetLastError(); e != cudaSuccess) return Failed(e, "kernel launch");
+    if (const cudaError_t e = cudaGetLastError(); e != cudaSuccess) {
+      return Failed(e, "kernel launch");
+    }
     if (const cudaError_t e = cudaStreamSynchronize(stream_); e != cudaSuccess) {
       return Failed(e, "kernel execution");
     }

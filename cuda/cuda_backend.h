@@ -7,8 +7,9 @@
 // (core/common/unified_allocator.h), so grids, optimiser state, training frames, images and
 // tracking/render buffers allocated from then on are CUDA managed memory, which pages migrate
 // on demand between host and GPU. Arrays allocated before (e.g. a map loaded before the backend
-// was made) are ordinary host memory: a call that passes them fails (INVALID_ARGUMENT) with a message naming the
-// argument unless the device can read pageable memory (HMM / coherent systems).
+// was made) are ordinary host memory: a call that passes them fails (INVALID_ARGUMENT) with a
+// message naming the argument unless the device can read pageable memory (HMM / coherent
+// systems).
 #pragma once
 
 #include <memory>

@@ -81,14 +81,17 @@ plx::ColorImage Color() {
 plx::DepthImage Depth() {
   plx::DepthImage image(plx::Image<float>(kWidth, kHeight, 1));
   for (int v = 0; v < kHeight; ++v) {
-    for (int u = 0; u < kWidth; ++u) *image.pixel(u, v) = (u == 0 && v == 0) ? 0.0f : 1.0f + 0.1f * u;
+    for (int u = 0; u < kWidth; ++u) {
+      *image.pixel(u, v) = (u == 0 && v == 0) ? 0.0f : 1.0f + 0.1f * u;
+    }
   }
   return image;
 }
 
 plx::SE3 Pose(double t) {
-  return plx::SE3(Eigen::Quaterniond(Eigen::AngleAxisd(0.3 * t, Eigen::Vector3d(0, 1, 0.2).normalized())),
-                  Eigen::Vector3d(0.1 * t, -0.2, 1.5 + t));
+  return plx::SE3(
+      Eigen::Quaterniond(Eigen::AngleAxisd(0.3 * t, Eigen::Vector3d(0, 1, 0.2).normalized())),
+      Eigen::Vector3d(0.1 * t, -0.2, 1.5 + t));
 }
 
 plx::CameraCalibration Calibration() {
@@ -191,7 +194,8 @@ void TumSeeds(const fs::path& dir, const fs::path& scratch) {
 int main(int argc, char** argv) {
   if (argc != 2) Die("usage: plx_fuzz_seeds DIR");
   const fs::path out = argv[1];
-  const fs::path scratch = fs::temp_directory_path() / ("plx_fuzz_seeds_" + std::to_string(getpid()));
+  const fs::path scratch =
+      fs::temp_directory_path() / ("plx_fuzz_seeds_" + std::to_string(getpid()));
   fs::create_directories(scratch);
   ImageSeeds(out / "fuzz_image");
   FrameSeeds(out / "fuzz_frame_proto");

@@ -124,7 +124,9 @@ absl::StatusOr<CameraCalibration> IntrinsicsFromProto(const pb::Intrinsics& k,
     return Invalid(field, absl::StrCat("image size ", k.width(), "x", k.height(),
                                        " is larger than ", kMaxImageSide, "x", kMaxImageSide));
   }
-  if (absl::Status s = ValidateCalibration(c); !s.ok()) return Invalid(field, std::string(s.message()));
+  if (absl::Status s = ValidateCalibration(c); !s.ok()) {
+    return Invalid(field, std::string(s.message()));
+  }
   return c;
 }
 

@@ -1,7 +1,7 @@
 // The web viewer's view of plenoxd (web/viewer_source.h): the map store's maps and published
 // versions, the SLAM jobs' trajectory records, and the viewer's device work (renders) posted to
-// a device worker at interactive priority like the Render RPC's. Read directly in the server layer, never through
-// gRPC to the daemon itself.
+// a device worker at interactive priority like the Render RPC's. Read directly in the server
+// layer, never through gRPC to the daemon itself.
 #pragma once
 
 #include <string>

@@ -31,7 +31,7 @@ absl::Status IntegrateReactor::HandleFirstMessage() {
   PLX_ASSIGN_OR_RETURN(options_,
                        MappingSessionOptionsFromProto(request_.options(), info->voxel_size,
                                                       state_->maps->max_map_bytes()));
-  if (absl::Status s = state_->maps->BeginMapping(map_name_, MappingJobKind::kIntegrate); !s.ok()) return s;
+  PLX_RETURN_IF_ERROR(state_->maps->BeginMapping(map_name_, MappingJobKind::kIntegrate));
   lease_ = true;
   job_id_ = state_->jobs->Create("integrate", map_name_);
   state_->jobs->Update(job_id_, JobState::kRunning, 0.0, "waiting for keyframes");

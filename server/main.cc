@@ -200,7 +200,9 @@ int main(int argc, char** argv) {
     return 1;
   }
   std::cout << "plenoxd listening on port " << (*daemon)->port();
-  if ((*daemon)->metrics_port() >= 0) std::cout << ", metrics on port " << (*daemon)->metrics_port();
+  if ((*daemon)->metrics_port() >= 0) {
+    std::cout << ", metrics on port " << (*daemon)->metrics_port();
+  }
   std::cout << std::endl;
   if (options.viewer) {
     std::cout << "viewer: http://" << options.metrics_host << ":" << (*daemon)->metrics_port()

@@ -96,8 +96,8 @@ std::string Metrics::Render(const Gauges& g) const {
                     d.queue_depth, "\n");
   }
   absl::StrAppend(&out,
-                  "# HELP plenoxd_device_streams Track, Integrate and Slam streams (and SLAM jobs) bound to each "
-                  "device.\n# TYPE plenoxd_device_streams gauge\n");
+                  "# HELP plenoxd_device_streams Track, Integrate and Slam streams (and SLAM jobs) "
+                  "bound to each device.\n# TYPE plenoxd_device_streams gauge\n");
   for (const Gauges::Device& d : g.devices) {
     absl::StrAppend(&out, "plenoxd_device_streams{device=\"", LabelValue(d.id), "\"} ",
                     d.streams, "\n");

@@ -36,8 +36,10 @@ void PlenoxdService::Finish(grpc::ServerUnaryReactor* reactor, const char* metho
                             const absl::Status& status) {
   if (!status.ok()) {
     state_->metrics->rpc_errors++;
-    LogEvent("warning", "rpc", {{"method", method}, {"code", absl::StatusCodeToString(status.code())},
-                                {"message", std::string(status.message())}});
+    LogEvent("warning", "rpc",
+             {{"method", method},
+              {"code", absl::StatusCodeToString(status.code())},
+              {"message", std::string(status.message())}});
   }
   reactor->Finish(ToGrpcStatus(status));
 }

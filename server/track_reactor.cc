@@ -96,7 +96,8 @@ void TrackReactor::RunTask(Backend* backend, bool cancelled) {
       tracker_started_ = true;
       result.pose = start;
       result.state = TrackingState::kOk;
-      result.reason = work->initial_pose ? "initial pose" : "initial pose (frame prior or identity)";
+      result.reason =
+          work->initial_pose ? "initial pose" : "initial pose (frame prior or identity)";
     } else {
       absl::StatusOr<TrackingResult> tracked =
           tracker_->Track(frame, decoded->calibration.pinhole, decoded->client_pose);

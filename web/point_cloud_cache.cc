@@ -47,8 +47,8 @@ absl::StatusOr<PointCloud> ThinPointCloudPly(const std::string& ply, int64_t max
     body.append(ply, body_at + static_cast<size_t>(i) * kPointBytes, kPointBytes);
     ++out.points;
   }
-  out.ply = absl::StrCat(ply.substr(0, digits_at), out.points, ply.substr(digits_end, body_at - digits_end),
-                         body);
+  out.ply = absl::StrCat(ply.substr(0, digits_at), out.points,
+                         ply.substr(digits_end, body_at - digits_end), body);
   return out;
 }
 

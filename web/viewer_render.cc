@@ -41,7 +41,9 @@ absl::StatusOr<SE3> PoseParam(const HttpRequest& request) {
   const std::vector<std::string> parts = absl::StrSplit(*text, ',');
   double v[7];
   bool ok = parts.size() == 7;
-  for (size_t i = 0; ok && i < 7; ++i) ok = absl::SimpleAtod(parts[i], &v[i]) && std::isfinite(v[i]);
+  for (size_t i = 0; ok && i < 7; ++i) {
+    ok = absl::SimpleAtod(parts[i], &v[i]) && std::isfinite(v[i]);
+  }
   if (!ok) {
     return absl::InvalidArgumentError(
         "pose: expected 7 finite numbers tx,ty,tz,qx,qy,qz,qw (world_T_camera)");

@@ -199,7 +199,8 @@ std::unique_ptr<Backend> BackendFromFlagsOrReport(const std::string& command,
 }
 
 SlamSession::BackendFactory MappingBackendFactory(const FlagSet& flags, bool deterministic) {
-  const BackendKind kind = ParseBackendKind(flags.GetString("backend")).value_or(BackendKind::kAuto);
+  const BackendKind kind =
+      ParseBackendKind(flags.GetString("backend")).value_or(BackendKind::kAuto);
   const int device = flags.GetInt("device", 0, 1023).value_or(0);
   int threads = flags.GetInt("threads", 0, 4096).value_or(0);
   if (threads == 0) threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
@@ -233,7 +234,8 @@ absl::StatusOr<DatasetOptions> DatasetOptionsFromFlags(const FlagSet& flags) {
   PLX_ASSIGN_OR_RETURN(options.format, ParseDatasetFormat(flags.GetString("format")));
   if (!flags.GetString("intrinsics").empty()) {
     CameraCalibration calibration;
-    PLX_ASSIGN_OR_RETURN(calibration.pinhole, ParsePinholeIntrinsics(flags.GetString("intrinsics")));
+    PLX_ASSIGN_OR_RETURN(calibration.pinhole,
+                         ParsePinholeIntrinsics(flags.GetString("intrinsics")));
     PLX_ASSIGN_OR_RETURN(calibration.depth_scale, flags.GetDouble("depth-scale", 1e-6, 1e9));
     options.calibration = calibration;
   } else if (flags.GetString("depth-scale") != "5000") {

@@ -22,12 +22,13 @@
 namespace plx::cli {
 
 int RunDemo(const std::vector<std::string>& args) {
-  FlagSet flags("plenox demo",
-                "Generates a synthetic RGB-D sequence with sensor-like depth noise, maps every\n"
-                "10th frame with known poses, scores the map on the held-out frames in between\n"
-                "(PSNR, depth L1, coverage), tracks every frame in the map (ATE), runs online SLAM\n"
-                "on the same frames without their poses (ATE), and writes the sequence, the map,\n"
-                "renders and both trajectories to --out.");
+  FlagSet flags(
+      "plenox demo",
+      "Generates a synthetic RGB-D sequence with sensor-like depth noise, maps every\n"
+      "10th frame with known poses, scores the map on the held-out frames in between\n"
+      "(PSNR, depth L1, coverage), tracks every frame in the map (ATE), runs online SLAM\n"
+      "on the same frames without their poses (ATE), and writes the sequence, the map,\n"
+      "renders and both trajectories to --out.");
   flags.Add("out", "DIR", "output folder", "plenox_demo");
   AddSyntheticFlags(flags, 90, /*noise_by_default=*/true);
   AddMapperFlags(flags);
@@ -40,7 +41,8 @@ int RunDemo(const std::vector<std::string>& args) {
   if (!synth.ok()) return ReportError("demo", synth.status(), true);
   absl::StatusOr<int> every_flag = flags.GetInt("every", 1, 1000);
   const int demo_keyframes =
-      every_flag.ok() ? static_cast<int>(KeyframeIndices(synth->num_frames, *every_flag).size()) : 1;
+      every_flag.ok() ? static_cast<int>(KeyframeIndices(synth->num_frames, *every_flag).size())
+                      : 1;
   absl::StatusOr<MapperOptions> options = MapperOptionsFromFlags(flags, demo_keyframes);
   if (!options.ok()) return ReportError("demo", options.status(), true);
   absl::StatusOr<int> every = flags.GetInt("every", 1, 1000);
@@ -136,7 +138,8 @@ int RunDemo(const std::vector<std::string>& args) {
   // Online SLAM on the same frames, their poses unknown (only frame 0's, as the start).
   SlamDatasetOptions slam_options;
   slam_options.slam.mapping.mapper = *options;
-  slam_options.slam.mapping.mapper.window_keyframes = DefaultSlamOptions().mapping.mapper.window_keyframes;
+  slam_options.slam.mapping.mapper.window_keyframes =
+      DefaultSlamOptions().mapping.mapper.window_keyframes;
   absl::StatusOr<SlamDatasetResult> slam = RunSlamOnDataset(
       *dataset, *backend, MappingBackendFactory(flags, false), slam_options,
       [&](const SlamFrameResult& r) {
@@ -152,7 +155,8 @@ int RunDemo(const std::vector<std::string>& args) {
       !s.ok()) {
     return ReportError("demo", s);
   }
-  absl::StatusOr<TrajectoryEvalResult> slam_ate = EvaluateTrajectory(slam->trajectory, ground_truth);
+  absl::StatusOr<TrajectoryEvalResult> slam_ate =
+      EvaluateTrajectory(slam->trajectory, ground_truth);
   if (!slam_ate.ok()) return ReportError("demo", slam_ate.status());
   line.Finish(absl::StrFormat("slam: %d frames, %d keyframes, %d lost, ATE %.2f mm",
                               static_cast<int>(slam->trajectory.size()),

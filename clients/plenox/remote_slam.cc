@@ -61,7 +61,8 @@ FlagSet RemoteSlamFlags() {
                 "With --server: online RGB-D SLAM on the daemon. Streams every frame of a dataset\n"
                 "(no poses) into map N, which is created when it does not exist, bootstrapped\n"
                 "when it is empty and extended when it has content, and writes the poses the\n"
-                "daemon sends back as a TUM trajectory. Starts at frame 0's ground-truth pose when\n"
+                "daemon sends back as a TUM trajectory. Starts at frame 0's "
+                "ground-truth pose when\n"
                 "the dataset has one (and is then scored against it), else at the identity.\n"
                 "Frames go one at a time (the next after the previous update came back), or at\n"
                 "their timestamps with --realtime, where the daemon keeps the newest (latest\n"
@@ -75,7 +76,8 @@ FlagSet RemoteSlamFlags() {
   AddDatasetFlags(flags);
   flags.Add("name", "N", "the map on the daemon (1-64 characters of [A-Za-z0-9_.-])", std::nullopt,
             true);
-  AddSlamFlags(flags, "voxel edge in metres of a new map (for an existing map, its own or nothing)");
+  AddSlamFlags(flags,
+               "voxel edge in metres of a new map (for an existing map, its own or nothing)");
   flags.Add("encoding", "png|raw", "how frames travel: PNG, or raw RGB8 + uint16 (no codec)", "png")
       .Add("timings", "FILE",
            "also write per-frame times: frame timestamp roundtrip_ms daemon_ms state [keyframe]",

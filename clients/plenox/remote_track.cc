@@ -27,7 +27,8 @@ FlagSet RemoteTrackFlags() {
                 "sent to estimate read, encoding excluded).");
   AddTrackFlags(flags, "N", "the map on the daemon");
   flags.Add("encoding", "png|raw", "how frames travel: PNG, or raw RGB8 + uint16 (no codec)", "png")
-      .Add("timings", "FILE", "also write per-frame times: frame timestamp roundtrip_ms daemon_ms", "");
+      .Add("timings", "FILE",
+           "also write per-frame times: frame timestamp roundtrip_ms daemon_ms", "");
   AddJsonAndQuietSwitches(flags);
   return flags;
 }

@@ -90,9 +90,9 @@ absl::Status CheckSlamDataset(const RgbdDataset& dataset) {
       return absl::OkStatus();
     }
   }
-  return absl::InvalidArgumentError(absl::StrCat(dataset.name(),
-                                                 " has no valid depth in any of its ",
-                                                 dataset.size(), " frames: SLAM needs RGB-D frames"));
+  return absl::InvalidArgumentError(
+      absl::StrCat(dataset.name(), " has no valid depth in any of its ", dataset.size(),
+                   " frames: SLAM needs RGB-D frames"));
 }
 
 int SlamFrameCount(const RgbdDataset& dataset, const SlamDatasetOptions& options) {
@@ -103,7 +103,9 @@ void ScoreSlamTrajectory(const RgbdDataset& dataset, const std::vector<StampedPo
                          double rpe_delta_m, SlamReport* report) {
   std::vector<StampedPose> gt;
   for (int i = 0; i < dataset.size(); ++i) {
-    if (std::optional<SE3> pose = dataset.ground_truth(i)) gt.push_back({dataset.timestamp(i), *pose});
+    if (std::optional<SE3> pose = dataset.ground_truth(i)) {
+      gt.push_back({dataset.timestamp(i), *pose});
+    }
   }
   if (gt.size() < 3) return;
   TrajectoryEvalOptions options;

@@ -16,7 +16,8 @@
       return plx_status_;                                  \
   } while (false)
 
-// `PLX_ASSIGN_OR_RETURN(auto x, Foo());` declares x from an OK StatusOr, returns the error otherwise.
+// `PLX_ASSIGN_OR_RETURN(auto x, Foo());` declares x from an OK StatusOr, returns the error
+// otherwise.
 #define PLX_ASSIGN_OR_RETURN(lhs, expr) \
   PLX_ASSIGN_OR_RETURN_IMPL(PLX_STATUS_CONCAT(plx_statusor_, __LINE__), lhs, expr)
 #define PLX_ASSIGN_OR_RETURN_IMPL(tmp, lhs, expr) \

@@ -20,7 +20,8 @@ struct MapEvalOptions {
 };
 
 struct MapEvalResult {
-  double psnr = 0.0;              // dB, mean over frames; colour clamped to [0, 1], all sampled pixels
+  double psnr = 0.0;              // dB, mean over frames, all sampled pixels; colour clamped
+                                  // to [0, 1]
   double depth_l1_m = 0.0;        // mean |rendered range - measured range| over rendered pixels
   double depth_l1_median_m = 0.0; // median of the same errors
   double coverage = 0.0;          // fraction of sampled pixels the map renders (opacity >= 0.5)

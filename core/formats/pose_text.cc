@@ -14,8 +14,9 @@ namespace plx {
 absl::StatusOr<SE3> ParsePoseText(const std::string& text) {
   std::vector<std::string> parts = absl::StrSplit(text, absl::ByAnyChar(" ,\t"), absl::SkipEmpty());
   if (parts.size() != 7) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "a pose needs 7 numbers \"tx ty tz qx qy qz qw\", got ", parts.size(), " in \"", text, "\""));
+    return absl::InvalidArgumentError(
+        absl::StrCat("a pose needs 7 numbers \"tx ty tz qx qy qz qw\", got ", parts.size(),
+                     " in \"", text, "\""));
   }
   double v[7];
   for (int i = 0; i < 7; ++i) {

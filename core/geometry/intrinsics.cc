@@ -44,7 +44,8 @@ absl::StatusOr<PinholeIntrinsics> ParsePinholeIntrinsics(const std::string& text
   double v[4];
   for (int i = 0; i < 4; ++i) {
     if (!absl::SimpleAtod(parts[i], &v[i])) {
-      return absl::InvalidArgumentError(absl::StrCat("intrinsics: not a number: \"", parts[i], "\""));
+      return absl::InvalidArgumentError(
+          absl::StrCat("intrinsics: not a number: \"", parts[i], "\""));
     }
   }
   int w = 0, h = 0;

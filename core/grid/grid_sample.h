@@ -36,7 +36,8 @@ PLX_HD void LocateCell(const GridViewT<T>& grid, const Vec3<T>& q, CellSample<T>
   sample->cell[2] = c[2];
   sample->frac = {f[0], f[1], f[2]};
   TrilinearWeights(sample->frac, sample->weights);
-  const int lx = c[0] & (kBrickEdge - 1), ly = c[1] & (kBrickEdge - 1), lz = c[2] & (kBrickEdge - 1);
+  const int lx = c[0] & (kBrickEdge - 1), ly = c[1] & (kBrickEdge - 1),
+            lz = c[2] & (kBrickEdge - 1);
   if (lx < kBrickEdge - 1 && ly < kBrickEdge - 1 && lz < kBrickEdge - 1) {
     // All corners share one brick: one index lookup, fixed offsets.
     const int64_t base = grid.VertexSlot(c[0], c[1], c[2]);
@@ -49,7 +50,8 @@ PLX_HD void LocateCell(const GridViewT<T>& grid, const Vec3<T>& q, CellSample<T>
     return;
   }
   for (int k = 0; k < 8; ++k) {
-    sample->slots[k] = grid.VertexSlot(c[0] + (k & 1), c[1] + ((k >> 1) & 1), c[2] + ((k >> 2) & 1));
+    sample->slots[k] =
+        grid.VertexSlot(c[0] + (k & 1), c[1] + ((k >> 1) & 1), c[2] + ((k >> 2) & 1));
   }
 }
 
@@ -129,7 +131,9 @@ PLX_HD void ScatterSampleGrad(const CellSample<T>& s, T dL_dsigma, const T* dL_d
   T per_coeff[kShCoeffCount];
   if (dL_draw != nullptr) {
     for (int c = 0; c < 3; ++c) {
-      for (int k = 0; k < kShBasisCount; ++k) per_coeff[c * kShBasisCount + k] = dL_draw[c] * basis[k];
+      for (int k = 0; k < kShBasisCount; ++k) {
+        per_coeff[c * kShBasisCount + k] = dL_draw[c] * basis[k];
+      }
     }
   }
   for (int k = 0; k < 8; ++k) {

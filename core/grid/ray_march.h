@@ -40,8 +40,8 @@ PLX_HD bool ClipRayToBox(const Vec3<T>& o, const Vec3<T>& d, const T lo[3], cons
 }
 
 // Calls visit(t, sample) for every lattice sample in [t_near, t_far] whose cell is marked
-// occupied (see GridViewT::cell_bits), in increasing t, until visit returns false. `origin` and `dir` are in world units
-// (dir need not be unit; t is measured in multiples of |dir|).
+// occupied (see GridViewT::cell_bits), in increasing t, until visit returns false. `origin` and
+// `dir` are in world units (dir need not be unit; t is measured in multiples of |dir|).
 template <typename T, typename Visitor>
 PLX_HD void MarchRay(const GridViewT<T>& grid, const Vec3<T>& origin, const Vec3<T>& dir, T t_near,
                      T t_far, T step, Visitor&& visit) {

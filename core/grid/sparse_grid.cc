@@ -272,7 +272,8 @@ std::optional<SparseGrid::IndexBounds> SparseGrid::BoundsCovering(
   bool inside = index_dims_[0] > 0 && index_dims_[1] > 0 && index_dims_[2] > 0;
   for (int a = 0; a < 3; ++a) {
     lo[a] = inside ? index_min_[a] : std::numeric_limits<int32_t>::max();
-    hi[a] = inside ? int64_t{index_min_[a]} + index_dims_[a] - 1 : std::numeric_limits<int32_t>::min();
+    hi[a] = inside ? int64_t{index_min_[a]} + index_dims_[a] - 1
+                   : std::numeric_limits<int32_t>::min();
   }
   bool grow = !inside;
   for (const BrickCoord& b : bricks) {

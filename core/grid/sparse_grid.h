@@ -100,7 +100,8 @@ class SparseGrid {
   // ray marching works in index coordinates, so the same bounds give bit-identical renders.
   // Later allocations outside them still grow the index. InvalidArgument for bounds outside the
   // world (CheckIndexBoundsInsideWorld).
-  absl::Status SetIndexBounds(const std::array<int32_t, 3>& min, const std::array<int32_t, 3>& dims);
+  absl::Status SetIndexBounds(const std::array<int32_t, 3>& min,
+                              const std::array<int32_t, 3>& dims);
 
   // Slot of a brick, or -1.
   int32_t FindBrick(const BrickCoord& brick) const;

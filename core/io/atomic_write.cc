@@ -153,7 +153,9 @@ absl::Status AtomicFileWriter::Finish() {
   // Contents must be on disk before the rename publishes them, or a crash could leave a
   // complete name pointing at incomplete contents.
   absl::Status status;
-  if (::fsync(fd_) != 0) status = FileWriteError(errno, absl::StrCat(what_, ": fsync of ", temp_path_));
+  if (::fsync(fd_) != 0) {
+    status = FileWriteError(errno, absl::StrCat(what_, ": fsync of ", temp_path_));
+  }
   const int closed = ::close(fd_);
   fd_ = -1;
   if (closed != 0 && status.ok()) {

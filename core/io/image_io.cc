@@ -227,21 +227,24 @@ absl::StatusOr<cv::Mat> DecodeDepthBuffer(const std::string& bytes, const std::s
   return CheckDepth16(image, what);
 }
 
-absl::StatusOr<std::string> EncodeColorImage(const ColorImage& image, const std::string& extension) {
-  PLX_RETURN_IF_ERROR(
-      CheckImageShape("colour image", image.width, image.height, image.channels, image.data.size(), 3));
+absl::StatusOr<std::string> EncodeColorImage(const ColorImage& image,
+                                             const std::string& extension) {
+  PLX_RETURN_IF_ERROR(CheckImageShape("colour image", image.width, image.height, image.channels,
+                                      image.data.size(), 3));
   return EncodeMat(ColorImageToBgr8(image), extension);
 }
 
 absl::StatusOr<std::string> EncodeDepthImage(const DepthImage& image, double depth_scale) {
-  PLX_RETURN_IF_ERROR(
-      CheckImageShape("depth image", image.width, image.height, image.channels, image.data.size(), 1));
+  PLX_RETURN_IF_ERROR(CheckImageShape("depth image", image.width, image.height, image.channels,
+                                      image.data.size(), 1));
   return EncodeMat(DepthImageToU16(image, depth_scale), ".png");
 }
 
 std::string ColorImageToRgb8Bytes(const ColorImage& image) {
   std::string bytes(image.data.size(), '\0');
-  for (size_t i = 0; i < image.data.size(); ++i) bytes[i] = static_cast<char>(ToByte(image.data[i]));
+  for (size_t i = 0; i < image.data.size(); ++i) {
+    bytes[i] = static_cast<char>(ToByte(image.data[i]));
+  }
   return bytes;
 }
 

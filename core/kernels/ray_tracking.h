@@ -94,7 +94,9 @@ PLX_HD RayPoseJacobian<T> RenderRayPoseJacobian(const GridViewT<T>& grid,
     }
     T color[3];
     bool unclamped[3];
-    for (int c = 0; c < 3; ++c) color[c] = ActivateColor(Trilerp(corner_color[c], s.weights), &unclamped[c]);
+    for (int c = 0; c < 3; ++c) {
+      color[c] = ActivateColor(Trilerp(corner_color[c], s.weights), &unclamped[c]);
+    }
 
     const T values[5] = {color[0], color[1], color[2], t, T(1)};
     T dsigma[5];

@@ -18,8 +18,8 @@ absl::StatusOr<MapDatasetResult> MapDataset(
   state.keyframes_total = static_cast<int>(keyframes.size());
   for (int index : keyframes) {
     if (index < 0 || index >= dataset.size()) {
-      return absl::OutOfRangeError(
-          absl::StrCat("keyframe ", index, " is outside the dataset (", dataset.size(), " frames)"));
+      return absl::OutOfRangeError(absl::StrCat("keyframe ", index, " is outside the dataset (",
+                                                dataset.size(), " frames)"));
     }
     const std::optional<SE3> pose = dataset.ground_truth(index);
     if (!pose) {

@@ -48,7 +48,8 @@ absl::Status TrainingSet::AddFrame(RgbdFrame frame, const SE3& world_T_camera,
 
 absl::Status TrainingSet::SetPose(int i, const SE3& world_T_camera) {
   if (i < 0 || i >= num_frames()) {
-    return absl::OutOfRangeError(absl::StrCat("no keyframe ", i, " (", num_frames(), " keyframes)"));
+    return absl::OutOfRangeError(
+        absl::StrCat("no keyframe ", i, " (", num_frames(), " keyframes)"));
   }
   if (!world_T_camera.IsFinite()) {
     return absl::InvalidArgumentError(absl::StrCat("keyframe ", i, ": pose is not finite"));

@@ -6,7 +6,8 @@
 namespace plx {
 
 absl::StatusOr<TrackDatasetResult> TrackDataset(
-    const RgbdDataset& dataset, const PlenoxelMap& map, Backend& backend, const TrackerOptions& options,
+    const RgbdDataset& dataset, const PlenoxelMap& map, Backend& backend,
+    const TrackerOptions& options,
     const std::function<bool(int, const TrackingResult&)>& progress) {
   PLX_RETURN_IF_ERROR(Tracker::ValidateOptions(options));
   if (dataset.size() == 0) return absl::InvalidArgumentError("the dataset has no frames");

@@ -26,7 +26,8 @@ struct TrackDatasetResult {
 
 // `progress(frame_index, result)` after every frame; returning false cancels.
 absl::StatusOr<TrackDatasetResult> TrackDataset(
-    const RgbdDataset& dataset, const PlenoxelMap& map, Backend& backend, const TrackerOptions& options,
+    const RgbdDataset& dataset, const PlenoxelMap& map, Backend& backend,
+    const TrackerOptions& options,
     const std::function<bool(int, const TrackingResult&)>& progress = nullptr);
 
 }  // namespace plx

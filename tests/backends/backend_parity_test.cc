@@ -248,7 +248,8 @@ TEST_F(CudaParityTest, TrackingNormalEquationsMatchCpu) {
   params.render = map_->render;
   UnifiedVector<TrackingRayTerm> ta(n), tb(n);
   ASSERT_TRUE(
-      cpu_->ComputeTrackingTerms(map_->grid.view(), view, pixels.data(), n, params, ta.data()).ok());
+      cpu_->ComputeTrackingTerms(map_->grid.view(), view, pixels.data(), n, params, ta.data())
+          .ok());
   ASSERT_TRUE(
       cuda_->ComputeTrackingTerms(map_->grid.view(), view, pixels.data(), n, params, tb.data())
           .ok());

@@ -38,10 +38,14 @@ TEST_P(ReduceTest, ReduceTrackingTermsEqualsTheSerialSum) {
     for (TrackingLoss loss : {TrackingLoss::kHuber, TrackingLoss::kL1}) {
       TrackingSums serial;
       serial.Clear();
-      for (const TrackingRayTerm& t : terms) AccumulateTrackingTerm(t, loss, 1.345f, scale, &serial);
+      for (const TrackingRayTerm& t : terms) {
+        AccumulateTrackingTerm(t, loss, 1.345f, scale, &serial);
+      }
       TrackingSums s;
       ASSERT_TRUE(backend().ReduceTrackingTerms(terms.data(), count, loss, 1.345f, scale, &s).ok());
-      auto near = [](double a, double b) { return std::fabs(a - b) <= 1e-9 * (1.0 + std::fabs(b)); };
+      auto near = [](double a, double b) {
+        return std::fabs(a - b) <= 1e-9 * (1.0 + std::fabs(b));
+      };
       for (int i = 0; i < kNormalUpper; ++i) EXPECT_PRED2(near, s.H[i], serial.H[i]) << i;
       for (int i = 0; i < kPoseDim; ++i) EXPECT_PRED2(near, s.g[i], serial.g[i]) << i;
       EXPECT_PRED2(near, s.cost, serial.cost);

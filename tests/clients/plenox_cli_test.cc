@@ -707,7 +707,8 @@ TEST_F(PlenoxEndToEndTest, TrackWritesATrajectoryThatEvalTrajScores) {
   EXPECT_EQ(JsonNumber(*json, "frames").value_or(-1), kFrames);
   EXPECT_EQ(JsonNumber(*json, "lost").value_or(-1), 0);
   EXPECT_GT(JsonNumber(*json, "ms_per_frame_median").value_or(-1), 0.0);
-  EXPECT_GE(JsonNumber(*json, "ms_per_frame_p95").value_or(-1), JsonNumber(*json, "ms_per_frame_median").value_or(-1));
+  EXPECT_GE(JsonNumber(*json, "ms_per_frame_p95").value_or(-1),
+            JsonNumber(*json, "ms_per_frame_median").value_or(-1));
   ASSERT_TRUE(fs::exists(trajectory));
 
   const CommandResult scored = RunPlenox(

@@ -122,7 +122,9 @@ TEST(RemoteCliBadInputTest, CommandsThatNeedOrRefuseADaemonSaySo) {
     EXPECT_EQ(help.exit_code, kExitOk) << help.Describe();
     EXPECT_THAT(help.out, StartsWith(std::string("usage: plenox ") + command)) << help.Describe();
     std::vector<std::string> args = {command};
-    if (std::string(command) != "maps" && std::string(command) != "info") args.insert(args.end(), {"--map", "m"});
+    if (std::string(command) != "maps" && std::string(command) != "info") {
+      args.insert(args.end(), {"--map", "m"});
+    }
     const CommandResult r = RunPlenox(args);
     EXPECT_EQ(r.exit_code, kExitUsage) << r.Describe();
     EXPECT_THAT(r.err, HasSubstr("--server HOST:PORT")) << r.Describe();

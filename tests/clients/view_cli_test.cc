@@ -55,7 +55,8 @@ std::string HttpGet(int port, const std::string& path) {
 // `plenox view` as a background process, its stdout in a file.
 class ViewProcess {
  public:
-  ViewProcess(const std::string& dir, const std::vector<std::string>& args) : out_(dir + "/view.out") {
+  ViewProcess(const std::string& dir, const std::vector<std::string>& args)
+      : out_(dir + "/view.out") {
     std::vector<std::string> storage = {kPlenoxBinary, "view"};
     storage.insert(storage.end(), args.begin(), args.end());
     std::vector<char*> argv;

@@ -113,7 +113,8 @@ std::vector<Rpc> AllRpcs() {
                     stream->WritesDone();
                     return ReadToEnd<pb::PoseEstimate>(stream);
                   }});
-  rpcs.push_back({"Integrate", [](pb::Plenoxd::Stub& stub, const CallSetup& setup, std::string* job) {
+  rpcs.push_back({"Integrate", [](pb::Plenoxd::Stub& stub, const CallSetup& setup,
+                                  std::string* job) {
                     grpc::ClientContext c;
                     setup(&c);
                     auto stream = stub.Integrate(&c);
@@ -128,7 +129,8 @@ std::vector<Rpc> AllRpcs() {
                     while (stream->Read(&p)) *job = p.job_id();
                     return stream->Finish();
                   }});
-  rpcs.push_back({"WatchJob", [](pb::Plenoxd::Stub& stub, const CallSetup& setup, std::string* job) {
+  rpcs.push_back({"WatchJob", [](pb::Plenoxd::Stub& stub, const CallSetup& setup,
+                                 std::string* job) {
                     grpc::ClientContext c;
                     setup(&c);
                     pb::WatchJobRequest r;

@@ -136,7 +136,8 @@ inline pb::Frame EncodeFrame(int index, bool with_pose) {
     if (cached.color().empty()) {
       const RgbdFrame& f = Room().frames()[index];
       absl::StatusOr<std::string> color = EncodeColorImage(f.color, ".png");
-      absl::StatusOr<std::string> depth = EncodeDepthImage(f.depth, Room().calibration().depth_scale);
+      absl::StatusOr<std::string> depth =
+          EncodeDepthImage(f.depth, Room().calibration().depth_scale);
       EXPECT_TRUE(color.ok()) << color.status();
       EXPECT_TRUE(depth.ok()) << depth.status();
       if (color.ok() && depth.ok()) {
@@ -614,7 +615,8 @@ class TcpProxy {
           addr.sin_family = AF_INET;
           addr.sin_port = htons(static_cast<uint16_t>(target_port_));
           addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-          if (upstream >= 0 && connect(upstream, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) == 0) {
+          if (upstream >= 0 &&
+              connect(upstream, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) == 0) {
             pairs_.emplace_back(client, upstream);
             ++accepted_;
           } else {

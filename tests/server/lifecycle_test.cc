@@ -52,8 +52,8 @@ TEST_F(LifecycleTest, VoxelSizeZeroMeansTheDefault) {
 
 TEST_F(LifecycleTest, BadNamesAreInvalidArgumentNamingTheField) {
   const std::vector<std::string> bad = {"",          ".hidden",        "a/b",  "../escape",
-                                        "with space", std::string(65, 'x'), "tab\t", "uml\xc3\xa4ut",
-                                        "semi;colon"};
+                                        "with space", std::string(65, 'x'), "tab\t",
+                                        "uml\xc3\xa4ut", "semi;colon"};
   for (const std::string& name : bad) {
     const grpc::Status s = CreateMap(stub(), name);
     EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << "\"" << name << "\"";

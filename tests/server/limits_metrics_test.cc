@@ -229,7 +229,9 @@ int64_t Sample(const std::string& body, const std::string& name) {
     if (line.empty() || line[0] == '#') continue;
     const std::vector<absl::string_view> fields = absl::StrSplit(line, ' ');
     int64_t value = 0;
-    if (fields.size() == 2 && fields[0] == name && absl::SimpleAtoi(fields[1], &value)) return value;
+    if (fields.size() == 2 && fields[0] == name && absl::SimpleAtoi(fields[1], &value)) {
+      return value;
+    }
   }
   return -1;
 }

@@ -512,7 +512,8 @@ TEST(SlamStreamTest, FramesWithoutDepthWaitAndTheFirstGoodFrameBootstraps) {
   // gets no version (no empty map is published); the next stream bootstraps it.
   std::vector<pb::Frame> empty;
   for (int i = 0; i < 3; ++i) empty.push_back(EncodeFrameWithoutDepth(i));
-  const SlamRun blind = RunSlamFrames(*d.stub, "later", SmallSlamOptions(true), empty, GroundTruth(0));
+  const SlamRun blind =
+      RunSlamFrames(*d.stub, "later", SmallSlamOptions(true), empty, GroundTruth(0));
   ASSERT_TRUE(blind.status.ok()) << Describe(blind.status);
   ASSERT_EQ(blind.updates.size(), empty.size());
   for (const pb::SlamUpdate& u : blind.updates) EXPECT_EQ(u.state(), pb::SLAM_STATE_WAITING);
@@ -522,7 +523,8 @@ TEST(SlamStreamTest, FramesWithoutDepthWaitAndTheFirstGoodFrameBootstraps) {
   EXPECT_EQ(info.version(), fresh.version()) << "a version published without a keyframe";
   EXPECT_EQ(info.bricks(), 0u);
   EXPECT_EQ(info.keyframes(), 0u);
-  const SlamRun seeing = RunSlam(*d.stub, "later", SmallSlamOptions(true), Range(0, 5), GroundTruth(0));
+  const SlamRun seeing =
+      RunSlam(*d.stub, "later", SmallSlamOptions(true), Range(0, 5), GroundTruth(0));
   ASSERT_TRUE(seeing.status.ok()) << Describe(seeing.status);
   ASSERT_EQ(seeing.updates.size(), 5u);
   EXPECT_TRUE(seeing.updates.front().keyframe());
@@ -553,7 +555,8 @@ TEST(SlamStreamTest, AWaitingCameraJoinsTheMapAnotherCameraBootstrapped) {
     ASSERT_TRUE(a->Read(&update));
     EXPECT_EQ(update.state(), pb::SLAM_STATE_WAITING) << update.reason();
   }
-  const SlamRun b = RunSlam(*d.stub, "shared", SmallSlamOptions(true), Range(0, 10), GroundTruth(0));
+  const SlamRun b =
+      RunSlam(*d.stub, "shared", SmallSlamOptions(true), Range(0, 10), GroundTruth(0));
   ASSERT_TRUE(b.status.ok()) << Describe(b.status);
   ASSERT_EQ(b.updates.size(), 10u);
   EXPECT_TRUE(b.updates.front().keyframe());
@@ -622,7 +625,8 @@ TEST(SlamStreamTest, ABadInitialPoseCreatesNoMap) {
     EXPECT_EQ(maps.maps_size(), 0);
   }
   // The one map --max-maps allows is still free for a good stream.
-  const SlamRun run = RunSlam(*d.stub, "good", SmallSlamOptions(false), Range(0, 3), GroundTruth(0));
+  const SlamRun run =
+      RunSlam(*d.stub, "good", SmallSlamOptions(false), Range(0, 3), GroundTruth(0));
   EXPECT_TRUE(run.status.ok()) << Describe(run.status);
   EXPECT_EQ(run.updates.size(), 3u);
 }

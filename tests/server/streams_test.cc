@@ -176,7 +176,8 @@ TEST(StreamsTest, EightTrackersWhileMappingOneOfTheirMaps) {
   EXPECT_TRUE(watch_status.ok()) << Describe(watch_status);
   ASSERT_FALSE(job_statuses.empty());
   EXPECT_EQ(job_statuses.front().state(), pb::JobStatus::STATE_RUNNING);
-  EXPECT_EQ(job_statuses.back().state(), pb::JobStatus::STATE_DONE) << job_statuses.back().message();
+  EXPECT_EQ(job_statuses.back().state(), pb::JobStatus::STATE_DONE)
+      << job_statuses.back().message();
   for (const pb::JobStatus& s : job_statuses) {
     EXPECT_TRUE(s.state() == pb::JobStatus::STATE_RUNNING || s.state() == pb::JobStatus::STATE_DONE)
         << s.state();

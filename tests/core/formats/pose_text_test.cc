@@ -19,8 +19,9 @@ TEST(PoseTextTest, ParsesSpacesOrCommasAndNormalises) {
 }
 
 TEST(PoseTextTest, FormatThenParseRoundTrips) {
-  const SE3 pose(Eigen::Quaterniond(Eigen::AngleAxisd(-2.5, Eigen::Vector3d(1, 2, -1).normalized())),
-                 Eigen::Vector3d(-0.5, 10.25, 3.0));
+  const SE3 pose(
+      Eigen::Quaterniond(Eigen::AngleAxisd(-2.5, Eigen::Vector3d(1, 2, -1).normalized())),
+      Eigen::Vector3d(-0.5, 10.25, 3.0));
   const absl::StatusOr<SE3> back = ParsePoseText(FormatPoseText(pose));
   ASSERT_TRUE(back.ok()) << back.status();
   EXPECT_LT((back->translation() - pose.translation()).norm(), 1e-9);

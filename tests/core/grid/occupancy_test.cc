@@ -79,7 +79,8 @@ TEST(OccupancyTest, SkippingEmptyCellsDoesNotChangeRenders) {
   const GridView refreshed = grid.view();
   int hits = 0;
   for (size_t r = 0; r < rays.size(); ++r) {
-    const RayRenderResult<float> after = RenderRay(refreshed, rays[r].first, rays[r].second, options);
+    const RayRenderResult<float> after =
+        RenderRay(refreshed, rays[r].first, rays[r].second, options);
     EXPECT_EQ(after.samples, before[r].samples);
     EXPECT_FLOAT_EQ(after.depth, before[r].depth);
     EXPECT_FLOAT_EQ(after.color[1], before[r].color[1]);

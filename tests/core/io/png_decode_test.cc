@@ -66,7 +66,9 @@ size_t IdatDataOffset(const std::string& png) {
 uint32_t IdatLength(const std::string& png) {
   const size_t data = IdatDataOffset(png);
   uint32_t length = 0;
-  for (size_t i = data - 8; i < data - 4; ++i) length = (length << 8) | static_cast<uint8_t>(png[i]);
+  for (size_t i = data - 8; i < data - 4; ++i) {
+    length = (length << 8) | static_cast<uint8_t>(png[i]);
+  }
   return length;
 }
 

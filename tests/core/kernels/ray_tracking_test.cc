@@ -55,7 +55,8 @@ TEST(PoseJacobianTest, PointAndDirectionGradientsMatchCentralDifferences) {
       return g.x * p.x() + g.y * p.y() + g.z * p.z();
     };
     const double numeric = (f(pose * SE3::Exp(e), false) - f(pose * SE3::Exp(-e), false)) / (2 * h);
-    const double numeric_dir = (f(pose * SE3::Exp(e), true) - f(pose * SE3::Exp(-e), true)) / (2 * h);
+    const double numeric_dir =
+        (f(pose * SE3::Exp(e), true) - f(pose * SE3::Exp(-e), true)) / (2 * h);
     EXPECT_NEAR(analytic[i], numeric, 1e-8) << i;
     EXPECT_NEAR(analytic_dir[i], numeric_dir, 1e-8) << i;
   }
@@ -83,7 +84,8 @@ class RayPoseJacobianTest : public ::testing::Test {
       int v[3];
       g.VertexCoords(i, v);
       const Vec3d p = g.VertexPosition(v[0], v[1], v[2]);
-      density_[i] = 6.0 + 5.0 * std::sin(a * p.x + 1.0) * std::cos(b * p.y) + 3.0 * std::sin(c * p.z);
+      density_[i] =
+          6.0 + 5.0 * std::sin(a * p.x + 1.0) * std::cos(b * p.y) + 3.0 * std::sin(c * p.z);
       for (int j = 0; j < kShCoeffCount; ++j) {
         sh_[i * kShCoeffCount + j] = 0.15 * std::sin((j + 1) * p.x + b * p.y - a * p.z + j);
       }

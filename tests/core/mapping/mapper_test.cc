@@ -128,8 +128,9 @@ TEST_F(MapperTest, AKeyframeOverTheMapSizeLimitAllocatesNothing) {
 TEST_F(MapperTest, ProgressCallbackCanCancel) {
   std::unique_ptr<Backend> backend = MakeCpuBackend(2);
   int calls = 0;
-  auto result = MapDataset(*dataset_, {0, 10}, Options(1000), *backend,
-                           [&](const MapDatasetProgress& p) { return !p.optimizing || ++calls < 3; });
+  auto result =
+      MapDataset(*dataset_, {0, 10}, Options(1000), *backend,
+                 [&](const MapDatasetProgress& p) { return !p.optimizing || ++calls < 3; });
   EXPECT_EQ(result.status().code(), absl::StatusCode::kCancelled);
   EXPECT_EQ(calls, 3);
 }

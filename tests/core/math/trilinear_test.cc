@@ -25,7 +25,9 @@ TEST(TrilinearTest, ReproducesCornersAndAffineFields) {
   // An affine field a + b.x is reproduced exactly everywhere inside the cell.
   const double a = 0.3, b[3] = {1.5, -0.7, 2.0};
   double affine[8];
-  for (int c = 0; c < 8; ++c) affine[c] = a + b[0] * (c & 1) + b[1] * ((c >> 1) & 1) + b[2] * ((c >> 2) & 1);
+  for (int c = 0; c < 8; ++c) {
+    affine[c] = a + b[0] * (c & 1) + b[1] * ((c >> 1) & 1) + b[2] * ((c >> 2) & 1);
+  }
   const Vec3d f{0.25, 0.6, 0.9};
   EXPECT_NEAR(Value(affine, f), a + b[0] * f.x + b[1] * f.y + b[2] * f.z, 1e-14);
   const Vec3d g = TrilinearGradient(affine, f);

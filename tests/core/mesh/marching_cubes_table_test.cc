@@ -81,7 +81,9 @@ TEST(MarchingCubesTableTest, TrianglesFaceAwayFromTheInside) {
     for (int v = 0; v < 3; ++v) {
       const int e = table.edges[c][v];
       const auto [a, b] = EdgeCorners(e);
-      for (int axis = 0; axis < 3; ++axis) p[v][axis] = 0.5 * (((a >> axis) & 1) + ((b >> axis) & 1));
+      for (int axis = 0; axis < 3; ++axis) {
+        p[v][axis] = 0.5 * (((a >> axis) & 1) + ((b >> axis) & 1));
+      }
     }
     const double u[3] = {p[1][0] - p[0][0], p[1][1] - p[0][1], p[1][2] - p[0][2]};
     const double w[3] = {p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]};

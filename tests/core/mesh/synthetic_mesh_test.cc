@@ -85,8 +85,8 @@ TEST(SyntheticMeshTest, MeshLiesOnTheRoomsSurfaces) {
       for (int u = 0; u < K.width; u += 2) {
         const double z = *frame.depth.pixel(u, v);
         if (z <= 0) continue;
-        truth.push_back(*frame.ground_truth *
-                        Eigen::Vector3d((u + 0.5 - K.cx) / K.fx * z, (v + 0.5 - K.cy) / K.fy * z, z));
+        truth.push_back(*frame.ground_truth * Eigen::Vector3d((u + 0.5 - K.cx) / K.fx * z,
+                                                              (v + 0.5 - K.cy) / K.fy * z, z));
       }
     }
   }

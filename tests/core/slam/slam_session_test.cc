@@ -109,8 +109,10 @@ TEST_F(SlamSessionTest, DeterministicRunsAreBitIdentical) {
   SlamDatasetOptions options;
   options.slam = TestOptions();
   options.max_frames = 30;
-  absl::StatusOr<SlamDatasetResult> a = RunSlamOnDataset(*dataset_, *backend_, CpuFactory(), options);
-  absl::StatusOr<SlamDatasetResult> b = RunSlamOnDataset(*dataset_, *backend_, CpuFactory(), options);
+  absl::StatusOr<SlamDatasetResult> a =
+      RunSlamOnDataset(*dataset_, *backend_, CpuFactory(), options);
+  absl::StatusOr<SlamDatasetResult> b =
+      RunSlamOnDataset(*dataset_, *backend_, CpuFactory(), options);
   ASSERT_TRUE(a.ok()) << a.status();
   ASSERT_TRUE(b.ok()) << b.status();
   ASSERT_EQ(a->trajectory.size(), b->trajectory.size());
