@@ -27,7 +27,9 @@ void AddInProcessSlamFlags(FlagSet& flags) {
   flags.Add("map-out", "MAP.plx", "write the final map here", "")
       .Add("keyframes-out", "F", "write the keyframes' (refined) poses here (TUM format)", "")
       .Add("frames-out", "F.csv",
-           "write one line per processed frame here: frame,timestamp,state,ms,keyframe,reason", "")
+           "write one line per processed frame here: frame,timestamp,state,ms,keyframe,"
+           "odometry_ms,map_ms,relocalisation_ms,features_ms,reason",
+           "")
       .Add("window", "N", "mapping window: half of each batch from the last N keyframes",
            absl::StrCat(d.mapping.mapper.window_keyframes))
       .Add("refine-window", "N",
@@ -69,10 +71,14 @@ std::string CsvQuoted(const std::string& text) {
 absl::Status WriteFramesCsv(const std::string& path, const std::vector<SlamFrameResult>& results) {
   std::ofstream out(path);
   if (!out) return absl::UnavailableError(absl::StrCat("cannot write ", path));
-  out << "frame,timestamp,state,ms,keyframe,reason\n";
+  out << "frame,timestamp,state,ms,keyframe,odometry_ms,map_ms,relocalisation_ms,features_ms,"
+         "reason\n";
   for (const SlamFrameResult& r : results) {
-    out << absl::StrFormat("%d,%.6f,%s,%.3f,%d,%s\n", r.frame, r.timestamp, SlamStateName(r.state),
-                           r.milliseconds, r.keyframe ? 1 : 0, CsvQuoted(r.reason));
+    const SlamFrameTimings& t = r.timings;
+    out << absl::StrFormat("%d,%.6f,%s,%.3f,%d,%.3f,%.3f,%.3f,%.3f,%s\n", r.frame, r.timestamp,
+                           SlamStateName(r.state), r.milliseconds, r.keyframe ? 1 : 0,
+                           t.odometry_ms, t.map_ms, t.relocalisation_ms, t.features_ms,
+                           CsvQuoted(r.reason));
   }
   out.close();
   if (!out) return absl::UnavailableError(absl::StrCat("failed writing ", path));

@@ -12,6 +12,12 @@
 namespace plx {
 namespace {
 
+using Clock = std::chrono::steady_clock;
+
+double MillisecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
 SlamState FromTracking(TrackingState state) {
   switch (state) {
     case TrackingState::kOk: return SlamState::kOk;
@@ -283,7 +289,7 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
                                                    const PinholeIntrinsics& k,
                                                    const std::optional<SE3>& prior,
                                                    const SlamMapView& view) {
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = Clock::now();
   SlamFrameResult out;
   out.frame = counts_.frames;
   out.timestamp = frame.timestamp;
@@ -295,12 +301,17 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
         "the map has no published version yet: its first keyframe is still being integrated");
   }
   frame_features_.reset();
+  auto stage = Clock::now();
   PLX_ASSIGN_OR_RETURN(OdometryPyramid pyramid, PyramidOf(frame, k));
+  out.timings.odometry_ms += MillisecondsSince(stage);
   if (BootstrapCandidate(view)) {
     out = Bootstrap(frame, prior, std::move(pyramid), std::move(out));
     if (out.keyframe) {
+      stage = Clock::now();
       PLX_ASSIGN_OR_RETURN(out.features, FeaturesOf(frame, k));
+      out.timings.features_ms += MillisecondsSince(stage);
     }
+    out.milliseconds = MillisecondsSince(start);
     return out;
   }
   ++counts_.frames;
@@ -319,7 +330,9 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   bool may_be_keyframe = false;
   if (lost_) {
     std::string how;
+    stage = Clock::now();
     PLX_ASSIGN_OR_RETURN(result, Relocalise(frame, k, prior, view, &how));
+    out.timings.relocalisation_ms += MillisecondsSince(stage);
     if (result) {
       tracker_.Reset(result->pose, frame.timestamp);
       out.state = SlamState::kRelocalised;
@@ -338,7 +351,9 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       out.reason = result->reason;
     }
   } else if (!options_.odometry) {
+    stage = Clock::now();
     PLX_ASSIGN_OR_RETURN(TrackingResult tracked, tracker_.Track(frame, k, prior));
+    out.timings.map_ms += MillisecondsSince(stage);
     out.state = FromTracking(tracked.state);
     out.source = out.state == SlamState::kLost ? PoseSource::kPrediction : PoseSource::kMap;
     out.reason = tracked.reason;
@@ -347,10 +362,14 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   } else {
     // The odometry's pose starts the map tracker (the prior's place when there is none), then
     // the two are fused (core/slam/pose_fusion.h).
+    stage = Clock::now();
     PLX_ASSIGN_OR_RETURN(const std::optional<OdometryPose> odometry,
                          RunOdometry(pyramid, frame.timestamp, prior, &out.odometry));
-    const std::optional<SE3> start = odometry && odometry->ok ? odometry->pose : prior;
-    PLX_ASSIGN_OR_RETURN(TrackingResult tracked, tracker_.Track(frame, k, start));
+    out.timings.odometry_ms += MillisecondsSince(stage);
+    const std::optional<SE3> map_start = odometry && odometry->ok ? odometry->pose : prior;
+    stage = Clock::now();
+    PLX_ASSIGN_OR_RETURN(TrackingResult tracked, tracker_.Track(frame, k, map_start));
+    out.timings.map_ms += MillisecondsSince(stage);
     const FusedPose fused = FusePoses(tracked, odometry, options_.fusion);
     // The map tracker's motion model follows the pose given out when it is not its own.
     if (fused.source == PoseSource::kOdometry) tracker_.Reset(fused.pose, frame.timestamp);
@@ -369,8 +388,10 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
         fused.source == PoseSource::kOdometry && result->cause != TrackingCause::kFewValidRays;
     if (contradicted || fused.confirm) {
       std::string how;
+      stage = Clock::now();
       PLX_ASSIGN_OR_RETURN(std::optional<TrackingResult> found,
                            RelocaliseByKeyframes(frame, k, view, &how));
+      out.timings.relocalisation_ms += MillisecondsSince(stage);
       if (!found && fused.confirm) {
         out.state = SlamState::kDegraded;
         out.reason = absl::StrCat(fused.reason, "; the keyframes' features do not confirm the "
@@ -417,15 +438,16 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       out.keyframe = true;
       out.keyframes += 1;
       out.reason = decision.reason;
+      stage = Clock::now();
       PLX_ASSIGN_OR_RETURN(out.features, FeaturesOf(frame, k));
+      out.timings.features_ms += MillisecondsSince(stage);
     }
   }
   counts_.ok += out.state == SlamState::kOk;
   counts_.degraded += out.state == SlamState::kDegraded;
   counts_.lost += out.state == SlamState::kLost;
   counts_.relocalised += out.state == SlamState::kRelocalised;
-  out.milliseconds =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  out.milliseconds = MillisecondsSince(start);
   return out;
 }
 

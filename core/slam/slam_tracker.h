@@ -8,8 +8,11 @@
 //     (BootstrapDepth) is keyframe 0 at the initial pose (the frame's prior, else
 //     SlamTrackerOptions::initial_pose, else the identity). Frames before it are WAITING.
 //   - Tracking: constant-velocity prediction, or the caller's prior (e.g. a headset's VIO).
-//   - Keyframes: only frames tracked OK, by the policy (core/slam/keyframe_policy.h) against
-//     every keyframe the map has accepted.
+//   - Tracking: the map-free odometry's pose starts the map tracker; the two are fused
+//     (core/slam/pose_fusion.h), which says how sure the pose is.
+//   - Keyframes: only frames whose pose is sure (tracked OK, or carried by the odometry
+//     through a view the map does not cover yet), by the policy (core/slam/keyframe_policy.h)
+//     against every keyframe the map has accepted.
 //   - Relocalisation (docs/SLAM.md, "Relocalisation"): every keyframe carries ORB features
 //     (core/relocalisation/frame_features.h; SlamFrameResult::features, kept by the
 //     coordinator). After a LOST frame (or from the first frame of a camera joining a map it
@@ -120,6 +123,14 @@ struct SlamMapView {
   bool mapping_behind = false;
 };
 
+// Where a frame's tracking time went, in milliseconds (the rest is bookkeeping).
+struct SlamFrameTimings {
+  double odometry_ms = 0.0;        // the pyramid and the frame-to-frame alignment
+  double map_ms = 0.0;             // the map tracker on the frame
+  double relocalisation_ms = 0.0;  // features, PnP and dense attempts (LOST or checked frames)
+  double features_ms = 0.0;        // a keyframe's features, when not extracted already
+};
+
 struct SlamFrameResult {
   int frame = 0;  // 0-based count of frames given to this camera
   double timestamp = 0.0;
@@ -135,6 +146,7 @@ struct SlamFrameResult {
   TrackingResult tracking;      // the map tracker's rays, iterations, residual and state
   OdometryResult odometry;      // the odometry's (points 0: not run)
   double milliseconds = 0.0;    // tracking time (SlamSession: the whole ProcessFrame)
+  SlamFrameTimings timings;     // its parts
 };
 
 // Per-camera counts: frames tracked, and how many ended in each SlamState (waiting: no map
