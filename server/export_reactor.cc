@@ -4,11 +4,12 @@
 #include <new>
 #include <utility>
 
-#include "server/export_request.h"
-#include "server/grpc_status.h"
-#include "server/log.h"
+#include "core/export/map_export.h"
+#include "proto/export_codec.h"
 #include "proto/map_codec.h"
 #include "proto/wire.h"
+#include "server/grpc_status.h"
+#include "server/log.h"
 
 namespace plx::server {
 
@@ -27,7 +28,7 @@ ExportReactor::ExportReactor(DaemonState* state, grpc::CallbackServerContext* co
     Done(map.status());
     return;
   }
-  absl::StatusOr<ExportSpec> spec = ParseExportRequest(*request);
+  absl::StatusOr<ExportSpec> spec = ExportSpecFromProto(*request);
   if (!spec.ok()) {
     Done(spec.status());
     return;
@@ -40,13 +41,13 @@ ExportReactor::ExportReactor(DaemonState* state, grpc::CallbackServerContext* co
                 return;
               }
               // A call cancelled while exporting stops within a few bricks.
-              absl::StatusOr<std::string> bytes =
-                  BuildExport(spec, *map.map, *backend, [this] { return context_->IsCancelled(); });
-              if (!bytes.ok()) {
-                Done(bytes.status());
+              absl::StatusOr<MapPly> ply = ExportMapPly(spec, *map.map, *backend,
+                                                        [this] { return context_->IsCancelled(); });
+              if (!ply.ok()) {
+                Done(ply.status());
                 return;
               }
-              bytes_ = *std::move(bytes);
+              bytes_ = std::move(ply->bytes);
               WriteNext();
             });
 }

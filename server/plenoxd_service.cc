@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <functional>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "core/common/allocation_guard.h"
@@ -118,47 +120,36 @@ grpc::ServerUnaryReactor* PlenoxdService::DeleteMap(grpc::CallbackServerContext*
 grpc::ServerUnaryReactor* PlenoxdService::SaveMap(grpc::CallbackServerContext* context,
                                                   const pb::SaveMapRequest* request,
                                                   pb::MapInfo* response) {
-  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
-  const absl::Status status = CheckCall(*state_, context);
-  if (!status.ok()) {
-    Finish(reactor, "SaveMap", status);
-    return reactor;
-  }
-  // Writing hundreds of MB takes a while: off the gRPC thread, on the I/O worker.
-  const std::string name = request->name();
-  state_->io->Post(Priority::kInteractive,
-                   [this, context, reactor, name, response](Backend*, bool stopped) {
-                     absl::Status status = QueuedCallStatus(stopped, context);
-                     if (status.ok()) {
-                       status = CatchAllocationFailure("SaveMap", [&] {
-                         return StatusToProto(state_->maps->Save(name), response);
-                       });
-                     }
-                     Finish(reactor, "SaveMap", status);
-                   });
-  return reactor;
+  return MapFileCall(context, "SaveMap", response,
+                     [this, name = request->name()] { return state_->maps->Save(name); });
 }
 
 grpc::ServerUnaryReactor* PlenoxdService::LoadMap(grpc::CallbackServerContext* context,
                                                   const pb::LoadMapRequest* request,
                                                   pb::MapInfo* response) {
+  return MapFileCall(context, "LoadMap", response,
+                     [this, name = request->name()] { return state_->maps->Load(name); });
+}
+
+grpc::ServerUnaryReactor* PlenoxdService::MapFileCall(
+    grpc::CallbackServerContext* context, const char* method, pb::MapInfo* response,
+    std::function<absl::StatusOr<MapStatus>()> file_work) {
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   const absl::Status status = CheckCall(*state_, context);
   if (!status.ok()) {
-    Finish(reactor, "LoadMap", status);
+    Finish(reactor, method, status);
     return reactor;
   }
-  const std::string name = request->name();
-  state_->io->Post(Priority::kInteractive,
-                   [this, context, reactor, name, response](Backend*, bool stopped) {
-                     absl::Status status = QueuedCallStatus(stopped, context);
-                     if (status.ok()) {
-                       status = CatchAllocationFailure("LoadMap", [&] {
-                         return StatusToProto(state_->maps->Load(name), response);
-                       });
-                     }
-                     Finish(reactor, "LoadMap", status);
-                   });
+  // Reading or writing hundreds of MB takes a while: off the gRPC thread, on the I/O worker.
+  state_->io->Post(Priority::kInteractive, [this, context, reactor, method, response,
+                                            file_work = std::move(file_work)](Backend*,
+                                                                              bool stopped) {
+    absl::Status status = QueuedCallStatus(stopped, context);
+    if (status.ok()) {
+      status = CatchAllocationFailure(method, [&] { return StatusToProto(file_work(), response); });
+    }
+    Finish(reactor, method, status);
+  });
   return reactor;
 }
 

@@ -4,8 +4,12 @@
 // stream_reactor.h), export_reactor.h and watch_job_reactor.h.
 #pragma once
 
+#include <functional>
+
 #include <grpcpp/grpcpp.h>
 
+#include "absl/status/statusor.h"
+#include "core/grid/map_status.h"
 #include "plenoxd/v1/plenoxd.grpc.pb.h"
 #include "server/daemon_state.h"
 
@@ -53,6 +57,11 @@ class PlenoxdService final : public plenoxd::v1::Plenoxd::CallbackService {
  private:
   // Finishes `reactor` with `status`, counting errors and logging the call.
   void Finish(grpc::ServerUnaryReactor* reactor, const char* method, const absl::Status& status);
+  // SaveMap and LoadMap: checks the call, then runs `file_work` (the map store's Save or Load)
+  // on the I/O worker and answers with the map's MapInfo. `method` names the call in logs.
+  grpc::ServerUnaryReactor* MapFileCall(grpc::CallbackServerContext* context, const char* method,
+                                        plenoxd::v1::MapInfo* response,
+                                        std::function<absl::StatusOr<MapStatus>()> file_work);
 
   DaemonState* state_;
 };

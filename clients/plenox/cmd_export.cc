@@ -5,8 +5,7 @@
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "clients/plenox/export_flags.h"
-#include "core/formats/ply_export.h"
-#include "core/formats/ply_mesh.h"
+#include "core/export/map_export.h"
 #include "core/io/atomic_write.h"
 
 namespace plx::cli {
@@ -29,8 +28,8 @@ int RunExport(const std::vector<std::string>& args) {
   AddJsonAndQuietSwitches(flags);
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
-  absl::StatusOr<ExportChoice> choice = ExportChoiceFromFlags(flags);
-  if (!choice.ok()) return ReportError(kCommand, choice.status(), true);
+  absl::StatusOr<ExportSpec> spec = ExportSpecFromFlags(flags);
+  if (!spec.ok()) return ReportError(kCommand, spec.status(), true);
   const std::string out = flags.GetString("out");
   if (absl::Status s = CheckOutputDirectory(out); !s.ok()) return ReportError(kCommand, s);
   std::unique_ptr<Backend> backend = BackendFromFlagsOrReport(kCommand, flags, &exit_code);
@@ -38,42 +37,27 @@ int RunExport(const std::vector<std::string>& args) {
   std::unique_ptr<PlenoxelMap> map = LoadMapOrReport(kCommand, flags, *backend, &exit_code);
   if (!map) return exit_code;
 
-  std::string bytes;
-  int64_t vertices = 0, faces = 0;
-  if (choice->mesh) {
-    absl::StatusOr<TriangleMesh> mesh = ExtractMesh(map->grid, *backend, choice->mesh_options);
-    if (!mesh.ok()) return ReportError(kCommand, mesh.status());
-    absl::StatusOr<PlyMesh> ply = EncodePlyMesh(*mesh, map->source);
-    if (!ply.ok()) return ReportError(kCommand, ply.status());
-    bytes = std::move(ply->bytes);
-    vertices = ply->vertices;
-    faces = ply->faces;
-  } else {
-    absl::StatusOr<PlyExport> ply = ExportSurfacePointsPly(
-        *map, choice->min_density > 0 ? static_cast<float>(choice->min_density)
-                                      : kDefaultExportMinDensity);
-    if (!ply.ok()) return ReportError(kCommand, ply.status());
-    bytes = std::move(ply->bytes);
-    vertices = ply->points;
-  }
+  absl::StatusOr<MapPly> ply = ExportMapPly(*spec, *map, *backend);
+  if (!ply.ok()) return ReportError(kCommand, ply.status());
+  const std::string& bytes = ply->bytes;
   if (absl::Status s = WriteFileAtomically(out, bytes, "export"); !s.ok()) {
     return ReportError(kCommand, s);
   }
   if (flags.GetSwitch("json")) {
     JsonObject json;
     json.Add("map", flags.GetString("map")).Add("out", out);
-    if (choice->mesh) {
-      json.Add("vertices", vertices).Add("faces", faces);
+    if (spec->mesh) {
+      json.Add("vertices", ply->vertices).Add("faces", ply->faces);
     } else {
-      json.Add("points", vertices);
+      json.Add("points", ply->vertices);
     }
     json.Add("bytes", static_cast<int64_t>(bytes.size())).Add("backend", backend->name());
     std::cout << json.str() << "\n";
-  } else if (choice->mesh) {
-    std::cout << absl::StrFormat("wrote %s (%d vertices, %d triangles, %.1f MB)\n", out, vertices,
-                                 faces, bytes.size() / 1e6);
+  } else if (spec->mesh) {
+    std::cout << absl::StrFormat("wrote %s (%d vertices, %d triangles, %.1f MB)\n", out,
+                                 ply->vertices, ply->faces, bytes.size() / 1e6);
   } else {
-    std::cout << absl::StrFormat("wrote %s (%d points, %.1f MB)\n", out, vertices,
+    std::cout << absl::StrFormat("wrote %s (%d points, %.1f MB)\n", out, ply->vertices,
                                  bytes.size() / 1e6);
   }
   return kExitOk;

@@ -29,9 +29,9 @@ void AddExportFlags(FlagSet& flags) {
            "mesh: view-independent colour, or as seen looking along the vertex normal", "dc");
 }
 
-absl::StatusOr<ExportChoice> ExportChoiceFromFlags(const FlagSet& flags) {
-  ExportChoice choice;
-  choice.mesh = flags.GetSwitch("mesh");
+absl::StatusOr<ExportSpec> ExportSpecFromFlags(const FlagSet& flags) {
+  ExportSpec spec;
+  spec.mesh = flags.GetSwitch("mesh");
   absl::StatusOr<double> min_density = flags.GetDouble("min-density", 0.0, 1e9);
   if (!min_density.ok()) return min_density.status();
   absl::StatusOr<double> iso = flags.GetDouble("iso-level", 0.0, 1e9);
@@ -45,7 +45,7 @@ absl::StatusOr<ExportChoice> ExportChoiceFromFlags(const FlagSet& flags) {
     return absl::InvalidArgumentError(
         absl::StrCat("--mesh-color: expected dc or normal, got \"", color, "\""));
   }
-  if (!choice.mesh) {
+  if (!spec.mesh) {
     const char* mesh_flag = *iso != 0                    ? "--iso-level"
                             : *components != 0           ? "--min-component"
                             : *max_triangles != 0        ? "--max-triangles"
@@ -55,19 +55,19 @@ absl::StatusOr<ExportChoice> ExportChoiceFromFlags(const FlagSet& flags) {
     if (mesh_flag != nullptr) {
       return absl::InvalidArgumentError(absl::StrCat(mesh_flag, " applies to --mesh only"));
     }
-    choice.min_density = *min_density;
-    return choice;
+    if (*min_density > 0) spec.min_density = static_cast<float>(*min_density);
+    return spec;
   }
   if (*min_density != 0) {
     return absl::InvalidArgumentError("--min-density applies to points only (--mesh: --iso-level)");
   }
-  MeshOptions& o = choice.mesh_options;
+  MeshOptions& o = spec.mesh_options;
   if (*iso > 0) o.iso_level = static_cast<float>(*iso);
   o.min_component_triangles = *components;
   if (*max_triangles > 0) o.max_triangles = *max_triangles;
   o.keep_unobserved = flags.GetSwitch("keep-unobserved");
   o.color_mode = color == "normal" ? MeshColorMode::kViewAlongNormal : MeshColorMode::kDc;
-  return choice;
+  return spec;
 }
 
 }  // namespace plx::cli

@@ -4,21 +4,16 @@
 
 #include "absl/status/statusor.h"
 #include "app/flags.h"
-#include "core/mesh/iso_surface.h"
+#include "core/export/map_export.h"
 
 namespace plx::cli {
-
-struct ExportChoice {
-  bool mesh = false;
-  double min_density = 0.0;  // points; 0 = the default
-  MeshOptions mesh_options;  // mesh; iso_level and max_triangles resolved to the defaults
-};
 
 // --out, --mesh, --min-density, --iso-level, --min-component, --max-triangles,
 // --keep-unobserved, --mesh-color.
 void AddExportFlags(FlagSet& flags);
 
+// The spec the flags ask for, a 0 (the flags' default) read as core's default.
 // InvalidArgument (a usage error) for a value out of range or a flag of the other format.
-absl::StatusOr<ExportChoice> ExportChoiceFromFlags(const FlagSet& flags);
+absl::StatusOr<ExportSpec> ExportSpecFromFlags(const FlagSet& flags);
 
 }  // namespace plx::cli

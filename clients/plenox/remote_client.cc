@@ -253,6 +253,11 @@ absl::StatusOr<FrameEncoding> ParseWireEncoding(const std::string& text) {
       absl::StrFormat("--encoding must be png or raw, got \"%s\"", text));
 }
 
+void AddWireEncodingFlag(FlagSet& flags) {
+  flags.Add("encoding", "png|raw", "how frames travel: PNG, or raw RGB8 + uint16 (no codec)",
+            "png");
+}
+
 absl::StatusOr<pb::Frame> LoadFrameToProto(const RgbdDataset& dataset, int index, bool with_pose,
                                            const FrameEncoding& encoding) {
   PLX_ASSIGN_OR_RETURN(const RgbdFrame frame, dataset.LoadFrame(index));

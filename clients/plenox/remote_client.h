@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -103,12 +104,34 @@ std::unique_ptr<RemoteClient> ConnectOrReport(const std::string& command,
 // costs an encode here and a decode on the daemon) or raw (RAW_RGB8 + RAW_U16; 1.5 MB at
 // 640x480, no codec).
 absl::StatusOr<FrameEncoding> ParseWireEncoding(const std::string& text);
+// Declares that flag (default png) for the commands that stream frames with a pose to estimate.
+void AddWireEncodingFlag(FlagSet& flags);
 
 // Frame `index` of `dataset` as a Frame message (FrameToProto with the dataset's calibration,
 // camera id "plenox"), with the frame's ground-truth pose when `with_pose` (InvalidArgument when
 // it has none); a frame that does not load is its error.
 absl::StatusOr<pb::Frame> LoadFrameToProto(const RgbdDataset& dataset, int index, bool with_pose,
                                            const FrameEncoding& encoding = FrameEncoding());
+
+// Request `index` of a Track or Slam stream: frame `index` of `dataset` without its pose (the
+// daemon estimates it), the first also with the map, the options and the start pose (none: the
+// daemon starts at the identity).
+template <typename Request, typename Options>
+absl::StatusOr<Request> TrackingStreamRequest(const RgbdDataset& dataset, int index,
+                                              const FrameEncoding& encoding, const std::string& map,
+                                              const Options& options,
+                                              const std::optional<SE3>& start_pose) {
+  absl::StatusOr<pb::Frame> frame = LoadFrameToProto(dataset, index, /*with_pose=*/false, encoding);
+  if (!frame.ok()) return frame.status();
+  Request request;
+  if (index == 0) {
+    request.set_map(map);
+    *request.mutable_options() = options;
+    if (start_pose) PoseToProto(*start_pose, request.mutable_initial_pose());
+  }
+  *request.mutable_frame() = *std::move(frame);
+  return request;
+}
 
 // The name of a TrackingState for progress lines ("OK", "DEGRADED", "LOST").
 const char* TrackingStateText(pb::TrackingState state);

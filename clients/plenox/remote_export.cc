@@ -8,9 +8,10 @@
 #include "absl/strings/str_format.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
-#include "clients/plenox/remote_client.h"
 #include "clients/plenox/export_flags.h"
+#include "clients/plenox/remote_client.h"
 #include "core/io/atomic_write.h"
+#include "proto/export_codec.h"
 
 namespace plx::cli {
 namespace {
@@ -40,26 +41,6 @@ FlagSet RemoteExportFlags() {
   AddExportFlags(flags);
   AddJsonAndQuietSwitches(flags);
   return flags;
-}
-
-pb::ExportRequest ExportRequestFor(const std::string& map_name, const ExportChoice& choice) {
-  pb::ExportRequest request;
-  request.set_map(map_name);
-  if (choice.mesh) {
-    // Defaults resolved by the flags are sent as they are: the daemon applies the same ones.
-    const MeshOptions& o = choice.mesh_options;
-    request.set_format(pb::EXPORT_FORMAT_MESH);
-    request.set_iso_level(o.iso_level);
-    request.set_min_component_triangles(static_cast<uint64_t>(o.min_component_triangles));
-    request.set_max_triangles(static_cast<uint64_t>(o.max_triangles));
-    request.set_keep_unobserved(o.keep_unobserved);
-    request.set_mesh_color(o.color_mode == MeshColorMode::kViewAlongNormal
-                               ? pb::MESH_COLOR_ALONG_NORMAL
-                               : pb::MESH_COLOR_DC);
-  } else {
-    request.set_min_density(static_cast<float>(choice.min_density));
-  }
-  return request;
 }
 
 // What an Export stream delivered into `out`.
@@ -126,8 +107,8 @@ int RunRemoteExport(const RemoteOptions& remote, const std::vector<std::string>&
   FlagSet flags = RemoteExportFlags();
   int exit_code = 0;
   if (!ParseFlagsOrExit(flags, args, &exit_code)) return exit_code;
-  absl::StatusOr<ExportChoice> choice = ExportChoiceFromFlags(flags);
-  if (!choice.ok()) return ReportError(kCommand, choice.status(), true);
+  absl::StatusOr<ExportSpec> spec = ExportSpecFromFlags(flags);
+  if (!spec.ok()) return ReportError(kCommand, spec.status(), true);
   const std::string map_name = flags.GetString("map");
   const std::string out = flags.GetString("out");
   if (absl::Status s = CheckOutputDirectory(out); !s.ok()) return ReportError(kCommand, s);
@@ -135,15 +116,15 @@ int RunRemoteExport(const RemoteOptions& remote, const std::vector<std::string>&
   std::unique_ptr<RemoteClient> client = ConnectOrReport(kCommand, remote, &exit_code);
   if (!client) return exit_code;
   ProgressLine line(!flags.GetSwitch("quiet"));
-  absl::StatusOr<ExportedFile> exported =
-      ReceiveExport(*client, ExportRequestFor(map_name, *choice), out, line);
+  pb::ExportRequest request = ExportSpecToProto(*spec);
+  request.set_map(map_name);
+  absl::StatusOr<ExportedFile> exported = ReceiveExport(*client, request, out, line);
   if (!exported.ok()) return ReportError(kCommand, exported.status());
   const int64_t points = ElementCount(exported->head, "vertex");
   const int64_t faces = ElementCount(exported->head, "face");
   const double mb = exported->bytes / 1e6;
-  const std::string what = choice->mesh
-                               ? absl::StrFormat("%d vertices, %d triangles", points, faces)
-                               : absl::StrFormat("%d points", points);
+  const std::string what = spec->mesh ? absl::StrFormat("%d vertices, %d triangles", points, faces)
+                                      : absl::StrFormat("%d points", points);
   line.Finish(absl::StrFormat("exported \"%s\" from %s: %s, %.1f MB", map_name,
                               client->server(), what, mb));
   if (!flags.GetSwitch("json")) {
@@ -152,7 +133,7 @@ int RunRemoteExport(const RemoteOptions& remote, const std::vector<std::string>&
   }
   JsonObject json;
   json.Add("map", map_name).Add("server", client->server()).Add("out", out);
-  if (choice->mesh) {
+  if (spec->mesh) {
     json.Add("vertices", points).Add("faces", faces);
   } else {
     json.Add("points", points);

@@ -78,11 +78,11 @@ FlagSet RemoteSlamFlags() {
             true);
   AddSlamFlags(flags,
                "voxel edge in metres of a new map (for an existing map, its own or nothing)");
-  flags.Add("encoding", "png|raw", "how frames travel: PNG, or raw RGB8 + uint16 (no codec)", "png")
-      .Add("timings", "FILE",
-           "also write per-frame times: frame timestamp roundtrip_ms daemon_ms state [keyframe]",
-           "")
-      .AddSwitch("save", "after the last update, write the map to the daemon's data directory");
+  AddWireEncodingFlag(flags);
+  flags.Add("timings", "FILE",
+            "also write per-frame times: frame timestamp roundtrip_ms daemon_ms state [keyframe]",
+            "");
+  flags.AddSwitch("save", "after the last update, write the map to the daemon's data directory");
   AddJsonAndQuietSwitches(flags);
   return flags;
 }
@@ -141,17 +141,8 @@ absl::Status StreamFrames(SlamStream& s, SlamReport& report, ProgressLine& line)
       s.realtime ? FramePacing::Realtime(s.speed) : FramePacing::LockStep(), "an update");
   s.result = frames.Run(report.frames, {
       .request = [&](int i) -> absl::StatusOr<pb::SlamRequest> {
-        absl::StatusOr<pb::Frame> frame =
-            LoadFrameToProto(*s.dataset, i, /*with_pose=*/false, s.encoding);
-        if (!frame.ok()) return frame.status();
-        pb::SlamRequest request;
-        if (i == 0) {
-          request.set_map(s.map_name);
-          *request.mutable_options() = s.wire;
-          if (s.start_pose) PoseToProto(*s.start_pose, request.mutable_initial_pose());
-        }
-        *request.mutable_frame() = std::move(*frame);
-        return request;
+        return TrackingStreamRequest<pb::SlamRequest>(*s.dataset, i, s.encoding, s.map_name,
+                                                      s.wire, s.start_pose);
       },
       .timestamp = [&](int i) { return s.dataset->timestamp(i); },
       .answers = [](const pb::SlamUpdate& u) -> std::optional<FrameAnswer> {

@@ -26,9 +26,9 @@ FlagSet RemoteTrackFlags() {
                 "latency (frame received to estimate sent) and the round trip seen here (frame\n"
                 "sent to estimate read, encoding excluded).");
   AddTrackFlags(flags, "N", "the map on the daemon");
-  flags.Add("encoding", "png|raw", "how frames travel: PNG, or raw RGB8 + uint16 (no codec)", "png")
-      .Add("timings", "FILE",
-           "also write per-frame times: frame timestamp roundtrip_ms daemon_ms", "");
+  AddWireEncodingFlag(flags);
+  flags.Add("timings", "FILE", "also write per-frame times: frame timestamp roundtrip_ms daemon_ms",
+            "");
   AddJsonAndQuietSwitches(flags);
   return flags;
 }
@@ -60,18 +60,9 @@ absl::Status StreamFrames(TrackStream& s, ProgressLine& line, TrackReport& repor
   s.result = frames.Run(report.frames, {
       .request = [&](int i) -> absl::StatusOr<pb::TrackRequest> {
         if (i == 1) s.first_tracked = absl::Now();
-        pb::TrackRequest request;
-        if (i == 0) {
-          request.set_map(s.map_name);
-          *request.mutable_options() = s.wire;
-          if (s.start_pose) PoseToProto(*s.start_pose, request.mutable_initial_pose());
-        }
         // No per-frame prior: the daemon predicts with constant velocity, as in-process.
-        absl::StatusOr<pb::Frame> frame =
-            LoadFrameToProto(*s.dataset, i, /*with_pose=*/false, s.encoding);
-        if (!frame.ok()) return frame.status();
-        *request.mutable_frame() = std::move(*frame);
-        return request;
+        return TrackingStreamRequest<pb::TrackRequest>(*s.dataset, i, s.encoding, s.map_name,
+                                                       s.wire, s.start_pose);
       },
       .answers = [](const pb::PoseEstimate& e) -> std::optional<FrameAnswer> {
         return FrameAnswer{e.timestamp(), e.latency_ms()};
