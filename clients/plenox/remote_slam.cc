@@ -38,6 +38,11 @@ const std::vector<UnavailableFlag>& InProcessOnlyFlags() {
       {"backend", "the daemon computes on its own devices (plenoxd --backend, --gpus)"},
       {"device", "the daemon computes on its own devices (plenoxd --backend, --gpus)"},
       {"threads", "the daemon computes with its own threads (plenoxd --threads)"},
+      {"no-odometry", "the daemon's SLAM always runs its whole front-end (they are switches to "
+                      "measure it in-process)"},
+      {"no-feature-relocalisation",
+       "the daemon's SLAM always runs its whole front-end (they are switches to measure it "
+       "in-process)"},
   };
   return flags;
 }
@@ -72,7 +77,7 @@ FlagSet RemoteSlamFlags() {
                 "to update sent) and the round trip seen here (frame sent to update read,\n"
                 "encoding excluded). Not here (the daemon decides them): --map-out,\n"
                 "--keyframes-out, --window, --refine-window, --mapping-nice, --backend,\n"
-                "--device, --threads.");
+                "--device, --threads, --no-odometry, --no-feature-relocalisation.");
   AddDatasetFlags(flags);
   flags.Add("name", "N", "the map on the daemon (1-64 characters of [A-Za-z0-9_.-])", std::nullopt,
             true);

@@ -126,6 +126,8 @@ TEST_F(RemoteSlamBadInputTest, InProcessOnlyFlagsAreRefusedWithTheReason) {
       {{"--backend", "cpu"}, "plenoxd --backend"},
       {{"--device", "0"}, "plenoxd --backend"},
       {{"--threads=2"}, "plenoxd --threads"},
+      {{"--no-odometry"}, "whole front-end"},
+      {{"--no-feature-relocalisation"}, "whole front-end"},
   };
   for (const auto& c : cases) {
     SCOPED_TRACE(c.flag[0]);
