@@ -156,13 +156,13 @@ absl::StatusOr<std::shared_ptr<const FrameFeatures>> SlamTracker::FeaturesOf(
 }
 
 absl::StatusOr<std::optional<TrackingResult>> SlamTracker::TryRelocalisationFrom(
-    const SE3& start, const RgbdFrame& frame, const PinholeIntrinsics& k) {
-  // The first attempt that tracks OK without wandering far from where it started wins. The
+    const SE3& start, int iterations, const RgbdFrame& frame, const PinholeIntrinsics& k) {
+  // An attempt counts when it tracks OK without wandering far from where it started. The
   // adaptive noise scale makes a residual test weak evidence on its own (it stretches to
   // whatever spread it finds), so a start that slid half a metre along a wall is a false
   // match, not a relocalisation.
   TrackerOptions attempt_options = options_.tracker;
-  attempt_options.iterations = std::max(attempt_options.iterations, 20);
+  attempt_options.iterations = iterations;
   attempt_options.constant_velocity = false;
   Tracker attempt(tracked_map_.get(), backend_, attempt_options);
   attempt.Reset(start, frame.timestamp);
@@ -183,11 +183,10 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::TryRelocalisationFrom
   return std::optional<TrackingResult>(std::move(r));
 }
 
-absl::StatusOr<std::optional<TrackingResult>> SlamTracker::RelocaliseByKeyframes(
-    const RgbdFrame& frame, const PinholeIntrinsics& k, const SlamMapView& view,
-    std::string* reason) {
+absl::StatusOr<std::optional<FeatureRelocalisation>> SlamTracker::FindByFeatures(
+    const RgbdFrame& frame, const PinholeIntrinsics& k, const SlamMapView& view) {
   if (!options_.feature_relocalisation || view.keyframe_features.empty()) {
-    return std::optional<TrackingResult>();
+    return std::optional<FeatureRelocalisation>();
   }
   PLX_ASSIGN_OR_RETURN(std::shared_ptr<const FrameFeatures> features, FeaturesOf(frame, k));
   // Index i is keyframe i: features and refined poses are both in the order accepted.
@@ -196,14 +195,18 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::RelocaliseByKeyframes
   for (size_t i = 0; i < n; ++i) {
     keyframes.push_back({view.keyframe_features[i].get(), view.keyframe_poses[i].pose});
   }
-  const std::optional<FeatureRelocalisation> found =
-      RelocaliseByFeatures(*features, keyframes, k, options_.feature_relocaliser);
-  if (!found) return std::optional<TrackingResult>();
+  return RelocaliseByFeatures(*features, keyframes, k, options_.feature_relocaliser);
+}
+
+absl::StatusOr<std::optional<TrackingResult>> SlamTracker::VerifyFeaturePose(
+    const FeatureRelocalisation& found, const RgbdFrame& frame, const PinholeIntrinsics& k,
+    std::string* reason) {
+  // PnP lands within a few centimetres: the tracker's own iteration count refines it.
   PLX_ASSIGN_OR_RETURN(std::optional<TrackingResult> verified,
-                       TryRelocalisationFrom(found->pose, frame, k));
+                       TryRelocalisationFrom(found.pose, options_.tracker.iterations, frame, k));
   if (verified) {
     *reason = absl::StrFormat("relocalised by features (keyframe %d: %d of %d matches)",
-                              found->keyframe, found->inliers, found->matches);
+                              found.keyframe, found.inliers, found.matches);
   }
   return verified;
 }
@@ -211,9 +214,16 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::RelocaliseByKeyframes
 absl::StatusOr<std::optional<TrackingResult>> SlamTracker::Relocalise(
     const RgbdFrame& frame, const PinholeIntrinsics& k, const std::optional<SE3>& prior,
     const SlamMapView& view, std::string* reason) {
-  PLX_ASSIGN_OR_RETURN(std::optional<TrackingResult> by_features,
-                       RelocaliseByKeyframes(frame, k, view, reason));
-  if (by_features) return by_features;
+  // Dense attempts are what a LOST frame pays for: at most relocalisation_attempts_per_frame.
+  int attempts = options_.relocalisation_attempts_per_frame;
+  PLX_ASSIGN_OR_RETURN(const std::optional<FeatureRelocalisation> found,
+                       FindByFeatures(frame, k, view));
+  if (found) {
+    PLX_ASSIGN_OR_RETURN(std::optional<TrackingResult> verified,
+                         VerifyFeaturePose(*found, frame, k, reason));
+    if (verified) return verified;
+    --attempts;
+  }
 
   // Near where the camera was: the prior, where the motion before the loss would have carried
   // it (a covered lens, a blur), where it was last seen, the keyframes nearest to that.
@@ -233,19 +243,21 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::Relocalise(
       std::min<int>(options_.relocalisation_keyframes, static_cast<int>(keyframes.size()));
   for (int i = 0; i < tries; ++i) candidates.push_back(keyframes[i].pose);
 
-  // This frame's share of the list; the next LOST frame goes on where it stopped.
+  // This frame's share of the list; the next LOST frame goes on where it stopped. These starts
+  // may be far off: more iterations than tracking from a good start.
   const int count = static_cast<int>(candidates.size());
-  const int attempts = std::min(options_.relocalisation_attempts_per_frame, count);
+  attempts = std::min(attempts, count);
+  const int iterations = std::max(options_.tracker.iterations, 20);
   for (int a = 0; a < attempts; ++a) {
     const int index = (relocalisation_cursor_ + a) % count;
     PLX_ASSIGN_OR_RETURN(std::optional<TrackingResult> r,
-                         TryRelocalisationFrom(candidates[index], frame, k));
+                         TryRelocalisationFrom(candidates[index], iterations, frame, k));
     if (r) {
       *reason = "relocalised near the last good pose";
       return r;
     }
   }
-  relocalisation_cursor_ = (relocalisation_cursor_ + attempts) % count;
+  if (attempts > 0) relocalisation_cursor_ = (relocalisation_cursor_ + attempts) % count;
   return std::optional<TrackingResult>();
 }
 
@@ -382,32 +394,42 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
     // The map renders the view but contradicts the odometry's pose (moving things do that,
     // and so does a kidnap the odometry followed with confidence: a jump in the stream that
     // its gates could not tell from motion), or the map's pose has nothing to back it (the
-    // odometry failed): the keyframes' features decide, and the dense tracker must confirm
-    // what they find.
+    // odometry failed): the keyframes' features decide. Where they agree with the pose given
+    // out, that is all (no dense work); only a place elsewhere costs a dense verification.
     const bool contradicted =
         fused.source == PoseSource::kOdometry && result->cause != TrackingCause::kFewValidRays;
     if (contradicted || fused.confirm) {
-      std::string how;
       stage = Clock::now();
-      PLX_ASSIGN_OR_RETURN(std::optional<TrackingResult> found,
-                           RelocaliseByKeyframes(frame, k, view, &how));
-      out.timings.relocalisation_ms += MillisecondsSince(stage);
-      if (!found && fused.confirm) {
-        out.state = SlamState::kDegraded;
-        out.reason = absl::StrCat(fused.reason, "; the keyframes' features do not confirm the "
-                                                "map's pose");
+      PLX_ASSIGN_OR_RETURN(const std::optional<FeatureRelocalisation> found,
+                           FindByFeatures(frame, k, view));
+      const bool elsewhere =
+          found && ((found->pose.translation() - fused.pose.translation()).norm() >
+                        options_.fusion.agree_translation_m ||
+                    RotationAngleBetween(found->pose, fused.pose) >
+                        options_.fusion.agree_rotation_rad);
+      std::optional<TrackingResult> moved;
+      std::string how;
+      if (elsewhere) {
+        PLX_ASSIGN_OR_RETURN(moved, VerifyFeaturePose(*found, frame, k, &how));
       }
-      if (found) {
-        const bool moved =
-            (found->pose.translation() - fused.pose.translation()).norm() >
-                options_.fusion.agree_translation_m ||
-            RotationAngleBetween(found->pose, fused.pose) > options_.fusion.agree_rotation_rad;
-        tracker_.Reset(found->pose, frame.timestamp);
-        out.state = moved ? SlamState::kRelocalised : SlamState::kOk;
+      out.timings.relocalisation_ms += MillisecondsSince(stage);
+      if (moved) {
+        tracker_.Reset(moved->pose, frame.timestamp);
+        out.state = SlamState::kRelocalised;
         out.source = PoseSource::kMap;
-        out.reason = moved ? how : "the map confirms the pose where the features put it";
-        may_be_keyframe = !moved;
-        result = std::move(found);
+        out.reason = how;
+        may_be_keyframe = false;
+        result = std::move(moved);
+      } else if (fused.confirm && found && !elsewhere) {
+        out.reason = absl::StrCat(fused.reason, "; the keyframes' features confirm the map's "
+                                                "pose");
+        may_be_keyframe = true;
+      } else if (fused.confirm) {
+        out.state = SlamState::kDegraded;
+        out.reason = absl::StrCat(fused.reason, found ? "; the keyframes' features place the "
+                                                        "frame elsewhere, the map does not"
+                                                      : "; the keyframes' features do not "
+                                                        "confirm the map's pose");
       }
     }
   }

@@ -19,10 +19,11 @@
 //     did not bootstrap), and on a frame the map contradicts although the odometry is sure
 //     (a kidnap the odometry followed), the frame's features are matched against the most
 //     similar keyframes and RANSAC PnP gives a pose from anywhere in the map; the dense
-//     tracker verifies and refines it. A LOST frame also tries, at most
-//     relocalisation_attempts_per_frame at a time, the poses near where the camera was (the
-//     prior, the motion model's prediction, the last good pose, the nearest keyframes), taking
-//     up on the next LOST frame where this one stopped. An attempt that tracks OK, stays near
+//     tracker verifies and refines it (on a checked frame only when that pose is elsewhere).
+//     A LOST frame spends at most relocalisation_attempts_per_frame dense attempts: the
+//     features' pose first, when they find one, then the poses near where the camera was (the
+//     prior, the motion model's prediction, the last good pose, the nearest keyframes), the
+//     next LOST frame taking up where this one stopped. An attempt that tracks OK, stays near
 //     its start and passes a check at the sensor's noise is RELOCALISED. Until then frames are
 //     LOST with the prediction, never an unconverged estimate; the work per frame is bounded.
 //
@@ -86,8 +87,8 @@ struct SlamTrackerOptions {
   int relocalisation_keyframes = 4;
   // An attempt that ends further than this from its starting pose is a false match.
   double relocalisation_radius_m = 0.25;
-  // Dense attempts from the poses near the last good one, per LOST frame (each a map tracking
-  // run): the rest wait for the next LOST frame, so no frame pays for the whole list.
+  // Dense attempts (each a map tracking run) per LOST frame, the features' pose included: the
+  // rest of the list waits for the next LOST frame, so no frame pays for all of it.
   int relocalisation_attempts_per_frame = 1;
   // Relocalisation by keyframe features (and features on every keyframe). Off: only the
   // attempts near the last good pose.
@@ -201,14 +202,19 @@ class SlamTracker {
                                                             const std::optional<SE3>& prior,
                                                             const SlamMapView& view,
                                                             std::string* reason);
-  // The pose RANSAC PnP finds against the keyframes' features, verified densely (none when
-  // the features find nothing or the map does not confirm it).
-  absl::StatusOr<std::optional<TrackingResult>> RelocaliseByKeyframes(
-      const RgbdFrame& frame, const PinholeIntrinsics& k, const SlamMapView& view,
+  // The pose RANSAC PnP finds against the keyframes' features, not verified (none when
+  // feature relocalisation is off or the features find nothing).
+  absl::StatusOr<std::optional<FeatureRelocalisation>> FindByFeatures(const RgbdFrame& frame,
+                                                                      const PinholeIntrinsics& k,
+                                                                      const SlamMapView& view);
+  // That pose, verified and refined densely (TryRelocalisationFrom); `reason` says how.
+  absl::StatusOr<std::optional<TrackingResult>> VerifyFeaturePose(
+      const FeatureRelocalisation& found, const RgbdFrame& frame, const PinholeIntrinsics& k,
       std::string* reason);
-  // A dense attempt from `start`: tracks OK, ends within relocalisation_radius_m of it and
-  // explains the frame at the sensor's noise.
+  // A dense attempt of `iterations` from `start`: tracks OK, ends within
+  // relocalisation_radius_m of it and explains the frame at the sensor's noise.
   absl::StatusOr<std::optional<TrackingResult>> TryRelocalisationFrom(const SE3& start,
+                                                                       int iterations,
                                                                        const RgbdFrame& frame,
                                                                        const PinholeIntrinsics& k);
   // This frame's features, extracted once (null when feature relocalisation is off).
