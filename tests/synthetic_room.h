@@ -10,6 +10,14 @@
 
 namespace plx::testing {
 
+// The synthetic sequences' camera at `width` x `height` (for views rendered one at a time).
+inline PinholeIntrinsics SyntheticCamera(int width, int height) {
+  SyntheticOptions o;
+  o.width = width;
+  o.height = height;
+  return SyntheticCalibration(o).pinhole;
+}
+
 // `width` x `height`, `frames` frames; depth noise (metres at 1 m) and hole fraction optional.
 // Fails the calling test (and returns null) when generation fails.
 inline std::unique_ptr<InMemoryDataset> MakeSyntheticRoom(int width, int height, int frames,

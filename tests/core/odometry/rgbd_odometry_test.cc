@@ -7,16 +7,12 @@
 #include "core/odometry/odometry_pyramid.h"
 #include "core/synthetic/synthetic_scene.h"
 #include "core/synthetic/synthetic_sequence.h"
+#include "tests/synthetic_room.h"
 
 namespace plx {
 namespace {
 
-PinholeIntrinsics Camera(int width, int height) {
-  SyntheticOptions o;
-  o.width = width;
-  o.height = height;
-  return SyntheticCalibration(o).pinhole;
-}
+using ::plx::testing::SyntheticCamera;
 
 OdometryPyramid Pyramid(const RgbdFrame& frame, const PinholeIntrinsics& k) {
   absl::StatusOr<OdometryPyramid> p = BuildOdometryPyramid(frame, k, OdometryPyramidOptions());
@@ -59,7 +55,7 @@ SyntheticOptions Sequence(int width, int height) {
 }
 
 TEST(OdometryPyramidTest, LevelsHalveTheIntrinsicsExactlyAndStartAtMaxWidth) {
-  const PinholeIntrinsics k = Camera(640, 480);
+  const PinholeIntrinsics k = SyntheticCamera(640, 480);
   const OdometryPyramid p = Pyramid(RenderSyntheticView(SE3::Identity(), k), k);
   ASSERT_EQ(p.levels.size(), 4u);  // 320, 160, 80, 40 (the next would be below min_width)
   EXPECT_EQ(p.levels[0].width, 320);
@@ -86,8 +82,8 @@ TEST(OdometryPyramidTest, ABlockAcrossAnEdgeKeepsTheForegroundDepth) {
 }
 
 TEST(OdometryPyramidTest, ImagesThatDoNotMatchTheIntrinsicsAreInvalidArgument) {
-  const PinholeIntrinsics k = Camera(64, 48);
-  RgbdFrame f = RenderSyntheticView(SE3::Identity(), Camera(80, 60));
+  const PinholeIntrinsics k = SyntheticCamera(64, 48);
+  RgbdFrame f = RenderSyntheticView(SE3::Identity(), SyntheticCamera(80, 60));
   EXPECT_TRUE(absl::IsInvalidArgument(
       BuildOdometryPyramid(f, k, OdometryPyramidOptions()).status()));
 }
@@ -180,7 +176,7 @@ TEST(RgbdOdometryTest, SensorNoiseAndHolesCostMillimetres) {
 }
 
 TEST(RgbdOdometryTest, ACoveredLensIsNotOk) {
-  const PinholeIntrinsics k = Camera(320, 240);
+  const PinholeIntrinsics k = SyntheticCamera(320, 240);
   const RgbdFrame a = RenderSyntheticView(SyntheticCameraPose(Sequence(320, 240), 5), k);
   RgbdFrame covered;
   covered.color = ColorImage(k.width, k.height, 3, 0.02f);
@@ -212,7 +208,7 @@ TEST(RgbdOdometryTest, TheSameInputGivesTheSameBits) {
 }
 
 TEST(RgbdOdometryTest, PyramidsOfDifferentCamerasAreInvalidArgument) {
-  const PinholeIntrinsics k1 = Camera(320, 240), k2 = Camera(160, 120);
+  const PinholeIntrinsics k1 = SyntheticCamera(320, 240), k2 = SyntheticCamera(160, 120);
   const OdometryPyramid a = Pyramid(RenderSyntheticView(SE3::Identity(), k1), k1);
   const OdometryPyramid b = Pyramid(RenderSyntheticView(SE3::Identity(), k2), k2);
   EXPECT_TRUE(absl::IsInvalidArgument(

@@ -10,16 +10,12 @@
 #include "core/synthetic/synthetic_path.h"
 #include "core/synthetic/synthetic_scene.h"
 #include "core/synthetic/synthetic_sequence.h"
+#include "tests/synthetic_room.h"
 
 namespace plx {
 namespace {
 
-PinholeIntrinsics Camera(int width, int height) {
-  SyntheticOptions o;
-  o.width = width;
-  o.height = height;
-  return SyntheticCalibration(o).pinhole;
-}
+using ::plx::testing::SyntheticCamera;
 
 FrameFeatures FeaturesAt(const SE3& pose, const PinholeIntrinsics& k) {
   absl::StatusOr<FrameFeatures> f =
@@ -57,7 +53,7 @@ double RotationErrorDeg(const SE3& a, const SE3& b) {
 }
 
 TEST(FrameFeaturesTest, KeypointsHaveDepthAndBackProjectOntoTheirPixels) {
-  const PinholeIntrinsics k = Camera(640, 480);
+  const PinholeIntrinsics k = SyntheticCamera(640, 480);
   const FrameFeatures f = FeaturesAt(SyntheticCameraPoseAtTime(0.0), k);
   // The room's procedural texture gives hundreds of corners; 500 are asked for.
   EXPECT_GE(f.size(), 150);
@@ -77,7 +73,7 @@ TEST(FrameFeaturesTest, KeypointsHaveDepthAndBackProjectOntoTheirPixels) {
 }
 
 TEST(FrameFeaturesTest, ACoveredLensOrNoDepthGivesNoKeypoints) {
-  const PinholeIntrinsics k = Camera(320, 240);
+  const PinholeIntrinsics k = SyntheticCamera(320, 240);
   RgbdFrame covered;
   covered.color = ColorImage(320, 240, 3, 0.02f);
   covered.depth = DepthImage(320, 240, 1, 0.0f);
@@ -95,9 +91,10 @@ TEST(FrameFeaturesTest, ACoveredLensOrNoDepthGivesNoKeypoints) {
 }
 
 TEST(FrameFeaturesTest, MismatchedIntrinsicsAndBadOptionsAreRefused) {
-  const RgbdFrame frame = RenderSyntheticView(SE3(), Camera(64, 48));
-  EXPECT_EQ(ExtractFrameFeatures(frame, Camera(80, 60), FrameFeatureOptions()).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  const RgbdFrame frame = RenderSyntheticView(SE3(), SyntheticCamera(64, 48));
+  EXPECT_EQ(
+      ExtractFrameFeatures(frame, SyntheticCamera(80, 60), FrameFeatureOptions()).status().code(),
+      absl::StatusCode::kInvalidArgument);
   FrameFeatureOptions o;
   o.max_features = 0;
   EXPECT_FALSE(ValidateFrameFeatureOptions(o).ok());
@@ -112,7 +109,7 @@ TEST(FrameFeaturesTest, MismatchedIntrinsicsAndBadOptionsAreRefused) {
 }
 
 TEST(FeatureRelocaliserTest, TheNearestPlaceRanksFirst) {
-  const PinholeIntrinsics k = Camera(320, 240);
+  const PinholeIntrinsics k = SyntheticCamera(320, 240);
   const Keyframes keyframes = AroundTheRoom(k);
   // 0.2 s after keyframe 3's time: ~6 degrees and a few centimetres from it.
   const FrameFeatures query = FeaturesAt(SyntheticCameraPoseAtTime(4.7), k);
@@ -122,7 +119,7 @@ TEST(FeatureRelocaliserTest, TheNearestPlaceRanksFirst) {
 }
 
 TEST(FeatureRelocaliserTest, AKidnappedFrameFindsItsPoseFromTheKeyframesAlone) {
-  const PinholeIntrinsics k = Camera(640, 480);
+  const PinholeIntrinsics k = SyntheticCamera(640, 480);
   const Keyframes keyframes = AroundTheRoom(k);
   // Between keyframes, anywhere on the circle: no prior, no motion model, only the keyframes.
   for (double t : {0.7, 4.0, 8.2, 11.0}) {
@@ -145,7 +142,7 @@ TEST(FeatureRelocaliserTest, AKidnappedFrameFindsItsPoseFromTheKeyframesAlone) {
 }
 
 TEST(FeatureRelocaliserTest, NoPoseForAFrameThatSeesNothingKnown) {
-  const PinholeIntrinsics k = Camera(320, 240);
+  const PinholeIntrinsics k = SyntheticCamera(320, 240);
   const Keyframes keyframes = AroundTheRoom(k);
   RgbdFrame covered;
   covered.color = ColorImage(320, 240, 3, 0.02f);
@@ -158,7 +155,7 @@ TEST(FeatureRelocaliserTest, NoPoseForAFrameThatSeesNothingKnown) {
 }
 
 TEST(FeatureRelocaliserTest, MatchesAreMutualAndPassTheRatioTest) {
-  const PinholeIntrinsics k = Camera(320, 240);
+  const PinholeIntrinsics k = SyntheticCamera(320, 240);
   const FrameFeatures a = FeaturesAt(SyntheticCameraPoseAtTime(0.0), k);
   const FrameFeatures b = FeaturesAt(SyntheticCameraPoseAtTime(0.2), k);
   const auto matches = MatchFeatures(a, b, FeatureRelocaliserOptions());
@@ -178,7 +175,7 @@ TEST(FeatureRelocaliserTest, MatchesAreMutualAndPassTheRatioTest) {
 }
 
 TEST(FeatureRelocaliserTest, TheSameInputsGiveTheSamePoseOnAnyThread) {
-  const PinholeIntrinsics k = Camera(320, 240);
+  const PinholeIntrinsics k = SyntheticCamera(320, 240);
   const Keyframes keyframes = AroundTheRoom(k);
   const FrameFeatures query = FeaturesAt(SyntheticCameraPoseAtTime(5.2), k);
   const std::optional<FeatureRelocalisation> here =
