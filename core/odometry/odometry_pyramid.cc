@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "absl/strings/str_format.h"
+#include "core/geometry/luma.h"
 
 namespace plx {
 namespace {
@@ -12,7 +13,6 @@ namespace {
 // gradient across them would pull the pose towards whichever side the point lands on.
 constexpr float kDepthEdgeFraction = 0.05f;
 
-float Luma(const float* rgb) { return 0.299f * rgb[0] + 0.587f * rgb[1] + 0.114f * rgb[2]; }
 
 OdometryLevel HalfLevel(const OdometryLevel& fine, float tolerance) {
   OdometryLevel coarse;

@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "absl/strings/str_cat.h"
+#include "core/geometry/luma.h"
 
 namespace plx {
 namespace {
@@ -24,8 +25,7 @@ cv::Mat GreyOf(const ColorImage& color) {
   for (int v = 0; v < color.height; ++v) {
     auto* row = grey.ptr<uint8_t>(v);
     for (int u = 0; u < color.width; ++u, rgb += 3) {
-      const float luma = 0.299f * rgb[0] + 0.587f * rgb[1] + 0.114f * rgb[2];
-      row[u] = static_cast<uint8_t>(std::clamp(luma * 255.0f + 0.5f, 0.0f, 255.0f));
+      row[u] = static_cast<uint8_t>(std::clamp(Luma(rgb) * 255.0f + 0.5f, 0.0f, 255.0f));
     }
   }
   return grey;

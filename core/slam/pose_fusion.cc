@@ -13,6 +13,11 @@ const char* PoseSourceName(PoseSource source) {
   return "?";
 }
 
+bool PosesAgree(const SE3& a, const SE3& b, const PoseFusionOptions& options) {
+  return (a.translation() - b.translation()).norm() <= options.agree_translation_m &&
+         RotationAngleBetween(a, b) <= options.agree_rotation_rad;
+}
+
 FusedPose FusePoses(const TrackingResult& map, const std::optional<OdometryPose>& odometry,
                     const PoseFusionOptions& options) {
   FusedPose out;
@@ -43,11 +48,8 @@ FusedPose FusePoses(const TrackingResult& map, const std::optional<OdometryPose>
   if (map.cause == TrackingCause::kFewValidRays) {
     // Unmapped space, a sure pose: what a keyframe is for.
     out.may_be_keyframe = true;
-    const SE3 apart = odometry->pose.Inverse() * map.pose;
     const bool agrees = map.state == TrackingState::kDegraded &&
-                        apart.translation().norm() <= options.agree_translation_m &&
-                        RotationAngleBetween(odometry->pose, map.pose) <=
-                            options.agree_rotation_rad;
+                        PosesAgree(odometry->pose, map.pose, options);
     if (agrees) {
       out.pose = map.pose;
       out.source = PoseSource::kMap;

@@ -61,6 +61,9 @@ struct FusedPose {
   bool confirm = false;
 };
 
+// Whether two estimates of a frame's pose are the same within the options' tolerances.
+bool PosesAgree(const SE3& a, const SE3& b, const PoseFusionOptions& options);
+
 // `map`: the map tracker's result (its pose is the prediction when LOST); `odometry`: absent
 // when there was nothing to align to (the first frame, or the previous one was LOST).
 FusedPose FusePoses(const TrackingResult& map, const std::optional<OdometryPose>& odometry,

@@ -402,11 +402,7 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       stage = Clock::now();
       PLX_ASSIGN_OR_RETURN(const std::optional<FeatureRelocalisation> found,
                            FindByFeatures(frame, k, view));
-      const bool elsewhere =
-          found && ((found->pose.translation() - fused.pose.translation()).norm() >
-                        options_.fusion.agree_translation_m ||
-                    RotationAngleBetween(found->pose, fused.pose) >
-                        options_.fusion.agree_rotation_rad);
+      const bool elsewhere = found && !PosesAgree(found->pose, fused.pose, options_.fusion);
       std::optional<TrackingResult> moved;
       std::string how;
       if (elsewhere) {
