@@ -1,5 +1,6 @@
 #include "app/make_backend.h"
 
+#include <algorithm>
 #include <set>
 
 #include "absl/strings/numbers.h"
@@ -60,6 +61,13 @@ std::string CudaDeviceName(int device) {
 #else
   return absl::StrCat("cuda:", device, " (not built)");
 #endif
+}
+
+SlamCpuThreads SplitCoresForSlam(int cores) {
+  SlamCpuThreads out;
+  out.mapping = std::max(1, cores / 2);
+  out.tracking = std::max(1, cores - out.mapping);
+  return out;
 }
 
 absl::StatusOr<std::unique_ptr<Backend>> MakeBackend(BackendKind kind, int cuda_device,

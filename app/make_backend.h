@@ -44,6 +44,18 @@ std::string CudaDeviceName(int device);
 absl::StatusOr<std::unique_ptr<Backend>> MakeBackend(BackendKind kind, int cuda_device = 0,
                                                      int cpu_threads = 0);
 
+// How in-process SLAM shares `cores` CPU cores when the user does not choose (plenox slam
+// without --threads): the tracker's pool and the mapper's each on their own half (the tracker
+// gets the odd core), at least one thread each. With two pools over every core the mapper's
+// threads and the tracker's took turns on each core: a frame's map tracking took ~2.5x as long
+// at equal priority, and with the mapper niced, integration starved and keyframes fell behind
+// (docs/BENCHMARKS.md, issue 21's speed section).
+struct SlamCpuThreads {
+  int tracking = 1;
+  int mapping = 1;
+};
+SlamCpuThreads SplitCoresForSlam(int cores);
+
 // "0,2" -> {0, 2}; "all" -> every visible device; InvalidArgument for bad or repeated ids or
 // ids not below CudaDeviceCount().
 absl::StatusOr<std::vector<int>> ParseGpuList(absl::string_view text);

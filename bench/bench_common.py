@@ -352,9 +352,10 @@ def make_synthetic(plenox, synth_dir, timeout, frames=None, extra=()):
         raise CommandError("%s has no intrinsics.txt after `plenox synth`" % synth_dir)
 
 
-def list_sequences(data_dir, wanted, notes):
+def list_sequences(data_dir, wanted, notes, need_ground_truth=False):
     """(name, path) of the TUM-layout subfolders of data_dir (only `wanted` ones if given);
-    what is skipped or missing goes to notes."""
+    with need_ground_truth, only those with a groundtruth.txt (a benchmark that maps or scores
+    with known poses); what is skipped or missing goes to notes."""
     if not os.path.isdir(data_dir):
         notes.append("data folder %s does not exist; no dataset sequences were run" % data_dir)
         return []
@@ -367,6 +368,9 @@ def list_sequences(data_dir, wanted, notes):
             continue
         if not os.path.exists(os.path.join(path, "intrinsics.txt")):
             notes.append("%s skipped: no intrinsics.txt (not a TUM-layout sequence)" % name)
+            continue
+        if need_ground_truth and not os.path.exists(os.path.join(path, "groundtruth.txt")):
+            notes.append("%s skipped: no groundtruth.txt (this benchmark needs known poses)" % name)
             continue
         seqs.append((name, path))
     if wanted is not None:

@@ -266,7 +266,7 @@ def main():
     notes = []
     started = datetime.datetime.now(datetime.timezone.utc)
     machine = machine_line()
-    seqs = list_sequences(data_dir, wanted, notes)
+    seqs = list_sequences(data_dir, wanted, notes, need_ground_truth=True)
 
     rows = []
     any_failed = False

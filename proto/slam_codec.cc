@@ -91,6 +91,12 @@ absl::StatusOr<SlamOptions> SlamOptionsFromProto(const pb::SlamOptions& o, float
                                                            "], got ", o.max_pending_keyframes()));
     }
     s.max_pending_keyframes = static_cast<int>(o.max_pending_keyframes());
+    // The default is ignored in lock-step; a bound asked for with it is a contradiction.
+    if (s.deterministic && s.max_pending_keyframes > 0) {
+      return absl::InvalidArgumentError(
+          "options: max_pending_keyframes must be 0 with deterministic (lock-step waits for "
+          "each keyframe's mapping)");
+    }
   }
   // The rest (the voxel size, lock-step with a pending keyframe, ...) is core's to check.
   if (absl::Status st = ValidateSlamOptions(s); !st.ok()) {

@@ -165,7 +165,8 @@ std::unique_ptr<PlenoxelMap> LoadMapOrReport(const std::string& command, const F
 }
 
 std::unique_ptr<Backend> BackendFromFlagsOrReport(const std::string& command,
-                                                  const FlagSet& flags, int* exit_code) {
+                                                  const FlagSet& flags, int* exit_code,
+                                                  int default_threads) {
   absl::StatusOr<BackendKind> kind = ParseBackendKind(flags.GetString("backend"));
   if (!kind.ok()) {
     *exit_code = ReportError(command, kind.status(), true);
@@ -187,6 +188,7 @@ std::unique_ptr<Backend> BackendFromFlagsOrReport(const std::string& command,
     *exit_code = ReportError(command, threads.status(), true);
     return nullptr;
   }
+  if (!flags.IsSet("threads")) *threads = default_threads;
   absl::StatusOr<std::unique_ptr<Backend>> backend = MakeBackend(*kind, *device, *threads);
   if (!backend.ok()) {
     *exit_code = ReportError(
@@ -198,11 +200,13 @@ std::unique_ptr<Backend> BackendFromFlagsOrReport(const std::string& command,
   return std::move(*backend);
 }
 
-SlamSession::BackendFactory MappingBackendFactory(const FlagSet& flags, bool deterministic) {
+SlamSession::BackendFactory MappingBackendFactory(const FlagSet& flags, bool deterministic,
+                                                  int default_threads) {
   const BackendKind kind =
       ParseBackendKind(flags.GetString("backend")).value_or(BackendKind::kAuto);
   const int device = flags.GetInt("device", 0, 1023).value_or(0);
   int threads = flags.GetInt("threads", 0, 4096).value_or(0);
+  if (!flags.IsSet("threads")) threads = default_threads;
   if (threads == 0) threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   if (deterministic) threads = 1;
   return [kind, device, threads] { return MakeBackend(kind, device, threads); };

@@ -120,14 +120,18 @@ void AddBackendFlags(FlagSet& flags);
 std::unique_ptr<PlenoxelMap> LoadMapOrReport(const std::string& command, const FlagSet& flags,
                                              Backend& backend, int* exit_code);
 
+// `default_threads`: the CPU backend's threads when --threads is not given (0: all cores).
 std::unique_ptr<Backend> BackendFromFlagsOrReport(const std::string& command,
-                                                  const FlagSet& flags, int* exit_code);
+                                                  const FlagSet& flags, int* exit_code,
+                                                  int default_threads = 0);
 // The backend SLAM's mapping thread makes for itself (core/slam/slam_session.h): the kind and
 // device of the backend flags (already checked by BackendFromFlagsOrReport). A CPU backend with
 // 0 threads is the process-wide pool, which runs one loop at a time, so mapping gets a pool of
 // its own with as many threads as the cores; `deterministic` asks for one thread (a fixed order
-// of gradient adds).
-SlamSession::BackendFactory MappingBackendFactory(const FlagSet& flags, bool deterministic);
+// of gradient adds). `default_threads` replaces "as many as the cores" when --threads is not
+// given.
+SlamSession::BackendFactory MappingBackendFactory(const FlagSet& flags, bool deterministic,
+                                                  int default_threads = 0);
 
 // The backend for progress and summary lines: "cpu, 4 threads", or the GPU's name.
 std::string BackendText(const Backend& backend);

@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <fstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "app/make_backend.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "clients/plenox/slam_output.h"
@@ -125,10 +127,13 @@ int RunSlam(const std::vector<std::string>& args) {
     if (path.empty()) continue;
     if (absl::Status s = CheckOutputDirectory(path); !s.ok()) return ReportError(kCommand, s);
   }
-  std::unique_ptr<Backend> backend = BackendFromFlagsOrReport(kCommand, flags, &exit_code);
+  const SlamCpuThreads cores = SplitCoresForSlam(
+      static_cast<int>(std::max(1u, std::thread::hardware_concurrency())));
+  std::unique_ptr<Backend> backend =
+      BackendFromFlagsOrReport(kCommand, flags, &exit_code, cores.tracking);
   if (!backend) return exit_code;
   const SlamSession::BackendFactory mapping_backend =
-      MappingBackendFactory(flags, options->slam.deterministic);
+      MappingBackendFactory(flags, options->slam.deterministic, cores.mapping);
   std::unique_ptr<RgbdDataset> dataset =
       OpenDatasetOrReport(kCommand, flags, *dataset_options, &exit_code);
   if (!dataset) return exit_code;
@@ -181,6 +186,7 @@ int RunSlam(const std::vector<std::string>& args) {
   report.ms_per_frame_median = result->ms_per_frame_median;
   report.ms_per_frame_p95 = result->ms_per_frame_p95;
   report.wall_s = result->wall_s;
+  report.stream_s = result->stream_s;
   report.mapping_iterations = p.mapping.mapping_iterations;
   report.map_mb = p.mapping.map_bytes / 1e6;
   report.keyframe_mb = p.mapping.keyframe_bytes / 1e6;

@@ -36,8 +36,10 @@ void AddSlamFlags(FlagSet& flags, const std::string& voxel_help) {
       .Add("kf-interval", "S", "keyframe when this long passed since the last one (0 = never)",
            absl::StrCat(d.keyframes.max_interval_s))
       .Add("max-pending-keyframes", "N",
-           absl::StrCat("keyframes tracking may run ahead of mapping (0-", kMaxPendingKeyframes,
-                        "): 0 = the frame after a keyframe waits for its integration"),
+           absl::StrCat("keyframes left waiting for mapping while tracking goes on (0-",
+                        kMaxPendingKeyframes,
+                        "; a keyframe beyond them is deferred): 0 = a keyframe's frame waits "
+                        "for its integration; ignored with --deterministic"),
            absl::StrCat(d.max_pending_keyframes))
       .Add("rpe-delta", "M", "RPE pair distance in metres of path (as eval-traj --delta)", "1");
   AddTrackerFlags(flags);
@@ -63,6 +65,11 @@ absl::StatusOr<SlamDatasetOptions> SlamOptionsFromFlags(const FlagSet& flags) {
   s.deterministic = flags.GetSwitch("deterministic");
   PLX_ASSIGN_OR_RETURN(s.max_pending_keyframes,
                        flags.GetInt("max-pending-keyframes", 0, kMaxPendingKeyframes));
+  if (s.deterministic && flags.IsSet("max-pending-keyframes") && s.max_pending_keyframes > 0) {
+    return absl::InvalidArgumentError(
+        "--max-pending-keyframes must be 0 with --deterministic (lock-step waits for each "
+        "keyframe's mapping)");
+  }
   o.realtime = flags.GetSwitch("realtime");
   PLX_ASSIGN_OR_RETURN(o.speed, flags.GetDouble("speed", 0.01, 100));
   PLX_ASSIGN_OR_RETURN(o.max_frames, flags.GetInt("max-frames", 0, 1 << 30));
@@ -178,6 +185,7 @@ void PrintSlamResult(const SlamReport& r, bool json, const JsonObject& more) {
       .Add("ms_per_frame_p95", r.ms_per_frame_p95)
       .Add("fps", r.fps())
       .Add("wall_s", r.wall_s)
+      .Add("stream_s", r.stream_s > 0.0 ? r.stream_s : unknown)
       .Add("mapping_iterations", r.mapping_iterations)
       .Add("map_mb", r.map_mb)
       .Add("keyframe_mb", r.keyframe_mb.value_or(unknown))

@@ -48,6 +48,9 @@ struct SlamReport {
   double ms_per_frame_median = 0.0;
   double ms_per_frame_p95 = 0.0;
   double wall_s = 0.0;
+  // The frames' part of wall_s (the final mapping after the last frame excluded); 0 when not
+  // known (the daemon's stream reports the whole).
+  double stream_s = 0.0;
   int mapping_iterations = 0;
   double map_mb = 0.0;
   // Known in-process only (the daemon reports neither): null in the JSON, left out of the
@@ -58,7 +61,11 @@ struct SlamReport {
   // With ground truth (eval-traj's definitions).
   std::optional<double> ate_none_m, ate_se3_m, rpe_m, rpe_deg;
 
-  double fps() const { return wall_s > 0.0 ? processed / wall_s : 0.0; }
+  // Frames per second of the stream, mapping running beside it.
+  double fps() const {
+    const double s = stream_s > 0.0 ? stream_s : wall_s;
+    return s > 0.0 ? processed / s : 0.0;
+  }
 };
 
 // ATE (no alignment and SE(3)) and RPE (pairs `rpe_delta_m` of path apart) of `trajectory`

@@ -18,6 +18,30 @@ bool PosesAgree(const SE3& a, const SE3& b, const PoseFusionOptions& options) {
          RotationAngleBetween(a, b) <= options.agree_rotation_rad;
 }
 
+CheckedPose ApplyFeatureCheck(const FusedPose& fused, bool features_found,
+                              bool features_agree) {
+  CheckedPose out{fused.state, fused.may_be_keyframe, fused.reason};
+  const bool agree = features_found && features_agree;
+  if (fused.confirm) {
+    out.may_be_keyframe = agree;
+    if (agree) {
+      absl::StrAppend(&out.reason, "; the keyframes' features confirm the map's pose");
+    } else {
+      out.state = SlamState::kDegraded;
+      absl::StrAppend(&out.reason, features_found ? "; the keyframes' features place the frame "
+                                                    "elsewhere, the map does not"
+                                                  : "; the keyframes' features do not confirm "
+                                                    "the map's pose");
+    }
+    return out;
+  }
+  if (agree) {
+    out.may_be_keyframe = true;
+    absl::StrAppend(&out.reason, "; the keyframes' features confirm it");
+  }
+  return out;
+}
+
 FusedPose FusePoses(const TrackingResult& map, const std::optional<OdometryPose>& odometry,
                     const PoseFusionOptions& options) {
   FusedPose out;

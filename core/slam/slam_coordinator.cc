@@ -21,6 +21,8 @@ SlamSplitOptions SplitSlamOptions(const SlamOptions& o) {
   out.tracker.relocalisation_radius_m = o.relocalisation_radius_m;
   out.tracker.odometry = o.odometry;
   out.tracker.feature_relocalisation = o.feature_relocalisation;
+  // Lock-step maps every keyframe before the next frame: nothing is ever left pending.
+  out.tracker.max_pending_keyframes = o.deterministic ? 0 : o.max_pending_keyframes;
   out.tracker.initial_pose = o.initial_pose;
   // A pixel helps the bootstrap only if the tracker uses it and the mapper maps it.
   out.tracker.bootstrap_max_depth =
@@ -31,7 +33,7 @@ SlamSplitOptions SplitSlamOptions(const SlamOptions& o) {
   if (o.deterministic) ApplyLockStepMappingPolicy(&out.mapper);
 
   out.gate.lock_step = o.deterministic;
-  out.gate.max_pending_keyframes = o.max_pending_keyframes;
+  out.gate.max_pending_keyframes = out.tracker.max_pending_keyframes;
   return out;
 }
 
@@ -151,6 +153,7 @@ SlamMapView SlamCoordinator::View() const {
     view.keyframe_features = keyframe_features_;
   }
   view.mapping_behind = progress_.pending_keyframes > 0;
+  view.pending_keyframes = progress_.pending_keyframes;
   return view;
 }
 

@@ -67,6 +67,7 @@ absl::StatusOr<SlamDatasetResult> RunSlamOnDataset(
     }
     i = next;
   }
+  out.stream_s = SecondsSince(wall_start);
   PLX_RETURN_IF_ERROR(session->Finish());
   out.wall_s = SecondsSince(wall_start);
   out.map = session->latest_map();

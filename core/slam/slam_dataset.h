@@ -39,6 +39,9 @@ struct SlamDatasetResult {
   double ms_per_frame_median = 0.0;  // ProcessFrame time, image decoding excluded
   double ms_per_frame_p95 = 0.0;
   double wall_s = 0.0;               // first frame to the final map, decoding included
+  // First frame to the last frame's pose (decoding included, mapping running beside): what a
+  // live camera sees. The rest of wall_s is the final mapping (Finish).
+  double stream_s = 0.0;
 };
 
 // `progress(result)` after every processed frame; returning false cancels.

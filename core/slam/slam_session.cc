@@ -56,11 +56,6 @@ absl::Status ValidateSlamOptions(const SlamOptions& o) {
                                                    kMaxPendingKeyframes, "], got ",
                                                    o.max_pending_keyframes));
   }
-  if (o.deterministic && o.max_pending_keyframes > 0) {
-    return absl::InvalidArgumentError(
-        "max_pending_keyframes must be 0 with deterministic (lock-step waits for each "
-        "keyframe's mapping)");
-  }
   if (o.mapping_nice < 0 || o.mapping_nice > 19) {
     return absl::InvalidArgumentError(
         absl::StrCat("mapping_nice must be in [0, 19], got ", o.mapping_nice));

@@ -7,8 +7,9 @@
 //   - SlamMapper (core/slam/slam_mapper.h): the keyframes' MappingSession with its local window,
 //     keyframe pose refinement, published versions.
 // By default mapping runs on its own thread with its own backend (optionally at a lower CPU
-// priority, mapping_nice); a frame that adds a keyframe waits until mapping has integrated it
-// (max_pending_keyframes), never for the optimisation. Deterministic mode runs mapping in
+// priority, mapping_nice); a frame never waits for mapping: while a keyframe waits for
+// integration the tracker defers the next one (max_pending_keyframes), and the optimisation is
+// never waited for. Deterministic mode runs mapping in
 // lock-step on the caller's thread after each keyframe instead (bit-identical results run to
 // run, for tests). The daemon wires the same halves to its workers instead (server/).
 //
@@ -63,17 +64,21 @@ struct SlamOptions {
   // mapping backend whose gradient scatter has a fixed order: the CPU backend on one thread
   // (with more, atomic float adds land in a varying order).
   bool deterministic = false;
-  // Concurrent mode: a frame that adds a keyframe returns once at most this many accepted
-  // keyframes still wait for integration (allocation and fusion), so the frames after it track
-  // against a map that has (all but this many of) them. Optimisation is never waited for.
+  // Concurrent mode: at most this many accepted keyframes wait for integration (allocation and
+  // fusion) while the camera goes on; a frame that would be a keyframe beyond that is deferred
+  // (SlamTrackerOptions::max_pending_keyframes), so no frame waits for mapping. 0: each
+  // keyframe's frame waits until mapping has integrated it (the next frames track against a
+  // map that has it; a frame then pays for a whole keyframe's fusion, seconds on 2 cores).
   // Without a bound, tracking outruns mapping, views go unmapped and tracking is lost.
-  // At most kMaxPendingKeyframes.
-  int max_pending_keyframes = 0;
+  // At most kMaxPendingKeyframes; lock-step (deterministic) ignores it (nothing is pending).
+  int max_pending_keyframes = 1;
   // Concurrent mode: the mapping thread's nice increment (Linux; 0 = same priority as the
-  // tracker). Its backend's worker threads inherit it. 0 by default: on the synthetic room on
-  // 2 cores nice 10 starved the optimisation and about doubled the ATE (docs/BENCHMARKS.md,
-  // "Online SLAM"); a latency-bound caller (the daemon) may trade some accuracy for it.
-  int mapping_nice = 0;
+  // tracker). Its backend's worker threads inherit it. 10 by default, as the daemon's mapping
+  // worker: at the same priority the tracker's and the mapper's threads share 2 cores evenly
+  // and each frame's map tracking took 2.5x as long (docs/BENCHMARKS.md, issue 21's speed
+  // section). Before frames stopped waiting for keyframes (max_pending_keyframes), nice 10
+  // starved the optimisation on the synthetic room and about doubled its ATE ("Online SLAM").
+  int mapping_nice = 10;
 
   // Keyframe poses tried besides the last good pose when relocalising.
   int relocalisation_keyframes = 4;

@@ -18,6 +18,14 @@ double MillisecondsSince(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
+// The map tracker's iterations from the odometry's pose: a share of the schedule, one
+// iteration per level at least.
+int OdometryStartIterations(const SlamTrackerOptions& o) {
+  const int share =
+      static_cast<int>(std::lround(o.tracker.iterations * o.odometry_start_iteration_share));
+  return std::min(o.tracker.iterations, std::max(2, share));
+}
+
 SlamState FromTracking(TrackingState state) {
   switch (state) {
     case TrackingState::kOk: return SlamState::kOk;
@@ -61,6 +69,11 @@ absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& o) {
   if (!(o.relocalisation_radius_m > 0.0) || !std::isfinite(o.relocalisation_radius_m)) {
     return absl::InvalidArgumentError(absl::StrCat(
         "relocalisation_radius_m must be positive, got ", o.relocalisation_radius_m));
+  }
+  if (!(o.odometry_start_iteration_share > 0.0 && o.odometry_start_iteration_share <= 1.0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("odometry_start_iteration_share must be in (0, 1], got ",
+                     o.odometry_start_iteration_share));
   }
   if (o.relocalisation_attempts_per_frame < 1 || o.relocalisation_attempts_per_frame > 16) {
     return absl::InvalidArgumentError(
@@ -380,6 +393,9 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
     out.timings.odometry_ms += MillisecondsSince(stage);
     const std::optional<SE3> map_start = odometry && odometry->ok ? odometry->pose : prior;
     stage = Clock::now();
+    const bool from_odometry = odometry && odometry->ok;
+    tracker_.set_iterations(
+        from_odometry ? OdometryStartIterations(options_) : options_.tracker.iterations);
     PLX_ASSIGN_OR_RETURN(TrackingResult tracked, tracker_.Track(frame, k, map_start));
     out.timings.map_ms += MillisecondsSince(stage);
     const FusedPose fused = FusePoses(tracked, odometry, options_.fusion);
@@ -416,16 +432,11 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
         out.reason = how;
         may_be_keyframe = false;
         result = std::move(moved);
-      } else if (fused.confirm && found && !elsewhere) {
-        out.reason = absl::StrCat(fused.reason, "; the keyframes' features confirm the map's "
-                                                "pose");
-        may_be_keyframe = true;
-      } else if (fused.confirm) {
-        out.state = SlamState::kDegraded;
-        out.reason = absl::StrCat(fused.reason, found ? "; the keyframes' features place the "
-                                                        "frame elsewhere, the map does not"
-                                                      : "; the keyframes' features do not "
-                                                        "confirm the map's pose");
+      } else {
+        const CheckedPose checked = ApplyFeatureCheck(fused, found.has_value(), !elsewhere);
+        out.state = checked.state;
+        out.reason = checked.reason;
+        may_be_keyframe = checked.may_be_keyframe;
       }
     }
   }
@@ -452,7 +463,14 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
             : 1.0 - static_cast<double>(result->valid_rays) / result->rays;
     const KeyframeDecision decision = DecideKeyframe(options_.keyframes, view.accepted_keyframes,
                                                      out.pose, frame.timestamp, unmapped);
-    if (decision.keyframe) {
+    const bool defer = decision.keyframe && options_.max_pending_keyframes > 0 &&
+                       view.pending_keyframes >= options_.max_pending_keyframes;
+    if (defer) {
+      const std::string deferred =
+          absl::StrFormat("keyframe deferred (%s): %d keyframes wait for mapping",
+                          decision.reason, view.pending_keyframes);
+      out.reason = out.reason.empty() ? deferred : absl::StrCat(out.reason, "; ", deferred);
+    } else if (decision.keyframe) {
       out.keyframe = true;
       out.keyframes += 1;
       out.reason = decision.reason;

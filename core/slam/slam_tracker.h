@@ -104,6 +104,18 @@ struct SlamTrackerOptions {
   // carries the pose where the map cannot (core/slam/pose_fusion.h). Off: the map tracker
   // alone from the constant-velocity prediction (the behaviour before the odometry existed).
   bool odometry = true;
+  // The keyframes a camera may leave waiting for integration (SlamGateOptions, the same
+  // bound): a frame that would be a keyframe while that many wait is not taken ("keyframe
+  // deferred"), so handing a keyframe over never makes the caller wait for mapping; a later
+  // frame takes it once mapping has caught up (the policy's rules still hold for it). 0: every
+  // keyframe is taken, and the caller waits for its integration (lock-step, or a caller that
+  // wants the map to have each keyframe before the next frame).
+  int max_pending_keyframes = 0;
+  // The share of tracker.iterations the map tracker runs from the odometry's pose (when the
+  // odometry tracked OK): that start is within millimetres of the map's optimum where the
+  // motion model's can be centimetres off, so half the coarse-to-fine schedule converges
+  // (docs/BENCHMARKS.md, issue 21's speed section). At least 2 iterations (one per level).
+  double odometry_start_iteration_share = 0.5;
   OdometryPyramidOptions odometry_pyramid;
   OdometryOptions odometry_options;
   PoseFusionOptions fusion;
@@ -122,6 +134,7 @@ struct SlamMapView {
   // Keyframes wait for integration: the part of the view the map does not render yet is
   // mostly what they will fill in, so it does not count towards a keyframe.
   bool mapping_behind = false;
+  int pending_keyframes = 0;  // accepted, not integrated yet
 };
 
 // Where a frame's tracking time went, in milliseconds (the rest is bookkeeping).

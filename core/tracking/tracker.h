@@ -5,6 +5,7 @@
 // Every result says whether it can be trusted (OK / DEGRADED / LOST) and why.
 #pragma once
 
+#include <algorithm>
 #include <optional>
 #include <string>
 #include <vector>
@@ -103,6 +104,10 @@ class Tracker {
   // Switches to another version of the map (the daemon's readers follow mapping jobs); the pose
   // and motion model carry over.
   void set_map(const PlenoxelMap* map) { map_ = map; }
+
+  // The iteration count for the next frames (at least 1): a caller whose starting guess is
+  // better than the motion model's (SLAM's odometry) needs less of the schedule.
+  void set_iterations(int iterations) { options_.iterations = std::max(1, iterations); }
 
   // Starts from a known pose (e.g. the first frame's ground truth) at `timestamp`.
   void Reset(const SE3& world_T_camera, double timestamp);

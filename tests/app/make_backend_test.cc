@@ -5,6 +5,9 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <utility>
+#include <vector>
+
 namespace plx {
 namespace {
 
@@ -15,6 +18,16 @@ TEST(BackendKindTextTest, IsTheInverseOfParseBackendKind) {
     const absl::StatusOr<BackendKind> parsed = ParseBackendKind(BackendKindText(kind));
     ASSERT_TRUE(parsed.ok()) << BackendKindText(kind);
     EXPECT_EQ(*parsed, kind);
+  }
+}
+
+TEST(SplitCoresForSlamTest, TrackingAndMappingEachGetTheirOwnHalfAndAtLeastOneThread) {
+  const std::vector<std::pair<int, std::pair<int, int>>> cases = {
+      {1, {1, 1}}, {2, {1, 1}}, {3, {2, 1}}, {8, {4, 4}}, {0, {1, 1}}};
+  for (const auto& [cores, want] : cases) {
+    const SlamCpuThreads got = SplitCoresForSlam(cores);
+    EXPECT_EQ(got.tracking, want.first) << cores << " cores";
+    EXPECT_EQ(got.mapping, want.second) << cores << " cores";
   }
 }
 

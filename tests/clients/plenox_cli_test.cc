@@ -473,6 +473,10 @@ TEST_F(PlenoxBadInputTest, SlamBadInputFailsBeforeWork) {
   ExpectFailsCleanly({"slam", "--dataset", *dataset_, "--out", "t.txt", "--realtime",
                       "--deterministic"},
                      kExitUsage, {"--realtime", "--deterministic"}, work);
+  // The default bound is ignored in lock-step; one asked for with it is a contradiction.
+  ExpectFailsCleanly({"slam", "--dataset", *dataset_, "--out", "t.txt", "--deterministic",
+                      "--max-pending-keyframes", "1"},
+                     kExitUsage, {"--max-pending-keyframes", "--deterministic"}, work);
   ExpectFailsCleanly({"slam", "--dataset", *dataset_, "--out", "t.txt", "--kf-unmapped", "2"},
                      kExitUsage, {"--kf-unmapped"}, work);
   ExpectFailsCleanly({"slam", "--dataset", *dataset_, "--out", "missing/t.txt"}, kExitFailure,

@@ -17,6 +17,7 @@
 #include "absl/strings/str_cat.h"
 #include "core/mapping/mapper.h"
 #include "core/mapping/mapping_session.h"
+#include "core/slam/slam_coordinator.h"
 #include "proto/pose_codec.h"
 
 namespace plx {
@@ -107,6 +108,15 @@ TEST(SlamCodecTest, ChosenOptionsRoundTrip) {
   ASSERT_TRUE(got.ok()) << got.status();
   ExpectSameWireSettings(*got, want);
   EXPECT_TRUE(SlamMappingOptionsChosen(wire));
+}
+
+TEST(SlamCodecTest, LockStepWithoutABoundIgnoresTheDefaultOne) {
+  pb::SlamOptions wire;
+  wire.set_deterministic(true);
+  const absl::StatusOr<SlamOptions> got = SlamOptionsFromProto(wire, kVoxel, kMaxMapBytes);
+  ASSERT_TRUE(got.ok()) << got.status();
+  EXPECT_TRUE(got->deterministic);
+  EXPECT_EQ(SplitSlamOptions(*got).gate.max_pending_keyframes, 0);
 }
 
 TEST(SlamCodecTest, LockStepRoundTrips) {

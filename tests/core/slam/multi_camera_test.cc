@@ -218,5 +218,72 @@ TEST(SlamMultiCameraTest, TrackerRefusesAFrameBeforeTheFirstVersion) {
   EXPECT_EQ(tracker.frames(), 0) << "a refused frame changes nothing";
 }
 
+TEST(SlamMultiCameraTest, AKeyframeWaitingForMappingDefersTheNextOneInsteadOfStallingTheCamera) {
+  // Concurrent mode's bound (max_pending_keyframes 1): while a keyframe waits for integration,
+  // a frame the policy would take is tracked as usual but not handed over (so its caller never
+  // waits for mapping); once mapping catches up, the next such frame is taken. Mapping is
+  // stepped by hand here, so "behind" is exact.
+  std::unique_ptr<InMemoryDataset> room = testing::MakeSyntheticRoom(160, 120, 90);
+  ASSERT_NE(room, nullptr);
+  const PinholeIntrinsics k = room->calibration().pinhole;
+  std::unique_ptr<Backend> tracking = MakeCpuBackend(2);
+  std::unique_ptr<Backend> mapping = MakeCpuBackend(1);
+  SlamOptions options = TestOptions();
+  options.deterministic = false;
+  options.max_pending_keyframes = 1;
+  const SlamSplitOptions split = SplitSlamOptions(options);
+  ASSERT_EQ(split.tracker.max_pending_keyframes, 1);
+  SlamCoordinator map(split.mapper, split.gate);
+  ASSERT_TRUE(map.StartMapper(mapping.get()).ok());
+  SlamTrackerOptions tracker_options = split.tracker;
+  tracker_options.initial_pose = *room->ground_truth(0);
+  SlamTracker camera(tracker_options, tracking.get());
+
+  auto track = [&](int i) {
+    absl::StatusOr<SlamFrameResult> r =
+        camera.Track(room->frames()[i], k, std::nullopt, map.View());
+    EXPECT_TRUE(r.ok()) << r.status();
+    if (!r.ok()) return SlamFrameResult();
+    EXPECT_NE(r->state, SlamState::kLost) << "frame " << i << ": " << r->reason;
+    if (r->keyframe) {
+      EXPECT_TRUE(map.AddKeyframe(room->frames()[i], r->pose, k, r->features).ok());
+    }
+    return *r;
+  };
+  ASSERT_TRUE(track(0).keyframe);
+  RunOut(map, SlamStepMode::kMap);
+
+  // Up to the next keyframe, with mapping kept up to date. Its frames started the map tracker
+  // at the odometry's pose: half the 8 iterations.
+  int i = 1;
+  for (; i < 40; ++i) {
+    const SlamFrameResult r = track(i);
+    if (r.state == SlamState::kOk) {
+      EXPECT_LE(r.tracking.iterations, 4) << "frame " << i;
+    }
+    if (r.keyframe) break;
+    RunOut(map, SlamStepMode::kMap);
+  }
+  ASSERT_LT(i, 40) << "no second keyframe on the path";
+  ASSERT_EQ(map.progress().pending_keyframes, 1);
+  EXPECT_TRUE(map.MayCameraProceed()) << "one pending keyframe is within the bound";
+
+  // Mapping stalls: the camera goes on without a keyframe, deferring those it would take.
+  int deferred = 0;
+  const int stalled_until = i + 20;
+  for (++i; i < stalled_until; ++i) {
+    const SlamFrameResult r = track(i);
+    EXPECT_FALSE(r.keyframe) << "frame " << i;
+    deferred += r.reason.find("keyframe deferred") != std::string::npos;
+  }
+  EXPECT_GE(deferred, 1) << "20 frames of the circle move the camera past the policy's bounds";
+  EXPECT_EQ(map.progress().pending_keyframes, 1);
+
+  // Mapping catches up: the camera, far from every keyframe by now, takes the next frame.
+  RunOut(map, SlamStepMode::kMap);
+  const SlamFrameResult next = track(i);
+  EXPECT_TRUE(next.keyframe) << next.reason;
+}
+
 }  // namespace
 }  // namespace plx

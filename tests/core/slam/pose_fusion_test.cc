@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <string>
+#include <utility>
+
 namespace plx {
 namespace {
 
@@ -76,6 +79,36 @@ TEST(PoseFusionTest, AMapThatDisagreesWithTheFrameNeverFeedsTheMap) {
     EXPECT_EQ(f.state, SlamState::kDegraded);
     EXPECT_EQ(f.source, PoseSource::kOdometry);
     EXPECT_FALSE(f.may_be_keyframe);
+  }
+}
+
+TEST(PoseFusionTest, FeaturesThatAgreeWithTheOdometryLetAFrameTheMapLagsBecomeAKeyframe) {
+  const FusedPose f = FusePoses(Map(TrackingState::kDegraded, TrackingCause::kHighResidual, 0.0),
+                                Odometry(true, 0.01), PoseFusionOptions());
+  ASSERT_FALSE(f.may_be_keyframe);
+  const CheckedPose agreed = ApplyFeatureCheck(f, /*features_found=*/true, /*agree=*/true);
+  EXPECT_EQ(agreed.state, SlamState::kDegraded) << "the map still does not explain the frame";
+  EXPECT_TRUE(agreed.may_be_keyframe);
+  EXPECT_NE(agreed.reason.find("features confirm"), std::string::npos) << agreed.reason;
+  for (const auto& [found, agree] : {std::pair{false, false}, std::pair{true, false}}) {
+    const CheckedPose c = ApplyFeatureCheck(f, found, agree);
+    EXPECT_EQ(c.state, SlamState::kDegraded);
+    EXPECT_FALSE(c.may_be_keyframe) << "found " << found << " agree " << agree;
+    EXPECT_EQ(c.reason, f.reason);
+  }
+}
+
+TEST(PoseFusionTest, AMapPoseToConfirmIsOkOnlyWhenTheFeaturesAgree) {
+  const FusedPose f = FusePoses(Map(TrackingState::kOk, TrackingCause::kNone, 0.0),
+                                Odometry(false, 0.0), PoseFusionOptions());
+  ASSERT_TRUE(f.confirm);
+  const CheckedPose agreed = ApplyFeatureCheck(f, true, true);
+  EXPECT_EQ(agreed.state, SlamState::kOk);
+  EXPECT_TRUE(agreed.may_be_keyframe);
+  for (const auto& [found, agree] : {std::pair{false, false}, std::pair{true, false}}) {
+    const CheckedPose c = ApplyFeatureCheck(f, found, agree);
+    EXPECT_EQ(c.state, SlamState::kDegraded);
+    EXPECT_FALSE(c.may_be_keyframe);
   }
 }
 

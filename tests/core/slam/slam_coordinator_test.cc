@@ -68,11 +68,15 @@ TEST_F(SlamCoordinatorTest, SplitAppliesTheLockStepPolicyOnlyWhenDeterministic) 
   EXPECT_EQ(free.mapper.mapping.max_clones_per_iteration, 7);
   EXPECT_FALSE(free.gate.lock_step);
   EXPECT_EQ(free.gate.max_pending_keyframes, 2);
+  EXPECT_EQ(free.tracker.max_pending_keyframes, 2);  // the tracker defers beyond the same bound
   EXPECT_EQ(free.tracker.tracker.rays, 512);
 
+  // Lock-step leaves nothing pending: the bound (here not the default) is ignored, not refused.
   o.deterministic = true;
-  o.max_pending_keyframes = 0;
+  EXPECT_TRUE(ValidateSlamOptions(o).ok());
   const SlamSplitOptions locked = SplitSlamOptions(o);
+  EXPECT_EQ(locked.gate.max_pending_keyframes, 0);
+  EXPECT_EQ(locked.tracker.max_pending_keyframes, 0);
   SlamMapperOptions expected = free.mapper;
   ApplyLockStepMappingPolicy(&expected);
   EXPECT_EQ(locked.mapper.mapping.min_publish_interval_s,
