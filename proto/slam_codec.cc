@@ -98,7 +98,7 @@ absl::StatusOr<SlamOptions> SlamOptionsFromProto(const pb::SlamOptions& o, float
           "each keyframe's mapping)");
     }
   }
-  // The rest (the voxel size, lock-step with a pending keyframe, ...) is core's to check.
+  // The rest (the voxel size, the options' ranges, ...) is core's to check.
   if (absl::Status st = ValidateSlamOptions(s); !st.ok()) {
     return absl::InvalidArgumentError(absl::StrCat("options: ", st.message()));
   }

@@ -13,7 +13,6 @@ namespace {
 // gradient across them would pull the pose towards whichever side the point lands on.
 constexpr float kDepthEdgeFraction = 0.05f;
 
-
 OdometryLevel HalfLevel(const OdometryLevel& fine, float tolerance) {
   OdometryLevel coarse;
   coarse.width = fine.width / 2;

@@ -152,7 +152,6 @@ SlamMapView SlamCoordinator::View() const {
     view.keyframe_poses = mapper_->keyframe_poses();
     view.keyframe_features = keyframe_features_;
   }
-  view.mapping_behind = progress_.pending_keyframes > 0;
   view.pending_keyframes = progress_.pending_keyframes;
   return view;
 }

@@ -391,9 +391,9 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
     PLX_ASSIGN_OR_RETURN(const std::optional<OdometryPose> odometry,
                          RunOdometry(pyramid, frame.timestamp, prior, &out.odometry));
     out.timings.odometry_ms += MillisecondsSince(stage);
-    const std::optional<SE3> map_start = odometry && odometry->ok ? odometry->pose : prior;
-    stage = Clock::now();
     const bool from_odometry = odometry && odometry->ok;
+    const std::optional<SE3> map_start = from_odometry ? odometry->pose : prior;
+    stage = Clock::now();
     tracker_.set_iterations(
         from_odometry ? OdometryStartIterations(options_) : options_.tracker.iterations);
     PLX_ASSIGN_OR_RETURN(TrackingResult tracked, tracker_.Track(frame, k, map_start));
@@ -458,7 +458,7 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
     // mostly what they will fill in: counting it again would take a keyframe per frame exactly
     // when mapping is behind, and feed the lag it comes from.
     const double unmapped =
-        view.mapping_behind || result->rays == 0
+        view.mapping_behind() || result->rays == 0
             ? 0.0
             : 1.0 - static_cast<double>(result->valid_rays) / result->rays;
     const KeyframeDecision decision = DecideKeyframe(options_.keyframes, view.accepted_keyframes,

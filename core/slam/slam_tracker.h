@@ -131,10 +131,10 @@ struct SlamMapView {
   std::vector<StampedPose> keyframe_poses;      // refined, for relocalisation
   // The keyframes' features, in the same order as keyframe_poses (null: none were extracted).
   std::vector<std::shared_ptr<const FrameFeatures>> keyframe_features;
+  int pending_keyframes = 0;  // accepted, not integrated yet
   // Keyframes wait for integration: the part of the view the map does not render yet is
   // mostly what they will fill in, so it does not count towards a keyframe.
-  bool mapping_behind = false;
-  int pending_keyframes = 0;  // accepted, not integrated yet
+  bool mapping_behind() const { return pending_keyframes > 0; }
 };
 
 // Where a frame's tracking time went, in milliseconds (the rest is bookkeeping).

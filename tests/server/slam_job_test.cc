@@ -274,7 +274,7 @@ TEST_F(SlamJobTest, AKeyframeHandedBeforeTheMapperStartsIsIntegrated) {
     EXPECT_EQ(view.version, 0);
     ASSERT_EQ(view.accepted_keyframes.size(), 1u);
     EXPECT_EQ(view.accepted_keyframes[0].timestamp, room_->frames()[0].timestamp);
-    EXPECT_TRUE(view.mapping_behind);
+    EXPECT_TRUE(view.mapping_behind());
     const SlamMapperProgress p = job->Status().mapping;
     EXPECT_EQ(p.keyframes, 1);
     EXPECT_EQ(p.keyframes_integrated, 0);

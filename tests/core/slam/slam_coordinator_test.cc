@@ -94,7 +94,7 @@ TEST_F(SlamCoordinatorTest, KeyframesBeforeTheMapperAreSeenAndHandedOver) {
   EXPECT_EQ(view.map, nullptr);
   EXPECT_EQ(view.version, 0);
   ASSERT_EQ(view.accepted_keyframes.size(), 1u);
-  EXPECT_TRUE(view.mapping_behind);
+  EXPECT_TRUE(view.mapping_behind());
   EXPECT_FALSE(c.MayCameraProceed());  // no version yet
   EXPECT_EQ(c.progress().pending_keyframes, 1);
   EXPECT_FALSE(c.Step(SlamStepMode::kMap).ok());  // StartMapper first
@@ -107,7 +107,7 @@ TEST_F(SlamCoordinatorTest, KeyframesBeforeTheMapperAreSeenAndHandedOver) {
   EXPECT_GE(view.version, 1);
   EXPECT_EQ(view.accepted_keyframes.size(), 1u);
   EXPECT_EQ(view.keyframe_poses.size(), 1u);
-  EXPECT_FALSE(view.mapping_behind);
+  EXPECT_FALSE(view.mapping_behind());
   const SlamMapperProgress p = c.progress();
   EXPECT_EQ(p.keyframes, 1);
   EXPECT_EQ(p.keyframes_integrated, 1);
