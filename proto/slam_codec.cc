@@ -188,6 +188,9 @@ pb::SlamUpdate SlamUpdateToProto(const SlamFrameResult& result, uint32_t frame, 
   update.set_latency_ms(latency_ms);
   update.set_dropped(dropped);
   update.set_valid_rays(static_cast<uint32_t>(result.tracking.valid_rays));
+  update.set_segment(static_cast<uint32_t>(result.segment));
+  update.set_new_segment(result.new_segment);
+  if (result.main_T_segment) PoseToProto(*result.main_T_segment, update.mutable_main_t_segment());
   *update.mutable_mapping() = std::move(mapping);
   return update;
 }

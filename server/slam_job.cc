@@ -53,9 +53,8 @@ SlamJob::~SlamJob() {
   if (worker_ != nullptr) state_->workers->DetachStream(*worker_);
 }
 
-absl::Status SlamJob::AddKeyframe(const RgbdFrame& frame, const SE3& pose,
-                                  const PinholeIntrinsics& k,
-                                  std::shared_ptr<const FrameFeatures> features) {
+absl::Status SlamJob::Accept(const RgbdFrame& frame, const PinholeIntrinsics& k,
+                             SlamFrameResult* result, int* segment) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     if (status_.finished) {
@@ -63,7 +62,8 @@ absl::Status SlamJob::AddKeyframe(const RgbdFrame& frame, const SE3& pose,
           absl::StrCat("the SLAM job on map \"", map_, "\" has ended"));
     }
   }
-  PLX_RETURN_IF_ERROR(coordinator_->AddKeyframe(frame, pose, k, std::move(features)));
+  PLX_ASSIGN_OR_RETURN(const bool queued, coordinator_->Accept(frame, k, result, segment));
+  if (!queued) return absl::OkStatus();
   std::lock_guard<std::mutex> lock(mutex_);
   ScheduleLocked();
   return absl::OkStatus();

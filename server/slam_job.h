@@ -77,16 +77,19 @@ class SlamJob : public std::enable_shared_from_this<SlamJob> {
   // view of the job); it outlives the job in the registry (SlamJobs::Trajectory).
   TrajectoryRecord& trajectory() const { return *trajectory_; }
 
-  // Queues a keyframe with its relocalisation features (any thread) and schedules mapping.
-  absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k,
-                           std::shared_ptr<const FrameFeatures> features = nullptr);
-  // What a camera tracks against now (the newest version with the store's number, keyframes
-  // accepted and refined).
-  SlamMapView View() const { return coordinator_->View(); }
+  // Applies a camera's tracked frame (any thread; SlamCoordinator::Accept: a new segment, a
+  // join, the keyframe with its relocalisation features) and schedules mapping for what it
+  // queued. `segment` is the camera's.
+  absl::Status Accept(const RgbdFrame& frame, const PinholeIntrinsics& k,
+                      SlamFrameResult* result, int* segment);
+  // What a camera in `segment` tracks against now (the newest version with the store's number
+  // for the main map, keyframes accepted and refined).
+  SlamMapView View(int segment = 0) const { return coordinator_->View(segment); }
   // Whether a stream whose last frame made a keyframe (or needed a version) may track its
   // next one (SlamCoordinator::MayCameraProceed with the stream's own bound).
-  bool MayCameraProceed(int max_pending_keyframes) const {
-    return coordinator_->MayCameraProceed(max_pending_keyframes);
+  bool MayCameraProceed(int max_pending_keyframes, int segment = 0,
+                        bool needs_version = true) const {
+    return coordinator_->MayCameraProceed(max_pending_keyframes, segment, needs_version);
   }
   SlamJobStatus Status() const;
 

@@ -116,7 +116,7 @@ bool SlamReactor::JobAllowsNextFrameLocked() {
   const SlamJobStatus s = job_->Status();
   if (!s.error.ok() || s.finished) return true;  // the task reports it
   // The map's rule (SlamCoordinator::MayCameraProceed) with this stream's bound.
-  const bool ready = job_->MayCameraProceed(max_pending_keyframes_);
+  const bool ready = job_->MayCameraProceed(max_pending_keyframes_, segment_, needs_version_);
   if (ready) wait_for_job_ = false;
   return ready;
 }
@@ -172,12 +172,14 @@ void SlamReactor::LeaveJobLocked() {
 void SlamReactor::RunTask(Backend* backend, bool cancelled) {
   std::optional<Pending> work;
   std::shared_ptr<SlamJob> job;
+  int segment = 0;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     if (!StartTaskLocked(cancelled)) return;
     work = std::move(queue_.front());
     queue_.pop_front();
     job = job_;
+    segment = segment_;
     ResumeReadingLocked();
   }
   bool client_error = false;  // the frame's data was bad: no error log, the stream just ends
@@ -185,7 +187,7 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
   SlamFrameResult result;
   std::string camera_label;  // the frame's camera_id, for the viewer
   const absl::Status failure = CatchAllocationFailure("SLAM tracking", [&]() -> absl::Status {
-    const SlamMapView view = job->View();
+    const SlamMapView view = job->View(segment);
     if (!tracker_) tracker_ = std::make_unique<SlamTracker>(tracker_options_, backend);
     // Only a bootstrap candidate (no keyframe in the map yet, from a camera that has not
     // tracked a frame: the first frame, or one after WAITING frames, of any camera on the map)
@@ -211,16 +213,19 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
         tracker_->Track(frame, k, decoded->client_pose, view);
     if (!tracked.ok()) return tracked.status();  // the backend's (memory, device)
     result = *std::move(tracked);
-    if (result.keyframe) {
-      PLX_RETURN_IF_ERROR(job->AddKeyframe(frame, result.pose, k, result.features));
-    }
+    PLX_RETURN_IF_ERROR(job->Accept(frame, k, &result, &segment));
     return absl::OkStatus();
   });
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - work->received).count();
 
+  // What the next frame waits for (JobAllowsNextFrameLocked): a version unless the odometry
+  // carries the camera.
+  const bool needs_version = tracker_ == nullptr || !tracker_->CarriesWithoutMap();
   std::lock_guard<std::mutex> lock(mutex_);
   TaskDoneLocked();
+  segment_ = segment;
+  needs_version_ = needs_version;
   if (!failure.ok()) {
     if (!client_error) {
       LogEvent("error", "slam_failed", {{"map", map_name_}, {"error", failure.ToString()}});

@@ -71,6 +71,8 @@ class SlamReactor final : public StreamReactor<plenoxd::v1::SlamRequest, plenoxd
   int max_pending_keyframes_ = 0;  // this stream's SlamGateOptions (lock-step is the job's)
   bool wait_for_job_ = false;  // the last frame became a keyframe, or the map has no version:
                                // the next waits for SlamJob::MayCameraProceed
+  int segment_ = 0;            // the camera's map segment (SlamCoordinator::Accept)
+  bool needs_version_ = true;  // the camera cannot go on without a version (the tracker's)
   bool left_job_ = false;
   bool done_sent_ = false;
   std::shared_ptr<SlamJob> job_;

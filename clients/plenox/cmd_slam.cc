@@ -30,7 +30,7 @@ void AddInProcessSlamFlags(FlagSet& flags) {
       .Add("keyframes-out", "F", "write the keyframes' (refined) poses here (TUM format)", "")
       .Add("frames-out", "F.csv",
            "write one line per processed frame here: frame,timestamp,state,ms,keyframe,"
-           "odometry_ms,map_ms,relocalisation_ms,features_ms,reason",
+           "segment,odometry_ms,map_ms,relocalisation_ms,features_ms,reason",
            "")
       .Add("window", "N", "mapping window: half of each batch from the last N keyframes",
            absl::StrCat(d.mapping.mapper.window_keyframes))
@@ -39,6 +39,10 @@ void AddInProcessSlamFlags(FlagSet& flags) {
            absl::StrCat(d.refinement.window))
       .Add("mapping-nice", "N", "priority of the mapping thread below tracking (0-19)",
            absl::StrCat(d.mapping_nice))
+      .Add("new-segment-after", "N",
+           "LOST frames with depth after which the camera starts a new map segment, joined to "
+           "the map when it finds it again (0 = never: LOST until relocalised)",
+           absl::StrCat(d.new_segment_after_lost_frames))
       .AddSwitch("no-odometry",
                  "track against the map alone, without the map-free odometry (to measure it)")
       .AddSwitch("no-feature-relocalisation",
@@ -52,6 +56,8 @@ absl::StatusOr<SlamDatasetOptions> OptionsFromFlags(const FlagSet& flags) {
   PLX_ASSIGN_OR_RETURN(s.mapping.mapper.window_keyframes, flags.GetInt("window", 0, 1000));
   PLX_ASSIGN_OR_RETURN(s.refinement.window, flags.GetInt("refine-window", 0, 1000));
   PLX_ASSIGN_OR_RETURN(s.mapping_nice, flags.GetInt("mapping-nice", 0, 19));
+  PLX_ASSIGN_OR_RETURN(s.new_segment_after_lost_frames,
+                       flags.GetInt("new-segment-after", 0, 1000000));
   s.odometry = !flags.GetSwitch("no-odometry");
   s.feature_relocalisation = !flags.GetSwitch("no-feature-relocalisation");
   PLX_RETURN_IF_ERROR(ValidateSlamOptions(s));
@@ -73,14 +79,14 @@ std::string CsvQuoted(const std::string& text) {
 absl::Status WriteFramesCsv(const std::string& path, const std::vector<SlamFrameResult>& results) {
   std::ofstream out(path);
   if (!out) return absl::UnavailableError(absl::StrCat("cannot write ", path));
-  out << "frame,timestamp,state,ms,keyframe,odometry_ms,map_ms,relocalisation_ms,features_ms,"
-         "reason\n";
+  out << "frame,timestamp,state,ms,keyframe,segment,odometry_ms,map_ms,relocalisation_ms,"
+         "features_ms,reason\n";
   for (const SlamFrameResult& r : results) {
     const SlamFrameTimings& t = r.timings;
-    out << absl::StrFormat("%d,%.6f,%s,%.3f,%d,%.3f,%.3f,%.3f,%.3f,%s\n", r.frame, r.timestamp,
-                           SlamStateName(r.state), r.milliseconds, r.keyframe ? 1 : 0,
-                           t.odometry_ms, t.map_ms, t.relocalisation_ms, t.features_ms,
-                           CsvQuoted(r.reason));
+    out << absl::StrFormat("%d,%.6f,%s,%.3f,%d,%d,%.3f,%.3f,%.3f,%.3f,%s\n", r.frame,
+                           r.timestamp, SlamStateName(r.state), r.milliseconds,
+                           r.keyframe ? 1 : 0, r.segment, t.odometry_ms, t.map_ms,
+                           t.relocalisation_ms, t.features_ms, CsvQuoted(r.reason));
   }
   out.close();
   if (!out) return absl::UnavailableError(absl::StrCat("failed writing ", path));
@@ -183,6 +189,8 @@ int RunSlam(const std::vector<std::string>& args) {
   report.lost = p.tracking.lost;
   report.relocalised = p.tracking.relocalised;
   report.waiting = p.tracking.waiting;
+  report.segments = p.segments.started;
+  report.segments_joined = p.segments.joined;
   report.ms_per_frame_median = result->ms_per_frame_median;
   report.ms_per_frame_p95 = result->ms_per_frame_p95;
   report.wall_s = result->wall_s;

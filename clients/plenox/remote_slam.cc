@@ -16,6 +16,7 @@
 #include "core/common/status_macros.h"
 #include "core/formats/trajectory_file.h"
 #include "core/io/atomic_write.h"
+#include "core/slam/map_segment_poses.h"
 #include "proto/slam_codec.h"
 
 namespace plx::cli {
@@ -35,6 +36,7 @@ const std::vector<UnavailableFlag>& InProcessOnlyFlags() {
       {"window", "the daemon's mapping job sets its own mapping window"},
       {"refine-window", "the daemon's mapping job sets its own keyframe refinement"},
       {"mapping-nice", "the daemon's mapping job runs at the daemon's priority"},
+      {"new-segment-after", "the daemon's SLAM starts map segments at its default"},
       {"backend", "the daemon computes on its own devices (plenoxd --backend, --gpus)"},
       {"device", "the daemon computes on its own devices (plenoxd --backend, --gpus)"},
       {"threads", "the daemon computes with its own threads (plenoxd --threads)"},
@@ -76,8 +78,9 @@ FlagSet RemoteSlamFlags() {
                 "daemon's data directory. Times reported: the daemon's latency (frame received\n"
                 "to update sent) and the round trip seen here (frame sent to update read,\n"
                 "encoding excluded). Not here (the daemon decides them): --map-out,\n"
-                "--keyframes-out, --window, --refine-window, --mapping-nice, --backend,\n"
-                "--device, --threads, --no-odometry, --no-feature-relocalisation.");
+                "--keyframes-out, --window, --refine-window, --mapping-nice,\n"
+                "--new-segment-after, --backend, --device, --threads, --no-odometry,\n"
+                "--no-feature-relocalisation.");
   AddDatasetFlags(flags);
   flags.Add("name", "N", "the map on the daemon (1-64 characters of [A-Za-z0-9_.-])", std::nullopt,
             true);
@@ -103,7 +106,8 @@ struct SlamStream {
   bool realtime = false;
   double speed = 1.0;
 
-  std::vector<StampedPose> trajectory{};
+  std::vector<StampedPose> trajectory{};  // in the main map's frame (PosesInMainMap) at the end
+  std::vector<SlamFrameResult> given{};   // each update's pose with its segment, as given
   pb::SlamMapping mapping{};  // as of the last update (the done message's at the end)
   bool done = false;
   absl::Time done_at{};
@@ -116,6 +120,17 @@ absl::Status TakeUpdate(const pb::SlamUpdate& update, FrameRecord& record, SlamS
   absl::StatusOr<SE3> pose = PoseFromProto(update.pose(), "update.pose");
   if (!pose.ok()) return pose.status();
   s.trajectory.push_back({update.timestamp(), *pose});
+  SlamFrameResult& given = s.given.emplace_back();
+  given.timestamp = update.timestamp();
+  given.pose = *pose;
+  given.segment = static_cast<int>(update.segment());
+  if (update.has_main_t_segment()) {
+    absl::StatusOr<SE3> joined = PoseFromProto(update.main_t_segment(), "update.main_T_segment");
+    if (!joined.ok()) return joined.status();
+    given.main_T_segment = *joined;
+    ++report.segments_joined;
+  }
+  report.segments += update.new_segment();
   record.note = absl::StrCat(SlamStateText(update.state()), update.keyframe() ? " keyframe" : "");
   report.keyframes += update.keyframe();
   report.dropped += static_cast<int>(update.dropped());
@@ -291,6 +306,8 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
   stream.client = client.get();
   ProgressLine line(!flags.GetSwitch("quiet"));
   if (absl::Status s = StreamFrames(stream, report, line); !s.ok()) return ReportError(kCommand, s);
+  // A segment's poses, once it joined the map, in the map's frame (docs/SLAM.md).
+  stream.trajectory = PosesInMainMap(stream.given);
   absl::StatusOr<std::optional<pb::MapInfo>> saved = WriteAndSave(flags, stream, report);
   if (!saved.ok()) return ReportError(kCommand, saved.status());
   ScoreSlamTrajectory(*dataset, stream.trajectory, *rpe_delta, &report);

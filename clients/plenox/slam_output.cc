@@ -152,6 +152,14 @@ std::string SlamSummaryText(const SlamReport& r, const std::string& tag) {
       "iterations; %s%s",
       r.processed, r.dropped, r.keyframes, r.ok, r.degraded, r.lost, r.relocalised, r.waiting,
       r.ms_per_frame_median, r.ms_per_frame_p95, r.fps(), r.mapping_iterations, memory, tag);
+  if (r.segments > 0) {
+    text += absl::StrFormat(
+        "\nslam: %d map segments started after the map was lost, %d joined it again%s",
+        r.segments, r.segments_joined,
+        r.segments > r.segments_joined
+            ? " (the others' keyframes are not in the map, their poses not in its frame)"
+            : "");
+  }
   if (r.ate_none_m && r.ate_se3_m) {
     text += absl::StrFormat("\nslam: ATE %.2f cm (no alignment), %.2f cm (SE(3))",
                             100.0 * *r.ate_none_m, 100.0 * *r.ate_se3_m);
@@ -181,6 +189,8 @@ void PrintSlamResult(const SlamReport& r, bool json, const JsonObject& more) {
       .Add("lost", r.lost)
       .Add("relocalised", r.relocalised)
       .Add("waiting", r.waiting)
+      .Add("segments", r.segments)
+      .Add("segments_joined", r.segments_joined)
       .Add("ms_per_frame_median", r.ms_per_frame_median)
       .Add("ms_per_frame_p95", r.ms_per_frame_p95)
       .Add("fps", r.fps())

@@ -45,6 +45,9 @@ struct SlamReport {
   int keyframes = 0;
   int ok = 0, degraded = 0, lost = 0, relocalised = 0;
   int waiting = 0;  // before a frame had enough depth to start the map (SlamState::kWaiting)
+  // Map segments started after the map was lost for good, and of them joined to the main map
+  // again (docs/SLAM.md, "Map segments").
+  int segments = 0, segments_joined = 0;
   double ms_per_frame_median = 0.0;
   double ms_per_frame_p95 = 0.0;
   double wall_s = 0.0;

@@ -14,7 +14,14 @@
 //     the drain rule (integrate only the keyframes accepted, then publish) as a StepMode;
 //   - the map's one version counter: each published map gets the number its publisher gives it
 //     (the daemon's store) or the mapper's own, and the view a tracker reads pairs that number
-//     with that map (View).
+//     with that map (View);
+//   - map segments (docs/SLAM.md, "Map segments"): segment 0 is the main map; a camera that
+//     lost it for good starts another (SlamFrameResult::new_segment), a map of its own with its
+//     own mapper, stepped after the main one; when the camera finds the main map again
+//     (SlamFrameResult::main_T_segment) the segment's keyframes move into the main map at the
+//     joined poses and the segment ends. Accept applies a camera's frame result to all this.
+//     Only the main map is published (the daemon's store, latest()); a segment never joined is
+//     left out of it (segments() says how many).
 //
 // Threads: AddKeyframe, View, MayCameraProceed and the accessors from any thread (an internal
 // lock guards the coordinator's state; the mapper has its own); StartMapper and Step from one
@@ -80,6 +87,12 @@ struct SlamStepResult {
   bool out_of_work = false; // nothing left for this mode until a keyframe comes
 };
 
+// The map's segments besides the main one (SlamCoordinator::segments).
+struct SlamSegmentCounts {
+  int started = 0;  // segments cameras started
+  int joined = 0;   // of them, moved into the main map
+};
+
 // Gives a newly published map its number (the daemon: the store's version); `new_keyframes`
 // were integrated since the last one it was given.
 using SlamPublisher = std::function<absl::StatusOr<int64_t>(
@@ -105,31 +118,43 @@ class SlamCoordinator {
   absl::Status StartMapper(Backend* backend);
   bool mapper_started() const;
 
-  // Queues a keyframe (any thread); before StartMapper it waits in the coordinator. `features`
-  // (SlamFrameResult::features) are kept for relocalisation; null: this keyframe has none.
+  // Queues a keyframe of `segment` (any thread); until the step-runner made that segment's
+  // mapper it waits in the coordinator. `features` (SlamFrameResult::features) are kept for
+  // relocalisation; null: this keyframe has none.
   absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k,
-                           std::shared_ptr<const FrameFeatures> features = nullptr);
+                           std::shared_ptr<const FrameFeatures> features = nullptr,
+                           int segment = 0);
+
+  // Applies a camera's tracked frame (any thread): starts the segment it asked for, joins its
+  // segment to the main map, queues its keyframe; `segment` is the camera's (0 at first),
+  // updated, and result->segment says where result->pose is. Returns whether mapping work
+  // was queued (a keyframe or a join).
+  absl::StatusOr<bool> Accept(const RgbdFrame& frame, const PinholeIntrinsics& k,
+                              SlamFrameResult* result, int* segment);
 
   // One bounded step of `mode` (StartMapper first). Step-runner.
   absl::StatusOr<SlamStepResult> Step(SlamStepMode mode);
 
-  // What a camera tracks against now: the newest numbered version, the keyframes as accepted
-  // and as refined with their features, and whether mapping is behind.
-  SlamMapView View() const;
+  // What a camera in `segment` tracks against now: the newest numbered version, the keyframes
+  // as accepted and as refined with their features, and whether mapping is behind; a segment's
+  // view carries the main map's too.
+  SlamMapView View(int segment = 0) const;
 
   // Whether a camera waiting after a keyframe (or for a first version) may track its next
-  // frame: at most gate.max_pending_keyframes keyframes wait for integration, the map has a
-  // version, and in lock-step mapping is idle.
-  bool MayCameraProceed() const;
+  // frame in `segment`: at most gate.max_pending_keyframes keyframes wait for integration
+  // there, the segment has a version when the camera needs one (`needs_version`: SlamTracker::
+  // CarriesWithoutMap is false), and in lock-step mapping is idle.
+  bool MayCameraProceed(int segment = 0, bool needs_version = true) const;
   // The same with a camera's own bound (the daemon: each stream gives its own; lock-step is
   // the map's).
-  bool MayCameraProceed(int max_pending_keyframes) const;
+  bool MayCameraProceed(int max_pending_keyframes, int segment, bool needs_version) const;
 
   // Mapping's counters: keyframes include those waiting for the mapper, map_version is the
   // map's number (as in View), idle says no keyframe waits and the budget is spent.
   SlamMapperProgress progress() const;
   SlamMapVersion latest() const;  // the newest version with its number (View's map)
   std::vector<StampedPose> keyframe_poses() const;  // as refined so far, in order
+  SlamSegmentCounts segments() const;
 
  private:
   struct EarlyKeyframe {
@@ -137,25 +162,47 @@ class SlamCoordinator {
     SE3 pose;
     PinholeIntrinsics intrinsics;
   };
-  bool IdleLocked() const;
+  // One map: the main one (segments_[0]) or a camera's segment.
+  struct Segment {
+    std::unique_ptr<SlamMapper> mapper;  // made by the step-runner (StartMapper, Step)
+    std::vector<EarlyKeyframe> early;    // added before the mapper exists
+    // Every accepted keyframe's features, in the order accepted (immutable once shared).
+    std::vector<std::shared_ptr<const FrameFeatures>> features;
+    // A segment's keyframes as accepted (not the main map's): what a join moves.
+    std::vector<EarlyKeyframe> kept;
+    SlamMapVersion published;     // the newest map with the number for it
+    bool has_work = false;        // the mapper's, after the last step (or a keyframe)
+    SlamMapperProgress progress;  // the mapper's after the last step, our numbering
+    bool joined = false;          // moved into the main map; its mapper goes at the next step
+    // Step-runner only.
+    int64_t handed_mapper_version = 0;  // the mapper's version last given a number
+    int integrated_at_publish = 0;
+  };
+
+  bool IdleLocked(const Segment& segment) const;
+  SlamMapView ViewLocked(int segment) const;
+  absl::Status AddKeyframeLocked(const RgbdFrame& frame, const SE3& pose,
+                                 const PinholeIntrinsics& k,
+                                 std::shared_ptr<const FrameFeatures> features, Segment* to,
+                                 bool keep);
+  // Moves `segment`'s keyframes into the main map at main_T_segment times their poses.
+  absl::Status JoinLocked(int segment, const SE3& main_T_segment);
+  // The segment Step works on in `mode` (the main map when none has work; `main` says whether
+  // it is), the segments' mappers made if needed.
+  absl::StatusOr<Segment*> SegmentToStep(SlamStepMode mode, bool* main);
+  // One step of `segment` (the main map: index 0) in `mode`.
+  absl::StatusOr<SlamStepResult> StepSegment(Segment* segment, bool main, SlamStepMode mode);
 
   const SlamMapperOptions mapper_options_;
   const SlamGateOptions gate_;
   const SlamPublisher publisher_;
   std::shared_ptr<const PlenoxelMap> base_;
+  Backend* backend_ = nullptr;  // StartMapper's; step-runner only
 
-  // Step-runner only.
-  int64_t handed_mapper_version_ = 0;  // the mapper's version last given a number
-  int integrated_at_publish_ = 0;
-
-  mutable std::mutex mutex_;  // guards what follows (before the mapper's own lock)
-  std::unique_ptr<SlamMapper> mapper_;  // set once by StartMapper
-  std::vector<EarlyKeyframe> early_;    // added before the mapper exists
-  // Every accepted keyframe's features, in the order accepted (immutable once shared).
-  std::vector<std::shared_ptr<const FrameFeatures>> keyframe_features_;
-  SlamMapVersion published_;            // the newest map with the map's number for it
-  bool has_work_ = false;               // the mapper's, after the last step (or a keyframe)
-  SlamMapperProgress progress_;         // the mapper's after the last step, our numbering
+  mutable std::mutex mutex_;  // guards what follows (before the mappers' own locks)
+  std::vector<std::unique_ptr<Segment>> segments_;  // [0]: the main map; never shrinks
+  bool started_ = false;                            // StartMapper ran
+  SlamSegmentCounts segment_counts_;
 };
 
 }  // namespace plx

@@ -8,6 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/percentile.h"
 #include "core/common/status_macros.h"
+#include "core/slam/map_segment_poses.h"
 
 namespace plx {
 namespace {
@@ -49,7 +50,6 @@ absl::StatusOr<SlamDatasetResult> RunSlamOnDataset(
     frame.ground_truth.reset();  // SLAM sees no ground truth
     PLX_ASSIGN_OR_RETURN(SlamFrameResult r, session->ProcessFrame(std::move(frame), k));
     ms.push_back(r.milliseconds);
-    out.trajectory.push_back({r.timestamp, r.pose});
     out.results.push_back(r);
     if (progress && !progress(r)) return absl::CancelledError("SLAM cancelled");
     int next = i + 1;
@@ -68,6 +68,7 @@ absl::StatusOr<SlamDatasetResult> RunSlamOnDataset(
     i = next;
   }
   out.stream_s = SecondsSince(wall_start);
+  out.trajectory = PosesInMainMap(out.results);
   PLX_RETURN_IF_ERROR(session->Finish());
   out.wall_s = SecondsSince(wall_start);
   out.map = session->latest_map();

@@ -28,7 +28,9 @@ struct SlamDatasetOptions {
 };
 
 struct SlamDatasetResult {
-  std::vector<StampedPose> trajectory;     // one pose per processed frame
+  // One pose per processed frame, in the main map's frame where known (PosesInMainMap: a
+  // segment's poses once it joined); results[i].pose is the pose as given online.
+  std::vector<StampedPose> trajectory;
   std::vector<SlamFrameResult> results;    // per processed frame
   std::vector<StampedPose> keyframes;      // final (refined) keyframe poses
   std::shared_ptr<const PlenoxelMap> map;  // the final version

@@ -183,26 +183,36 @@ absl::Status SlamSession::MappingError() const {
   return absl::OkStatus();
 }
 
-absl::Status SlamSession::AddKeyframe(const RgbdFrame& frame, const SE3& pose,
-                                      const PinholeIntrinsics& k,
-                                      std::shared_ptr<const FrameFeatures> features) {
-  PLX_RETURN_IF_ERROR(coordinator_.AddKeyframe(frame, pose, k, std::move(features)));
+absl::Status SlamSession::AfterQueued(bool keyframe) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     ++wakeups_;
   }
   changed_.notify_all();
+  // The camera's next frame in its segment: a version there unless the odometry carries it.
+  const bool needs_version = !tracker_.CarriesWithoutMap();
   if (split_.gate.lock_step) {
     PLX_RETURN_IF_ERROR(RunMappingToEnd(false));
-  } else {
-    std::unique_lock<std::mutex> lock(mutex_);
-    changed_.wait(lock, [&] {
-      return coordinator_.MayCameraProceed() || mapping_done_ || !mapping_error_.ok();
-    });
-    if (!mapping_error_.ok()) return mapping_error_;
+  } else if (keyframe) {
+    // After a join without a keyframe the main map may have many keyframes to integrate: the
+    // camera goes on (its keyframes are deferred meanwhile), it does not wait for them.
+    return WaitForMapping(needs_version);
   }
-  if (coordinator_.latest().map == nullptr) {
-    return absl::InternalError("mapping stopped before the first map version");
+  if (keyframe && !coordinator_.MayCameraProceed(segment_, needs_version)) {
+    return absl::InternalError("mapping stopped before the camera could go on");
+  }
+  return absl::OkStatus();
+}
+
+absl::Status SlamSession::WaitForMapping(bool needs_version) {
+  std::unique_lock<std::mutex> lock(mutex_);
+  changed_.wait(lock, [&] {
+    return coordinator_.MayCameraProceed(segment_, needs_version) || mapping_done_ ||
+           !mapping_error_.ok();
+  });
+  if (!mapping_error_.ok()) return mapping_error_;
+  if (!coordinator_.MayCameraProceed(segment_, needs_version)) {
+    return absl::InternalError("mapping stopped before the camera could go on");
   }
   return absl::OkStatus();
 }
@@ -216,9 +226,15 @@ absl::StatusOr<SlamFrameResult> SlamSession::ProcessFrame(RgbdFrame frame,
   PLX_RETURN_IF_ERROR(MappingError());
   frame.ground_truth.reset();
   return CatchAllocationFailure("SLAM frame", [&]() -> absl::StatusOr<SlamFrameResult> {
+    if (!split_.gate.lock_step && tracker_.NeedsVersion(coordinator_.View(segment_))) {
+      // The odometry carried the camera as far as it may without a map (or the camera joins
+      // a map whose first keyframe is not integrated yet): this frame waits for the version.
+      PLX_RETURN_IF_ERROR(WaitForMapping(/*needs_version=*/true));
+    }
     PLX_ASSIGN_OR_RETURN(SlamFrameResult out,
-                         tracker_.Track(frame, k, prior, coordinator_.View()));
-    if (out.keyframe) PLX_RETURN_IF_ERROR(AddKeyframe(frame, out.pose, k, out.features));
+                         tracker_.Track(frame, k, prior, coordinator_.View(segment_)));
+    PLX_ASSIGN_OR_RETURN(const bool queued, coordinator_.Accept(frame, k, &out, &segment_));
+    if (queued) PLX_RETURN_IF_ERROR(AfterQueued(out.keyframe));
     {
       std::lock_guard<std::mutex> lock(mutex_);
       counts_ = tracker_.counts();
@@ -253,6 +269,7 @@ std::vector<StampedPose> SlamSession::keyframe_poses() const {
 SlamProgress SlamSession::progress() const {
   SlamProgress p;
   p.mapping = coordinator_.progress();
+  p.segments = coordinator_.segments();
   std::lock_guard<std::mutex> lock(mutex_);
   p.tracking = counts_;
   return p;

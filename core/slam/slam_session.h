@@ -88,6 +88,10 @@ struct SlamOptions {
   // keyframe features. Both on by default; off only to measure what each brings.
   bool odometry = true;
   bool feature_relocalisation = true;
+  // Map segments (SlamTrackerOptions): LOST frames with depth before a camera starts a segment
+  // of its own (0: never), and frames between its attempts to find the main map again.
+  int new_segment_after_lost_frames = 10;
+  int segment_join_interval = 5;
 
   // Where keyframe 0 sits (world_T_camera); the frame's prior wins, else the identity.
   std::optional<SE3> initial_pose;
@@ -110,6 +114,7 @@ absl::Status ValidateSlamOptions(const SlamOptions& options);
 struct SlamProgress {
   SlamTrackerCounts tracking;  // frames, and how each was tracked
   SlamMapperProgress mapping;  // keyframes, their integration, the map's version and size
+  SlamSegmentCounts segments;  // map segments started and joined (SlamCoordinator::segments)
 };
 
 class SlamSession {
@@ -152,16 +157,20 @@ class SlamSession {
   void MappingLoop(const BackendFactory& make_backend, std::promise<absl::Status>* started);
   // Steps until the coordinator is out of work (or the session stops) (lock-step mode, Finish).
   absl::Status RunMappingToEnd(bool finish);
-  // Hands a keyframe to the coordinator, maps it (lock-step) and waits until the camera may go
-  // on (SlamCoordinator::MayCameraProceed).
-  absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k,
-                           std::shared_ptr<const FrameFeatures> features);
+  // After the coordinator queued mapping work for a frame (a keyframe, a segment's join): wakes
+  // mapping, maps it (lock-step) and, after a keyframe, waits until the camera may go on
+  // (SlamCoordinator::MayCameraProceed).
+  absl::Status AfterQueued(bool keyframe);
+  // Waits until the camera may track its next frame in its segment (SlamCoordinator::
+  // MayCameraProceed; concurrent mode), or mapping failed or stopped (an error).
+  absl::Status WaitForMapping(bool needs_version);
   absl::Status MappingError() const;
   void NotifyChanged();
 
   const SlamOptions options_;
   const SlamSplitOptions split_;
   SlamTracker tracker_;  // the caller's thread
+  int segment_ = 0;      // the camera's map segment (SlamCoordinator::Accept); caller's thread
   bool finished_ = false;
 
   // Created on the mapping thread (concurrent mode; its nice value applies to the backend's

@@ -75,6 +75,18 @@ absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& o) {
         absl::StrCat("odometry_start_iteration_share must be in (0, 1], got ",
                      o.odometry_start_iteration_share));
   }
+  if (o.new_segment_after_lost_frames < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "new_segment_after_lost_frames must be >= 0, got ", o.new_segment_after_lost_frames));
+  }
+  if (o.max_frames_without_map < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "max_frames_without_map must be >= 0, got ", o.max_frames_without_map));
+  }
+  if (o.segment_join_interval < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("segment_join_interval must be >= 1, got ", o.segment_join_interval));
+  }
   if (o.relocalisation_attempts_per_frame < 1 || o.relocalisation_attempts_per_frame > 16) {
     return absl::InvalidArgumentError(
         absl::StrCat("relocalisation_attempts_per_frame must be in [1, 16], got ",
@@ -169,7 +181,9 @@ absl::StatusOr<std::shared_ptr<const FrameFeatures>> SlamTracker::FeaturesOf(
 }
 
 absl::StatusOr<std::optional<TrackingResult>> SlamTracker::TryRelocalisationFrom(
-    const SE3& start, int iterations, const RgbdFrame& frame, const PinholeIntrinsics& k) {
+    const SE3& start, int iterations, const RgbdFrame& frame, const PinholeIntrinsics& k,
+    const PlenoxelMap* map) {
+  if (map == nullptr) map = tracked_map_.get();
   // An attempt counts when it tracks OK without wandering far from where it started. The
   // adaptive noise scale makes a residual test weak evidence on its own (it stretches to
   // whatever spread it finds), so a start that slid half a metre along a wall is a false
@@ -177,7 +191,7 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::TryRelocalisationFrom
   TrackerOptions attempt_options = options_.tracker;
   attempt_options.iterations = iterations;
   attempt_options.constant_velocity = false;
-  Tracker attempt(tracked_map_.get(), backend_, attempt_options);
+  Tracker attempt(map, backend_, attempt_options);
   attempt.Reset(start, frame.timestamp);
   PLX_ASSIGN_OR_RETURN(TrackingResult r, attempt.Track(frame, k, start));
   if (r.state != TrackingState::kOk) return std::optional<TrackingResult>();
@@ -189,7 +203,7 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::TryRelocalisationFrom
   TrackerOptions verify_options = attempt_options;
   verify_options.adaptive_scale = false;
   verify_options.iterations = 2;
-  Tracker verify(tracked_map_.get(), backend_, verify_options);
+  Tracker verify(map, backend_, verify_options);
   verify.Reset(r.pose, frame.timestamp);
   PLX_ASSIGN_OR_RETURN(TrackingResult check, verify.Track(frame, k, r.pose));
   if (check.state != TrackingState::kOk) return std::optional<TrackingResult>();
@@ -213,10 +227,11 @@ absl::StatusOr<std::optional<FeatureRelocalisation>> SlamTracker::FindByFeatures
 
 absl::StatusOr<std::optional<TrackingResult>> SlamTracker::VerifyFeaturePose(
     const FeatureRelocalisation& found, const RgbdFrame& frame, const PinholeIntrinsics& k,
-    std::string* reason) {
+    std::string* reason, const PlenoxelMap* map) {
   // PnP lands within a few centimetres: the tracker's own iteration count refines it.
-  PLX_ASSIGN_OR_RETURN(std::optional<TrackingResult> verified,
-                       TryRelocalisationFrom(found.pose, options_.tracker.iterations, frame, k));
+  PLX_ASSIGN_OR_RETURN(
+      std::optional<TrackingResult> verified,
+      TryRelocalisationFrom(found.pose, options_.tracker.iterations, frame, k, map));
   if (verified) {
     *reason = absl::StrFormat("relocalised by features (keyframe %d: %d of %d matches)",
                               found.keyframe, found.inliers, found.matches);
@@ -274,6 +289,68 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::Relocalise(
   return std::optional<TrackingResult>();
 }
 
+absl::StatusOr<std::optional<TrackingResult>> SlamTracker::TryJoinMain(
+    const RgbdFrame& frame, const PinholeIntrinsics& k, const SlamMapView& view,
+    std::string* reason) {
+  if (view.main == nullptr || view.main->map == nullptr) return std::optional<TrackingResult>();
+  PLX_ASSIGN_OR_RETURN(const std::optional<FeatureRelocalisation> found,
+                       FindByFeatures(frame, k, *view.main));
+  if (!found) return std::optional<TrackingResult>();
+  return VerifyFeaturePose(*found, frame, k, reason, view.main->map.get());
+}
+
+absl::StatusOr<TrackingResult> SlamTracker::CarryWithoutMap(const OdometryPyramid& pyramid,
+                                                            const RgbdFrame& frame,
+                                                            const std::optional<SE3>& prior,
+                                                            SlamFrameResult* out) {
+  PLX_ASSIGN_OR_RETURN(const std::optional<OdometryPose> odometry,
+                       RunOdometry(pyramid, frame.timestamp, prior, &out->odometry));
+  ++frames_without_map_;
+  TrackingResult r;
+  if (odometry && odometry->ok) {
+    // Not a keyframe: the map's keyframe rules need the map to say what it covers.
+    r.pose = odometry->pose;
+    r.state = TrackingState::kDegraded;
+    r.reason = "the map's first version is not out yet: the odometry carries the pose";
+    out->state = SlamState::kDegraded;
+    out->source = PoseSource::kOdometry;
+    tracker_.Reset(r.pose, frame.timestamp);
+  } else {
+    r.pose = prior.value_or(tracker_.Predict(frame.timestamp));
+    r.state = TrackingState::kLost;
+    r.reason = absl::StrCat("the map's first version is not out yet and the odometry failed: ",
+                            odometry ? odometry->reason : "no reference frame");
+    out->state = SlamState::kLost;
+    out->source = PoseSource::kPrediction;
+  }
+  out->reason = r.reason;
+  return r;
+}
+
+void SlamTracker::StartSegment(const SE3& pose, double timestamp, SlamFrameResult* out) {
+  // The prior, else where the camera was last seen, becomes the new segment's origin: nothing
+  // ties the two frames (the odometry lost the motion; the motion model's extrapolation over
+  // the lost frames is worth less), but a camera that did not move far keeps roughly the same
+  // axes for the client until the segment joins the main map.
+  out->new_segment = true;
+  out->state = SlamState::kOk;
+  out->source = PoseSource::kPrediction;
+  out->reason = absl::StrFormat(
+      "new map segment: relocalisation failed on %d frames that had depth to map",
+      lost_with_depth_);
+  out->keyframe = true;
+  out->keyframes = 1;
+  tracker_.set_map(nullptr);
+  tracked_map_.reset();
+  tracker_.Reset(pose, timestamp);
+  lost_ = false;
+  lost_with_depth_ = 0;
+  relocalisation_cursor_ = 0;
+  frames_in_segment_ = 0;
+  frames_without_map_ = 0;
+  ++counts_.segments_started;
+}
+
 SlamFrameResult SlamTracker::Bootstrap(const RgbdFrame& frame, const std::optional<SE3>& prior,
                                        OdometryPyramid pyramid, SlamFrameResult out) {
   ++counts_.frames;
@@ -316,11 +393,12 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
                                                    const SlamMapView& view) {
   const auto start = Clock::now();
   SlamFrameResult out;
+  out.segment = view.segment;
   out.frame = counts_.frames;
   out.timestamp = frame.timestamp;
   out.keyframes = static_cast<int>(view.accepted_keyframes.size());
   out.map_version = view.version;
-  if (!BootstrapCandidate(view) && view.map == nullptr) {
+  if (!BootstrapCandidate(view) && view.map == nullptr && !CarriesWithoutMap()) {
     // Checked before anything changes, so the caller can hand the same frame in again later.
     return absl::FailedPreconditionError(
         "the map has no published version yet: its first keyframe is still being integrated");
@@ -353,7 +431,13 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   tracker_.set_map(tracked_map_.get());
   std::optional<TrackingResult> result;
   bool may_be_keyframe = false;
-  if (lost_) {
+  if (view.map == nullptr) {
+    // Keyframe 0 (of the map or of a segment) is still being integrated.
+    stage = Clock::now();
+    PLX_ASSIGN_OR_RETURN(result, CarryWithoutMap(pyramid, frame, prior, &out));
+    out.timings.odometry_ms += MillisecondsSince(stage);
+  } else if (lost_) {
+    frames_without_map_ = 0;
     std::string how;
     stage = Clock::now();
     PLX_ASSIGN_OR_RETURN(result, Relocalise(frame, k, prior, view, &how));
@@ -374,8 +458,20 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       result->reason = "lost: no relocalisation candidate tracked OK";
       out.state = SlamState::kLost;
       out.reason = result->reason;
+      // Relocalisation had depth to work with and found nothing, frame after frame: the camera
+      // is somewhere this map has not seen. A covered lens (no depth) does not count.
+      const int segment_after = options_.new_segment_after_lost_frames;
+      if (segment_after > 0 &&
+          CountBootstrapDepth(frame.depth, options_.bootstrap_max_depth).enough() &&
+          ++lost_with_depth_ >= segment_after) {
+        result->pose = prior.value_or(last_good_pose_.value_or(result->pose));
+        StartSegment(result->pose, frame.timestamp, &out);
+        result->state = TrackingState::kOk;
+        result->reason.clear();
+      }
     }
   } else if (!options_.odometry) {
+    frames_without_map_ = 0;
     stage = Clock::now();
     PLX_ASSIGN_OR_RETURN(TrackingResult tracked, tracker_.Track(frame, k, prior));
     out.timings.map_ms += MillisecondsSince(stage);
@@ -387,6 +483,7 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   } else {
     // The odometry's pose starts the map tracker (the prior's place when there is none), then
     // the two are fused (core/slam/pose_fusion.h).
+    frames_without_map_ = 0;
     stage = Clock::now();
     PLX_ASSIGN_OR_RETURN(const std::optional<OdometryPose> odometry,
                          RunOdometry(pyramid, frame.timestamp, prior, &out.odometry));
@@ -427,6 +524,7 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       out.timings.relocalisation_ms += MillisecondsSince(stage);
       if (moved) {
         tracker_.Reset(moved->pose, frame.timestamp);
+        lost_with_depth_ = 0;
         out.state = SlamState::kRelocalised;
         out.source = PoseSource::kMap;
         out.reason = how;
@@ -440,6 +538,29 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       }
     }
   }
+  // In a segment, tracked there: now and then, look for the main map (bounded: the features
+  // and a match; a dense check only where they find a place).
+  if (view.segment != 0 && view.map != nullptr && out.state != SlamState::kLost &&
+      !out.new_segment && ++frames_in_segment_ % options_.segment_join_interval == 0) {
+    std::string how;
+    stage = Clock::now();
+    PLX_ASSIGN_OR_RETURN(std::optional<TrackingResult> joined,
+                         TryJoinMain(frame, k, view, &how));
+    out.timings.relocalisation_ms += MillisecondsSince(stage);
+    if (joined) {
+      out.main_T_segment = joined->pose * result->pose.Inverse();
+      tracked_map_ = view.main->map;
+      tracker_.set_map(tracked_map_.get());
+      tracker_.Reset(joined->pose, frame.timestamp);
+      out.state = SlamState::kRelocalised;
+      out.source = PoseSource::kMap;
+      out.reason = absl::StrCat("joined the main map: ", how);
+      may_be_keyframe = false;
+      frames_in_segment_ = 0;
+      ++counts_.segments_joined;
+      result = std::move(joined);
+    }
+  }
   out.tracking = *result;
   out.pose = result->pose;
   if (out.state == SlamState::kLost) {
@@ -448,10 +569,16 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
     Remember(std::move(pyramid), std::nullopt, frame.timestamp);
   } else {
     last_good_pose_ = out.pose;
-    // A relocalised pose is no motion from the previous frame's: the jump must not become
-    // the next frame's constant-velocity guess.
+    if (!out.new_segment) lost_with_depth_ = 0;
+    // A relocalised pose is no motion from the previous frame's, nor is a new segment's
+    // origin: the jump must not become the next frame's constant-velocity guess.
     Remember(std::move(pyramid), out.pose, frame.timestamp,
-             /*continues=*/out.state != SlamState::kRelocalised);
+             /*continues=*/out.state != SlamState::kRelocalised && !out.new_segment);
+  }
+  if (out.new_segment) {
+    stage = Clock::now();
+    PLX_ASSIGN_OR_RETURN(out.features, FeaturesOf(frame, k));
+    out.timings.features_ms += MillisecondsSince(stage);
   }
   if (may_be_keyframe) {
     // While keyframes wait for mapping, the part of the view the map does not render yet is

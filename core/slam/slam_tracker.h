@@ -26,6 +26,16 @@
 //     next LOST frame taking up where this one stopped. An attempt that tracks OK, stays near
 //     its start and passes a check at the sensor's noise is RELOCALISED. Until then frames are
 //     LOST with the prediction, never an unconverged estimate; the work per frame is bounded.
+//   - Before the map's first version is out (keyframe 0 still integrating), the odometry
+//     carries the pose from frame to frame (DEGRADED, never a keyframe): no frame waits for it.
+//   - Map segments (docs/SLAM.md, "Map segments"): a camera whose relocalisation failed on
+//     new_segment_after_lost_frames frames that had depth to map (it left the map and the
+//     odometry lost it too: a covered lens, a jump into space the map never saw) starts a new
+//     segment: a map of its own, in a frame of its own, whose keyframe 0 is the frame. In a
+//     segment, every segment_join_interval frames the frame's features are matched against
+//     the main map's keyframes; a place found there and verified densely in the main map joins
+//     the segment to it (SlamFrameResult::main_T_segment; the coordinator moves the segment's
+//     keyframes into the main map) and the camera goes on in the main map.
 //
 // Threads: one caller at a time.
 #pragma once
@@ -116,6 +126,18 @@ struct SlamTrackerOptions {
   // motion model's can be centimetres off, so half the coarse-to-fine schedule converges
   // (docs/BENCHMARKS.md, issue 21's speed section). At least 2 iterations (one per level).
   double odometry_start_iteration_share = 0.5;
+  // LOST frames with enough depth to map (BootstrapDepth) after which a camera starts a new map
+  // segment (0: never; the camera stays LOST until relocalised). At 30 frames/s, 10 is a third
+  // of a second of relocalisation attempts against the map first.
+  int new_segment_after_lost_frames = 10;
+  // In a segment, frames between attempts to find the main map by features (each costs the
+  // frame's features and a match against the main map's keyframes; a dense check when found).
+  int segment_join_interval = 5;
+  // Frames the odometry may carry while the map (or the camera's segment) has no version yet;
+  // the next one waits for it (NeedsVersion). 15 (half a second at 30 frames/s) covers keyframe
+  // 0's integration at 640x480 on 2 cores when frames come live, and keeps the odometry's drift
+  // small when they come faster (a replay): the map tracker then takes over.
+  int max_frames_without_map = 15;
   OdometryPyramidOptions odometry_pyramid;
   OdometryOptions odometry_options;
   PoseFusionOptions fusion;
@@ -132,6 +154,10 @@ struct SlamMapView {
   // The keyframes' features, in the same order as keyframe_poses (null: none were extracted).
   std::vector<std::shared_ptr<const FrameFeatures>> keyframe_features;
   int pending_keyframes = 0;  // accepted, not integrated yet
+  // The map segment the view is of (0: the main map; SlamCoordinator::View). A segment's view
+  // carries the main map's (map, keyframe poses and features) to find it again.
+  int segment = 0;
+  std::shared_ptr<const SlamMapView> main;
   // Keyframes wait for integration: the part of the view the map does not render yet is
   // mostly what they will fill in, so it does not count towards a keyframe.
   bool mapping_behind() const { return pending_keyframes > 0; }
@@ -156,6 +182,14 @@ struct SlamFrameResult {
   // ... with these (SlamCoordinator::AddKeyframe); null when feature relocalisation is off.
   std::shared_ptr<const FrameFeatures> features;
   int keyframes = 0;            // keyframes accepted so far, this one included
+  // The map segment `pose` is in (0: the main map; set by SlamCoordinator::Accept).
+  int segment = 0;
+  // The frame starts a new map segment (it is that segment's keyframe 0; its pose is in the
+  // new segment's frame, where the camera was predicted to be).
+  bool new_segment = false;
+  // The frame joined the camera's segment to the main map: main-map_T_segment, and `pose` is
+  // in the main map. The segment's earlier poses map into the main map by it.
+  std::optional<SE3> main_T_segment;
   int64_t map_version = 0;      // the published version the frame was tracked against
   TrackingResult tracking;      // the map tracker's rays, iterations, residual and state
   OdometryResult odometry;      // the odometry's (points 0: not run)
@@ -168,6 +202,7 @@ struct SlamFrameResult {
 struct SlamTrackerCounts {
   int frames = 0;
   int ok = 0, degraded = 0, lost = 0, relocalised = 0, waiting = 0;
+  int segments_started = 0, segments_joined = 0;
 };
 
 class SlamTracker {
@@ -184,9 +219,10 @@ class SlamTracker {
   // frame that cannot be tracked is a LOST result. Until the camera has tracked a frame, a
   // view with neither a version nor an accepted keyframe makes the frame a bootstrap
   // candidate: keyframe 0 when it has enough depth (BootstrapDepth), else WAITING (one camera
-  // must bootstrap a map: the caller serialises that). Any other frame while the map has no
-  // version yet is FailedPrecondition, with nothing changed (hand the frame in again once a
-  // version is out; NeedsVersion says so beforehand). The first frame of a camera that did not
+  // must bootstrap a map: the caller serialises that). While the map has no version yet, the
+  // odometry carries a camera that started it (CarryWithoutMap); any other frame then is
+  // FailedPrecondition, with nothing changed (hand the frame in again once a version is out;
+  // NeedsVersion says so beforehand). The first frame of a camera that did not
   // bootstrap the map joins it (relocalisation from the initial pose or prior).
   // `result.keyframes` counts view.accepted_keyframes plus this one.
   absl::StatusOr<SlamFrameResult> Track(const RgbdFrame& frame, const PinholeIntrinsics& k,
@@ -195,7 +231,15 @@ class SlamTracker {
 
   // Whether Track would refuse a frame in `view` until the map has a published version.
   bool NeedsVersion(const SlamMapView& view) const {
-    return view.map == nullptr && !BootstrapCandidate(view);
+    return view.map == nullptr && !BootstrapCandidate(view) && !CarriesWithoutMap();
+  }
+
+  // Whether the odometry can carry the pose while the map has no version: the camera started
+  // the map (or a segment), the previous frame has a pose, and it has carried fewer than
+  // max_frames_without_map frames since the map last had a version.
+  bool CarriesWithoutMap() const {
+    return started_ && !lost_ && options_.odometry && previous_ && previous_->pose &&
+           frames_without_map_ < options_.max_frames_without_map;
   }
 
   const SlamTrackerCounts& counts() const { return counts_; }
@@ -205,6 +249,19 @@ class SlamTracker {
   bool BootstrapCandidate(const SlamMapView& view) const {
     return !started_ && view.map == nullptr && view.accepted_keyframes.empty();
   }
+  // A frame before the map's first version: the odometry's pose (DEGRADED), else LOST.
+  absl::StatusOr<TrackingResult> CarryWithoutMap(const OdometryPyramid& pyramid,
+                                                 const RgbdFrame& frame,
+                                                 const std::optional<SE3>& prior,
+                                                 SlamFrameResult* out);
+  // A LOST frame that starts a new segment (new_segment_after_lost_frames): keyframe 0 there.
+  void StartSegment(const SE3& pose, double timestamp, SlamFrameResult* out);
+  // In a segment, every segment_join_interval frames: the frame's place in the main map by
+  // features, verified densely there (none: not found or not verified). `reason` says how.
+  absl::StatusOr<std::optional<TrackingResult>> TryJoinMain(const RgbdFrame& frame,
+                                                            const PinholeIntrinsics& k,
+                                                            const SlamMapView& view,
+                                                            std::string* reason);
   // A bootstrap candidate: keyframe 0, or WAITING without enough depth.
   SlamFrameResult Bootstrap(const RgbdFrame& frame, const std::optional<SE3>& prior,
                             OdometryPyramid pyramid, SlamFrameResult out);
@@ -220,16 +277,16 @@ class SlamTracker {
   absl::StatusOr<std::optional<FeatureRelocalisation>> FindByFeatures(const RgbdFrame& frame,
                                                                       const PinholeIntrinsics& k,
                                                                       const SlamMapView& view);
-  // That pose, verified and refined densely (TryRelocalisationFrom); `reason` says how.
+  // That pose, verified and refined densely (TryRelocalisationFrom in `map`, the tracked map
+  // when null); `reason` says how.
   absl::StatusOr<std::optional<TrackingResult>> VerifyFeaturePose(
       const FeatureRelocalisation& found, const RgbdFrame& frame, const PinholeIntrinsics& k,
-      std::string* reason);
-  // A dense attempt of `iterations` from `start`: tracks OK, ends within
-  // relocalisation_radius_m of it and explains the frame at the sensor's noise.
-  absl::StatusOr<std::optional<TrackingResult>> TryRelocalisationFrom(const SE3& start,
-                                                                       int iterations,
-                                                                       const RgbdFrame& frame,
-                                                                       const PinholeIntrinsics& k);
+      std::string* reason, const PlenoxelMap* map = nullptr);
+  // A dense attempt of `iterations` from `start` in `map` (the tracked map when null): tracks
+  // OK, ends within relocalisation_radius_m of it and explains the frame at the sensor's noise.
+  absl::StatusOr<std::optional<TrackingResult>> TryRelocalisationFrom(
+      const SE3& start, int iterations, const RgbdFrame& frame, const PinholeIntrinsics& k,
+      const PlenoxelMap* map = nullptr);
   // This frame's features, extracted once (null when feature relocalisation is off).
   absl::StatusOr<std::shared_ptr<const FrameFeatures>> FeaturesOf(const RgbdFrame& frame,
                                                                    const PinholeIntrinsics& k);
@@ -268,6 +325,9 @@ class SlamTracker {
   bool lost_ = false;
   std::optional<SE3> last_good_pose_;
   int relocalisation_cursor_ = 0;  // the next attempt near the last good pose
+  int lost_with_depth_ = 0;  // LOST frames in a row that had depth to start a segment
+  int frames_in_segment_ = 0;  // frames tracked since the camera started its segment
+  int frames_without_map_ = 0;  // frames the odometry carried since the map last had a version
   // The current frame's features once extracted (FeaturesOf), reset per frame.
   std::shared_ptr<const FrameFeatures> frame_features_;
   SlamTrackerCounts counts_;

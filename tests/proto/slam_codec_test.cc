@@ -314,6 +314,34 @@ TEST(SlamCodecTest, UpdateCarriesTheFramesResult) {
   EXPECT_EQ(u.valid_rays(), 1500u);
   EXPECT_EQ(u.mapping().keyframes(), 7u);
   EXPECT_FALSE(u.done());
+  EXPECT_EQ(u.segment(), 0u);
+  EXPECT_FALSE(u.new_segment());
+  EXPECT_FALSE(u.has_main_t_segment()) << "set only on the frame that joins a segment";
+}
+
+TEST(SlamCodecTest, UpdateSaysWhichSegmentThePoseIsInAndHowASegmentJoined) {
+  SlamFrameResult started;
+  started.segment = 2;
+  started.new_segment = true;
+  started.keyframe = true;
+  pb::SlamUpdate u =
+      SlamUpdateToProto(started, 5, 1.0, 0, SlamMappingToProto(Progress(), "slam-3", 1, false));
+  EXPECT_EQ(u.segment(), 2u);
+  EXPECT_TRUE(u.new_segment());
+  EXPECT_FALSE(u.has_main_t_segment());
+
+  SlamFrameResult joined;
+  joined.state = SlamState::kRelocalised;
+  joined.main_T_segment = SE3(Eigen::Quaterniond(Eigen::AngleAxisd(1.2, Eigen::Vector3d::UnitZ())),
+                              Eigen::Vector3d(0.3, 0.0, -4.0));
+  u = SlamUpdateToProto(joined, 9, 1.0, 0, SlamMappingToProto(Progress(), "slam-3", 1, false));
+  EXPECT_EQ(u.segment(), 0u);
+  EXPECT_FALSE(u.new_segment());
+  ASSERT_TRUE(u.has_main_t_segment());
+  const absl::StatusOr<SE3> t = PoseFromProto(u.main_t_segment(), "main_T_segment");
+  ASSERT_TRUE(t.ok()) << t.status();
+  EXPECT_TRUE(t->translation().isApprox(joined.main_T_segment->translation()));
+  EXPECT_LT(t->rotation().angularDistance(joined.main_T_segment->rotation()), 1e-9);
 }
 
 TEST(SlamCodecTest, DoneCarriesOnlyTheMapping) {

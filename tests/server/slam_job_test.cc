@@ -180,8 +180,11 @@ class SlamJobTest : public ::testing::Test {
     return *job;
   }
   absl::Status AddKeyframe(SlamJob& job, int i) {
-    return job.AddKeyframe(room_->frames()[i], *room_->ground_truth(i),
-                           room_->calibration().pinhole);
+    SlamFrameResult keyframe;
+    keyframe.keyframe = true;
+    keyframe.pose = *room_->ground_truth(i);
+    int segment = 0;
+    return job.Accept(room_->frames()[i], room_->calibration().pinhole, &keyframe, &segment);
   }
   uint64_t StoreVersion() {
     absl::StatusOr<MapVersion> latest = maps_.Latest(kMap);

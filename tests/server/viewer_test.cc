@@ -3,9 +3,11 @@
 // 4xx instead of work or a crash. Also the pieces on their own: the point cloud thinning and the
 // mesh endpoint's triangle cap and cache (the trajectory record's bounds: trajectory_record_test).
 #include <cmath>
+#include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -251,21 +253,29 @@ TEST(ViewerTest, TrajectoryFollowsARunningSlamStream) {
   const int port = (*started)->daemon->metrics_port();
   OpenSlamStream stream(*(*started)->stub, "live", ViewerSlamOptions());
   ASSERT_TRUE(stream.Advance(6));
-  HttpAnswer t = HttpGetAnswer(port, "/viewer/api/trajectory?map=live");
+  // The live map has content once keyframe 0 is integrated (the stream's frames do not wait
+  // for it: the odometry carries the first ones).
+  int points = 0;
+  HttpAnswer t;
+  for (int attempt = 0; attempt < 300; ++attempt) {
+    points = PlyVertices(HttpGetAnswer(port, "/viewer/api/points?map=live").body);
+    t = HttpGetAnswer(port, "/viewer/api/trajectory?map=live");
+    if (points > 100 && t.body.find("\"keyframes\":[[") != std::string::npos) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  EXPECT_GT(points, 100);
   ASSERT_EQ(t.status, 200) << t.body;
   EXPECT_NE(t.body.find("\"slam_running\":true"), std::string::npos) << t.body;
   EXPECT_NE(t.body.find("\"active\":true"), std::string::npos) << t.body;
   EXPECT_EQ(JsonNumber(t.body, "frames"), 6) << t.body;
   EXPECT_NE(t.body.find("\"keyframes\":[["), std::string::npos) << t.body;
-  // The camera's pose is frame 5's, near the truth (lock-step tracking is mm-accurate).
+  // The camera's pose is frame 5's, near the truth.
   const size_t pose_at = t.body.find("\"pose\":[");
   ASSERT_NE(pose_at, std::string::npos);
   const Eigen::Vector3d truth = GroundTruth(5).translation();
   double x = 0, y = 0, z = 0;
   ASSERT_EQ(std::sscanf(t.body.c_str() + pose_at + 8, "%lf,%lf,%lf", &x, &y, &z), 3);
   EXPECT_LT((Eigen::Vector3d(x, y, z) - truth).norm(), 0.05) << t.body.substr(pose_at, 120);
-  // The live map has content.
-  EXPECT_GT(PlyVertices(HttpGetAnswer(port, "/viewer/api/points?map=live").body), 100);
 
   ASSERT_TRUE(stream.Advance(4));
   t = HttpGetAnswer(port, "/viewer/api/trajectory?map=live");

@@ -1,0 +1,25 @@
+#include "core/slam/map_segment_poses.h"
+
+namespace plx {
+
+std::map<int, SE3> SegmentJoins(const std::vector<SlamFrameResult>& results) {
+  std::map<int, SE3> joins;
+  for (size_t i = 1; i < results.size(); ++i) {
+    const int left = results[i - 1].segment;
+    if (results[i].main_T_segment && left != 0) joins[left] = *results[i].main_T_segment;
+  }
+  return joins;
+}
+
+std::vector<StampedPose> PosesInMainMap(const std::vector<SlamFrameResult>& results) {
+  const std::map<int, SE3> joins = SegmentJoins(results);
+  std::vector<StampedPose> poses;
+  poses.reserve(results.size());
+  for (const SlamFrameResult& r : results) {
+    const auto join = joins.find(r.segment);
+    poses.push_back({r.timestamp, join == joins.end() ? r.pose : join->second * r.pose});
+  }
+  return poses;
+}
+
+}  // namespace plx
