@@ -227,11 +227,11 @@ absl::StatusOr<std::optional<FeatureRelocalisation>> SlamTracker::FindByFeatures
 
 absl::StatusOr<std::optional<TrackingResult>> SlamTracker::VerifyFeaturePose(
     const FeatureRelocalisation& found, const RgbdFrame& frame, const PinholeIntrinsics& k,
-    std::string* reason, const PlenoxelMap* map) {
+    std::string* reason, const PlenoxelMap* map, int iterations) {
   // PnP lands within a few centimetres: the tracker's own iteration count refines it.
-  PLX_ASSIGN_OR_RETURN(
-      std::optional<TrackingResult> verified,
-      TryRelocalisationFrom(found.pose, options_.tracker.iterations, frame, k, map));
+  if (iterations <= 0) iterations = options_.tracker.iterations;
+  PLX_ASSIGN_OR_RETURN(std::optional<TrackingResult> verified,
+                       TryRelocalisationFrom(found.pose, iterations, frame, k, map));
   if (verified) {
     *reason = absl::StrFormat("relocalised by features (keyframe %d: %d of %d matches)",
                               found.keyframe, found.inliers, found.matches);
@@ -296,7 +296,11 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::TryJoinMain(
   PLX_ASSIGN_OR_RETURN(const std::optional<FeatureRelocalisation> found,
                        FindByFeatures(frame, k, *view.main));
   if (!found) return std::optional<TrackingResult>();
-  return VerifyFeaturePose(*found, frame, k, reason, view.main->map.get());
+  // On a tracked frame's path: the odometry start's share of the schedule (the check at the
+  // sensor's noise still decides), so looking for the main map costs about one frame's map
+  // tracking.
+  return VerifyFeaturePose(*found, frame, k, reason, view.main->map.get(),
+                           OdometryStartIterations(options_));
 }
 
 absl::StatusOr<TrackingResult> SlamTracker::CarryWithoutMap(const OdometryPyramid& pyramid,
@@ -439,8 +443,15 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   } else if (lost_) {
     frames_without_map_ = 0;
     std::string how;
+    const BootstrapDepth depth = CountBootstrapDepth(frame.depth, options_.bootstrap_max_depth);
+    // Below the tracker's LOST fraction no dense attempt can track OK, and the features need
+    // depth too: a covered lens costs nothing.
+    const bool too_little_depth =
+        depth.valid < options_.tracker.lost_valid_fraction * frame.depth.num_pixels();
     stage = Clock::now();
-    PLX_ASSIGN_OR_RETURN(result, Relocalise(frame, k, prior, view, &how));
+    if (!too_little_depth) {
+      PLX_ASSIGN_OR_RETURN(result, Relocalise(frame, k, prior, view, &how));
+    }
     out.timings.relocalisation_ms += MillisecondsSince(stage);
     if (result) {
       tracker_.Reset(result->pose, frame.timestamp);
@@ -455,15 +466,17 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       result->pose = prior.value_or(tracker_.Predict(frame.timestamp));
       result->state = TrackingState::kLost;
       result->rays = options_.tracker.rays;
-      result->reason = "lost: no relocalisation candidate tracked OK";
+      result->reason =
+          too_little_depth
+              ? absl::StrFormat("lost: too little depth to relocalise (%d of %d pixels)",
+                                depth.valid, frame.depth.num_pixels())
+              : "lost: no relocalisation candidate tracked OK";
       out.state = SlamState::kLost;
       out.reason = result->reason;
       // Relocalisation had depth to work with and found nothing, frame after frame: the camera
       // is somewhere this map has not seen. A covered lens (no depth) does not count.
       const int segment_after = options_.new_segment_after_lost_frames;
-      if (segment_after > 0 &&
-          CountBootstrapDepth(frame.depth, options_.bootstrap_max_depth).enough() &&
-          ++lost_with_depth_ >= segment_after) {
+      if (segment_after > 0 && depth.enough() && ++lost_with_depth_ >= segment_after) {
         result->pose = prior.value_or(last_good_pose_.value_or(result->pose));
         StartSegment(result->pose, frame.timestamp, &out);
         result->state = TrackingState::kOk;
@@ -519,7 +532,9 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       std::optional<TrackingResult> moved;
       std::string how;
       if (elsewhere) {
-        PLX_ASSIGN_OR_RETURN(moved, VerifyFeaturePose(*found, frame, k, &how));
+        // On a tracked frame's path: the odometry start's share of the schedule, as above.
+        PLX_ASSIGN_OR_RETURN(moved, VerifyFeaturePose(*found, frame, k, &how, nullptr,
+                                                      OdometryStartIterations(options_)));
       }
       out.timings.relocalisation_ms += MillisecondsSince(stage);
       if (moved) {

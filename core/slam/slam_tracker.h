@@ -278,10 +278,10 @@ class SlamTracker {
                                                                       const PinholeIntrinsics& k,
                                                                       const SlamMapView& view);
   // That pose, verified and refined densely (TryRelocalisationFrom in `map`, the tracked map
-  // when null); `reason` says how.
+  // when null) with `iterations` (0: the tracker's); `reason` says how.
   absl::StatusOr<std::optional<TrackingResult>> VerifyFeaturePose(
       const FeatureRelocalisation& found, const RgbdFrame& frame, const PinholeIntrinsics& k,
-      std::string* reason, const PlenoxelMap* map = nullptr);
+      std::string* reason, const PlenoxelMap* map = nullptr, int iterations = 0);
   // A dense attempt of `iterations` from `start` in `map` (the tracked map when null): tracks
   // OK, ends within relocalisation_radius_m of it and explains the frame at the sensor's noise.
   absl::StatusOr<std::optional<TrackingResult>> TryRelocalisationFrom(
