@@ -25,7 +25,7 @@ SlamSplitOptions SplitSlamOptions(const SlamOptions& o) {
   out.tracker.new_segment_after_lost_frames = o.new_segment_after_lost_frames;
   out.tracker.segment_join_interval = o.segment_join_interval;
   // Lock-step maps keyframe 0 before the next frame: nothing to carry (and no timing).
-  if (o.deterministic) out.tracker.max_frames_without_map = 0;
+  if (o.deterministic) out.tracker.max_seconds_without_map = 0.0;
   // Lock-step maps every keyframe before the next frame: nothing is ever left pending.
   out.tracker.max_pending_keyframes = o.deterministic ? 0 : o.max_pending_keyframes;
   out.tracker.initial_pose = o.initial_pose;

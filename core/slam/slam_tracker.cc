@@ -79,9 +79,9 @@ absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& o) {
     return absl::InvalidArgumentError(absl::StrCat(
         "new_segment_after_lost_frames must be >= 0, got ", o.new_segment_after_lost_frames));
   }
-  if (o.max_frames_without_map < 0) {
+  if (!(o.max_seconds_without_map >= 0.0) || !std::isfinite(o.max_seconds_without_map)) {
     return absl::InvalidArgumentError(absl::StrCat(
-        "max_frames_without_map must be >= 0, got ", o.max_frames_without_map));
+        "max_seconds_without_map must be >= 0, got ", o.max_seconds_without_map));
   }
   if (o.segment_join_interval < 1) {
     return absl::InvalidArgumentError(
@@ -272,10 +272,12 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::Relocalise(
   for (int i = 0; i < tries; ++i) candidates.push_back(keyframes[i].pose);
 
   // This frame's share of the list; the next LOST frame goes on where it stopped. These starts
-  // may be far off: more iterations than tracking from a good start.
+  // may be centimetres off, but a LOST frame gets the tracker's own schedule, no more: with 20
+  // iterations each LOST frame in unseen space cost 2.5x a tracked one (docs/BENCHMARKS.md),
+  // and the features find places from further away than these attempts ever did.
   const int count = static_cast<int>(candidates.size());
   attempts = std::min(attempts, count);
-  const int iterations = std::max(options_.tracker.iterations, 20);
+  const int iterations = options_.tracker.iterations;
   for (int a = 0; a < attempts; ++a) {
     const int index = (relocalisation_cursor_ + a) % count;
     PLX_ASSIGN_OR_RETURN(std::optional<TrackingResult> r,
@@ -309,7 +311,6 @@ absl::StatusOr<TrackingResult> SlamTracker::CarryWithoutMap(const OdometryPyrami
                                                             SlamFrameResult* out) {
   PLX_ASSIGN_OR_RETURN(const std::optional<OdometryPose> odometry,
                        RunOdometry(pyramid, frame.timestamp, prior, &out->odometry));
-  ++frames_without_map_;
   TrackingResult r;
   if (odometry && odometry->ok) {
     // Not a keyframe: the map's keyframe rules need the map to say what it covers.
@@ -351,7 +352,7 @@ void SlamTracker::StartSegment(const SE3& pose, double timestamp, SlamFrameResul
   lost_with_depth_ = 0;
   relocalisation_cursor_ = 0;
   frames_in_segment_ = 0;
-  frames_without_map_ = 0;
+  carry_start_ = timestamp;
   ++counts_.segments_started;
 }
 
@@ -379,6 +380,7 @@ SlamFrameResult SlamTracker::Bootstrap(const RgbdFrame& frame, const std::option
   Remember(std::move(pyramid), pose, frame.timestamp);
   // Keyframe 0: it builds the first version.
   started_ = true;
+  carry_start_ = frame.timestamp;
   tracker_.Reset(pose, frame.timestamp);
   last_good_pose_ = pose;
   out.state = SlamState::kOk;
@@ -441,7 +443,6 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
     PLX_ASSIGN_OR_RETURN(result, CarryWithoutMap(pyramid, frame, prior, &out));
     out.timings.odometry_ms += MillisecondsSince(stage);
   } else if (lost_) {
-    frames_without_map_ = 0;
     std::string how;
     const BootstrapDepth depth = CountBootstrapDepth(frame.depth, options_.bootstrap_max_depth);
     // Below the tracker's LOST fraction no dense attempt can track OK, and the features need
@@ -484,7 +485,6 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       }
     }
   } else if (!options_.odometry) {
-    frames_without_map_ = 0;
     stage = Clock::now();
     PLX_ASSIGN_OR_RETURN(TrackingResult tracked, tracker_.Track(frame, k, prior));
     out.timings.map_ms += MillisecondsSince(stage);
@@ -496,7 +496,6 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   } else {
     // The odometry's pose starts the map tracker (the prior's place when there is none), then
     // the two are fused (core/slam/pose_fusion.h).
-    frames_without_map_ = 0;
     stage = Clock::now();
     PLX_ASSIGN_OR_RETURN(const std::optional<OdometryPose> odometry,
                          RunOdometry(pyramid, frame.timestamp, prior, &out.odometry));

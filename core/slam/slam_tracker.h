@@ -133,11 +133,12 @@ struct SlamTrackerOptions {
   // In a segment, frames between attempts to find the main map by features (each costs the
   // frame's features and a match against the main map's keyframes; a dense check when found).
   int segment_join_interval = 5;
-  // Frames the odometry may carry while the map (or the camera's segment) has no version yet;
-  // the next one waits for it (NeedsVersion). 15 (half a second at 30 frames/s) covers keyframe
-  // 0's integration at 640x480 on 2 cores when frames come live, and keeps the odometry's drift
-  // small when they come faster (a replay): the map tracker then takes over.
-  int max_frames_without_map = 15;
+  // How long (the frames' own clock, from keyframe 0 of the map or the segment) the odometry
+  // may carry the camera while the map has no version yet; a frame after that waits for it
+  // (NeedsVersion). A second covers keyframe 0's integration at 640x480 on 2 cores when frames
+  // come live and bounds the odometry's drift when a replay outruns mapping: the map tracker
+  // then takes over. 0: every frame after keyframe 0 waits for the version.
+  double max_seconds_without_map = 1.0;
   OdometryPyramidOptions odometry_pyramid;
   OdometryOptions odometry_options;
   PoseFusionOptions fusion;
@@ -235,11 +236,11 @@ class SlamTracker {
   }
 
   // Whether the odometry can carry the pose while the map has no version: the camera started
-  // the map (or a segment), the previous frame has a pose, and it has carried fewer than
-  // max_frames_without_map frames since the map last had a version.
+  // the map (or a segment), the previous frame has a pose, and it is within
+  // max_seconds_without_map of keyframe 0.
   bool CarriesWithoutMap() const {
     return started_ && !lost_ && options_.odometry && previous_ && previous_->pose &&
-           frames_without_map_ < options_.max_frames_without_map;
+           previous_->timestamp - carry_start_ < options_.max_seconds_without_map;
   }
 
   const SlamTrackerCounts& counts() const { return counts_; }
@@ -327,7 +328,7 @@ class SlamTracker {
   int relocalisation_cursor_ = 0;  // the next attempt near the last good pose
   int lost_with_depth_ = 0;  // LOST frames in a row that had depth to start a segment
   int frames_in_segment_ = 0;  // frames tracked since the camera started its segment
-  int frames_without_map_ = 0;  // frames the odometry carried since the map last had a version
+  double carry_start_ = 0.0;  // keyframe 0's timestamp (of the map or the camera's segment)
   // The current frame's features once extracted (FeaturesOf), reset per frame.
   std::shared_ptr<const FrameFeatures> frame_features_;
   SlamTrackerCounts counts_;

@@ -21,6 +21,7 @@
 #include "core/slam/slam_tracker.h"
 #include "core/synthetic/synthetic_scene.h"
 #include "core/synthetic/synthetic_sequence.h"
+#include "tests/core/slam/slam_test_options.h"
 #include "tests/synthetic_room.h"
 
 namespace plx {
@@ -30,17 +31,7 @@ constexpr double kPi = 3.14159265358979323846;
 constexpr int kWidth = 160;
 constexpr int kHeight = 120;
 
-SlamOptions TestOptions() {
-  SlamOptions o = DefaultSlamOptions();
-  o.deterministic = true;
-  o.tracker.rays = 1024;
-  o.mapping.mapper = MapperOptionsForVoxelSize(0.02f);
-  o.mapping.mapper.window_keyframes = 5;
-  o.mapping.mapper.batch_size = 2048;
-  o.mapping.iterations_per_keyframe = 30;
-  o.refinement.tracker.rays = o.tracker.rays;
-  return o;
-}
+SlamOptions TestOptions() { return testing::SmallLockStepSlamOptions(); }
 
 void RunOut(SlamCoordinator& coordinator) {
   for (int i = 0; i < 100000; ++i) {
@@ -141,6 +132,15 @@ TEST(SlamMapSegmentTest, AFrameBeforeTheFirstVersionIsCarriedByTheOdometry) {
     // Noise-free frames ~1.5 cm apart: the odometry is within a few millimetres.
     EXPECT_LT(TranslationError(r->pose, *room->ground_truth(i)), 0.01) << "frame " << i;
   }
+  // A second of the camera's own time is as far as the odometry carries it alone.
+  RgbdFrame late = room->frames()[3];
+  late.timestamp = 1.2;
+  absl::StatusOr<SlamFrameResult> carried =
+      camera.Track(late, k, std::nullopt, map.View(segment));
+  ASSERT_TRUE(carried.ok()) << carried.status();
+  EXPECT_EQ(carried->source, PoseSource::kOdometry);
+  EXPECT_TRUE(camera.NeedsVersion(map.View(segment))) << "carried past a second";
+  EXPECT_FALSE(camera.CarriesWithoutMap());
   EXPECT_EQ(map.progress().keyframes, 1);
   EXPECT_TRUE(map.MayCameraProceed(/*segment=*/0, /*needs_version=*/false));
   EXPECT_FALSE(map.MayCameraProceed(/*segment=*/0, /*needs_version=*/true));

@@ -14,22 +14,13 @@
 #include "core/slam/slam_coordinator.h"
 #include "core/slam/slam_session.h"
 #include "core/slam/slam_tracker.h"
+#include "tests/core/slam/slam_test_options.h"
 #include "tests/synthetic_room.h"
 
 namespace plx {
 namespace {
 
-SlamOptions TestOptions() {
-  SlamOptions o = DefaultSlamOptions();
-  o.deterministic = true;
-  o.tracker.rays = 1024;
-  o.mapping.mapper = MapperOptionsForVoxelSize(0.02f);
-  o.mapping.mapper.window_keyframes = 5;
-  o.mapping.mapper.batch_size = 2048;
-  o.mapping.iterations_per_keyframe = 30;
-  o.refinement.tracker.rays = o.tracker.rays;
-  return o;
-}
+SlamOptions TestOptions() { return testing::SmallLockStepSlamOptions(); }
 
 // The map's coordinator with its mapper started on `backend` (lock-step: the options are
 // deterministic).

@@ -15,6 +15,7 @@
 #include "core/eval/map_metrics.h"
 #include "core/eval/trajectory_metrics.h"
 #include "core/slam/slam_dataset.h"
+#include "tests/core/slam/slam_test_options.h"
 #include "tests/synthetic_room.h"
 
 namespace plx {
@@ -28,18 +29,7 @@ SlamSession::BackendFactory CpuFactory(int threads = 1) {
   };
 }
 
-// Small and quick: 2 cm voxels, 1024 tracking rays, 30 iterations per keyframe.
-SlamOptions TestOptions() {
-  SlamOptions o = DefaultSlamOptions();
-  o.deterministic = true;
-  o.tracker.rays = 1024;
-  o.mapping.mapper = MapperOptionsForVoxelSize(0.02f);
-  o.mapping.mapper.window_keyframes = 5;
-  o.mapping.mapper.batch_size = 2048;
-  o.mapping.iterations_per_keyframe = 30;
-  o.refinement.tracker.rays = o.tracker.rays;
-  return o;
-}
+SlamOptions TestOptions() { return testing::SmallLockStepSlamOptions(); }
 
 std::vector<StampedPose> GroundTruth(const RgbdDataset& dataset) {
   std::vector<StampedPose> gt;
