@@ -305,6 +305,12 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::TryJoinMain(
                            OdometryStartIterations(options_));
 }
 
+bool SlamTracker::NearCarryStart(const SE3& pose) const {
+  const SE3 moved = carry_origin_.Inverse() * pose;
+  return moved.translation().norm() < options_.keyframes.max_translation_m &&
+         Eigen::AngleAxisd(moved.rotation()).angle() < options_.keyframes.max_rotation_rad;
+}
+
 absl::StatusOr<TrackingResult> SlamTracker::CarryWithoutMap(const OdometryPyramid& pyramid,
                                                             const RgbdFrame& frame,
                                                             const std::optional<SE3>& prior,
@@ -353,6 +359,7 @@ void SlamTracker::StartSegment(const SE3& pose, double timestamp, SlamFrameResul
   relocalisation_cursor_ = 0;
   frames_in_segment_ = 0;
   carry_start_ = timestamp;
+  carry_origin_ = pose;
   ++counts_.segments_started;
 }
 
@@ -381,6 +388,7 @@ SlamFrameResult SlamTracker::Bootstrap(const RgbdFrame& frame, const std::option
   // Keyframe 0: it builds the first version.
   started_ = true;
   carry_start_ = frame.timestamp;
+  carry_origin_ = pose;
   tracker_.Reset(pose, frame.timestamp);
   last_good_pose_ = pose;
   out.state = SlamState::kOk;

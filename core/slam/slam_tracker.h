@@ -137,7 +137,11 @@ struct SlamTrackerOptions {
   // may carry the camera while the map has no version yet; a frame after that waits for it
   // (NeedsVersion). A second covers keyframe 0's integration at 640x480 on 2 cores when frames
   // come live and bounds the odometry's drift when a replay outruns mapping: the map tracker
-  // then takes over. 0: every frame after keyframe 0 waits for the version.
+  // then takes over. 0: every frame after keyframe 0 waits for the version. The camera is also
+  // carried only while it stays within the keyframe policy's translation and rotation of
+  // keyframe 0: further on, the next keyframe is due and the map it would join must exist
+  // (carried on, teddy at 3x the motion left keyframe 0's view before the first version and
+  // added no keyframe for 25 frames).
   double max_seconds_without_map = 1.0;
   OdometryPyramidOptions odometry_pyramid;
   OdometryOptions odometry_options;
@@ -240,7 +244,8 @@ class SlamTracker {
   // max_seconds_without_map of keyframe 0.
   bool CarriesWithoutMap() const {
     return started_ && !lost_ && options_.odometry && previous_ && previous_->pose &&
-           previous_->timestamp - carry_start_ < options_.max_seconds_without_map;
+           previous_->timestamp - carry_start_ < options_.max_seconds_without_map &&
+           NearCarryStart(*previous_->pose);
   }
 
   const SlamTrackerCounts& counts() const { return counts_; }
@@ -250,6 +255,8 @@ class SlamTracker {
   bool BootstrapCandidate(const SlamMapView& view) const {
     return !started_ && view.map == nullptr && view.accepted_keyframes.empty();
   }
+  // Within the keyframe policy's translation and rotation of keyframe 0 (carry_origin_).
+  bool NearCarryStart(const SE3& pose) const;
   // A frame before the map's first version: the odometry's pose (DEGRADED), else LOST.
   absl::StatusOr<TrackingResult> CarryWithoutMap(const OdometryPyramid& pyramid,
                                                  const RgbdFrame& frame,
@@ -329,6 +336,7 @@ class SlamTracker {
   int lost_with_depth_ = 0;  // LOST frames in a row that had depth to start a segment
   int frames_in_segment_ = 0;  // frames tracked since the camera started its segment
   double carry_start_ = 0.0;  // keyframe 0's timestamp (of the map or the camera's segment)
+  SE3 carry_origin_;          // and its pose
   // The current frame's features once extracted (FeaturesOf), reset per frame.
   std::shared_ptr<const FrameFeatures> frame_features_;
   SlamTrackerCounts counts_;
