@@ -168,7 +168,9 @@ class SlamCoordinator {
     std::vector<EarlyKeyframe> early;    // added before the mapper exists
     // Every accepted keyframe's features, in the order accepted (immutable once shared).
     std::vector<std::shared_ptr<const FrameFeatures>> features;
-    // A segment's keyframes as accepted (not the main map's): what a join moves.
+    // A segment's keyframes as accepted (not the main map's): what a join moves. A copy of
+    // what its mapper holds: the mapper's frames belong to the step-runner, a join happens on
+    // a camera's thread.
     std::vector<EarlyKeyframe> kept;
     SlamMapVersion published;     // the newest map with the number for it
     bool has_work = false;        // the mapper's, after the last step (or a keyframe)

@@ -191,13 +191,12 @@ absl::Status SlamSession::AfterQueued(bool keyframe) {
   changed_.notify_all();
   // The camera's next frame in its segment: a version there unless the odometry carries it.
   const bool needs_version = !tracker_.CarriesWithoutMap();
-  if (split_.gate.lock_step) {
-    PLX_RETURN_IF_ERROR(RunMappingToEnd(false));
-  } else if (keyframe) {
+  if (!split_.gate.lock_step) {
     // After a join without a keyframe the main map may have many keyframes to integrate: the
     // camera goes on (its keyframes are deferred meanwhile), it does not wait for them.
-    return WaitForMapping(needs_version);
+    return keyframe ? WaitForMapping(needs_version) : absl::OkStatus();
   }
+  PLX_RETURN_IF_ERROR(RunMappingToEnd(false));
   if (keyframe && !coordinator_.MayCameraProceed(segment_, needs_version)) {
     return absl::InternalError("mapping stopped before the camera could go on");
   }

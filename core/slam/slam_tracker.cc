@@ -407,7 +407,6 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
                                                    const SlamMapView& view) {
   const auto start = Clock::now();
   SlamFrameResult out;
-  out.segment = view.segment;
   out.frame = counts_.frames;
   out.timestamp = frame.timestamp;
   out.keyframes = static_cast<int>(view.accepted_keyframes.size());
