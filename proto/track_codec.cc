@@ -15,6 +15,11 @@ absl::StatusOr<TrackerOptions> TrackerOptionsFromProto(const pb::TrackOptions& o
       o.mode() == pb::TrackOptions::MODE_ADAM ? TrackingMode::kAdam : TrackingMode::kGaussNewton);
   if (o.rays() > 0) options.rays = static_cast<int>(o.rays());
   if (o.iterations() > 0) options.iterations = static_cast<int>(o.iterations());
+  if (!pb::TrackOptions::Pixels_IsValid(o.pixels())) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        field, ".pixels: unknown choice ", o.pixels(), " (UNSPECIFIED, INFORMATIVE or UNIFORM)"));
+  }
+  if (o.pixels() == pb::TrackOptions::PIXELS_UNIFORM) options.sampling = PixelSampling::kUniform;
   if (absl::Status s = Tracker::ValidateOptions(options); !s.ok()) {
     return absl::InvalidArgumentError(absl::StrCat(field, ": ", s.message()));
   }
@@ -28,6 +33,11 @@ pb::TrackOptions TrackOptionsToProto(const TrackerOptions& options,
                                                     : pb::TrackOptions::MODE_GAUSS_NEWTON);
   if (fields.rays) wire.set_rays(static_cast<uint32_t>(options.rays));
   if (fields.iterations) wire.set_iterations(static_cast<uint32_t>(options.iterations));
+  if (fields.pixels) {
+    wire.set_pixels(options.sampling == PixelSampling::kUniform
+                        ? pb::TrackOptions::PIXELS_UNIFORM
+                        : pb::TrackOptions::PIXELS_INFORMATIVE);
+  }
   return wire;
 }
 

@@ -26,10 +26,11 @@ absl::StatusOr<TrackerOptions> TrackerOptionsFromProto(const pb::TrackOptions& o
 struct TrackOptionsFields {
   bool rays = false;
   bool iterations = false;
+  bool pixels = false;
 };
 
-// The inverse of TrackerOptionsFromProto: the mode always, rays and iterations when `fields`
-// says they were chosen.
+// The inverse of TrackerOptionsFromProto: the mode always, rays, iterations and pixels when
+// `fields` says they were chosen.
 pb::TrackOptions TrackOptionsToProto(const TrackerOptions& options,
                                      const TrackOptionsFields& fields);
 

@@ -269,8 +269,12 @@ absl::Status CheckOutputDirectory(const std::string& path) {
 
 void AddTrackerFlags(FlagSet& flags) {
   flags.Add("mode", "gn|adam", "Gauss-Newton/LM, or Adam as in the paper", "gn")
-      .Add("rays", "N", "rays per frame (adam: per step) [default: gn 4096, adam 4096]", "")
-      .Add("iterations", "N", "iterations per frame [default: gn 8, adam 90]", "");
+      .Add("rays", "N", "rays per frame (adam: per step) [default: gn 2048, adam 4096]", "")
+      .Add("iterations", "N", "iterations per frame [default: gn 8, adam 90]", "")
+      .Add("pixels", "informative|uniform",
+           "where gn casts its rays: spread, towards texture and off depth edges, or uniform "
+           "over valid depth",
+           "informative");
 }
 
 absl::StatusOr<TrackerOptions> TrackerOptionsFromFlags(const FlagSet& flags) {
@@ -287,6 +291,13 @@ absl::StatusOr<TrackerOptions> TrackerOptionsFromFlags(const FlagSet& flags) {
   if (flags.IsSet("iterations")) {
     PLX_ASSIGN_OR_RETURN(options.iterations, flags.GetInt("iterations", 1, kMaxTrackerIterations));
   }
+  const std::string pixels = flags.GetString("pixels");
+  if (pixels != "informative" && pixels != "uniform") {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("--pixels must be informative or uniform, got \"%s\"", pixels));
+  }
+  options.sampling =
+      pixels == "uniform" ? PixelSampling::kUniform : PixelSampling::kInformative;
   return options;
 }
 

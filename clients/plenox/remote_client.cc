@@ -280,7 +280,9 @@ const char* SlamStateText(pb::SlamState state) {
 }
 
 TrackOptionsFields TrackOptionsFieldsFromFlags(const FlagSet& flags) {
-  return {.rays = flags.IsSet("rays"), .iterations = flags.IsSet("iterations")};
+  return {.rays = flags.IsSet("rays"),
+          .iterations = flags.IsSet("iterations"),
+          .pixels = flags.IsSet("pixels")};
 }
 
 }  // namespace plx::cli

@@ -139,9 +139,9 @@ const char* TrackingStateText(pb::TrackingState state);
 // SLAM names them.
 const char* SlamStateText(pb::SlamState state);
 
-// Which tracker settings the user chose with --rays/--iterations (AddTrackerFlags): only those
-// go on the wire (TrackOptionsToProto; the others are the daemon's defaults for the mode, which
-// are TrackerOptionsForMode's too).
+// Which tracker settings the user chose with --rays/--iterations/--pixels (AddTrackerFlags):
+// only those go on the wire (TrackOptionsToProto; the others are the daemon's defaults for the
+// mode, which are TrackerOptionsForMode's too).
 TrackOptionsFields TrackOptionsFieldsFromFlags(const FlagSet& flags);
 
 }  // namespace plx::cli

@@ -18,7 +18,7 @@ namespace plx::cli {
 // the dataset flags, --out and the tracker flags, in that order.
 void AddTrackFlags(FlagSet& flags, const std::string& map_value, const std::string& map_help);
 
-// One progress line: "tracking 5/40  OK  12 ms  rays 3970/4096  lost 0".
+// One progress line: "tracking 5/40  OK  12 ms  rays 1985/2048  lost 0".
 struct TrackProgress {
   int frame = 0;  // 1-based
   int frames = 0;

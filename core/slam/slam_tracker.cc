@@ -87,6 +87,10 @@ absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& o) {
     return absl::InvalidArgumentError(
         absl::StrCat("segment_join_interval must be >= 1, got ", o.segment_join_interval));
   }
+  if (o.skip_checks_after_failed_check < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "skip_checks_after_failed_check must be >= 0, got ", o.skip_checks_after_failed_check));
+  }
   if (o.relocalisation_attempts_per_frame < 1 || o.relocalisation_attempts_per_frame > 16) {
     return absl::InvalidArgumentError(
         absl::StrCat("relocalisation_attempts_per_frame must be in [1, 16], got ",
@@ -508,54 +512,97 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
                          RunOdometry(pyramid, frame.timestamp, prior, &out.odometry));
     out.timings.odometry_ms += MillisecondsSince(stage);
     const bool from_odometry = odometry && odometry->ok;
-    const std::optional<SE3> map_start = from_odometry ? odometry->pose : prior;
-    stage = Clock::now();
-    tracker_.set_iterations(
-        from_odometry ? OdometryStartIterations(options_) : options_.tracker.iterations);
-    PLX_ASSIGN_OR_RETURN(TrackingResult tracked, tracker_.Track(frame, k, map_start));
-    out.timings.map_ms += MillisecondsSince(stage);
-    const FusedPose fused = FusePoses(tracked, odometry, options_.fusion);
-    // The map tracker's motion model follows the pose given out when it is not its own.
-    if (fused.source == PoseSource::kOdometry) tracker_.Reset(fused.pose, frame.timestamp);
-    out.state = fused.state;
-    out.source = fused.source;
-    out.reason = fused.reason;
-    may_be_keyframe = fused.may_be_keyframe;
-    result = std::move(tracked);
-    result->pose = fused.pose;
-    // The map renders the view but contradicts the odometry's pose (moving things do that,
-    // and so does a kidnap the odometry followed with confidence: a jump in the stream that
-    // its gates could not tell from motion), or the map's pose has nothing to back it (the
-    // odometry failed): the keyframes' features decide. Where they agree with the pose given
-    // out, that is all (no dense work); only a place elsewhere costs a dense verification.
-    const bool contradicted =
-        fused.source == PoseSource::kOdometry && result->cause != TrackingCause::kFewValidRays;
-    if (contradicted || fused.confirm) {
+    // The odometry failed (a jump in the stream, a blur, a view it cannot match): the
+    // keyframes' features are the cheaper first look. Where they place the frame, the dense
+    // check of that place at the sensor's noise is the frame's whole map tracking (the
+    // odometry start's share of the schedule); where they find nothing, the map tracker starts
+    // from the motion model with its full schedule, as when there are no features.
+    std::optional<std::optional<FeatureRelocalisation>> looked;  // set once the features ran
+    if (!from_odometry && options_.feature_relocalisation) {
       stage = Clock::now();
-      PLX_ASSIGN_OR_RETURN(const std::optional<FeatureRelocalisation> found,
-                           FindByFeatures(frame, k, view));
-      const bool elsewhere = found && !PosesAgree(found->pose, fused.pose, options_.fusion);
-      std::optional<TrackingResult> moved;
+      PLX_ASSIGN_OR_RETURN(looked, FindByFeatures(frame, k, view));
+      std::optional<TrackingResult> placed;
       std::string how;
-      if (elsewhere) {
-        // On a tracked frame's path: the odometry start's share of the schedule, as above.
-        PLX_ASSIGN_OR_RETURN(moved, VerifyFeaturePose(*found, frame, k, &how, nullptr,
-                                                      OdometryStartIterations(options_)));
+      if (*looked) {
+        PLX_ASSIGN_OR_RETURN(placed, VerifyFeaturePose(**looked, frame, k, &how, nullptr,
+                                                       OdometryStartIterations(options_)));
       }
       out.timings.relocalisation_ms += MillisecondsSince(stage);
-      if (moved) {
-        tracker_.Reset(moved->pose, frame.timestamp);
+      if (placed) {
+        const SE3 predicted = prior.value_or(tracker_.Predict(frame.timestamp));
+        const bool moved = !PosesAgree(placed->pose, predicted, options_.fusion);
+        tracker_.Reset(placed->pose, frame.timestamp);
         lost_with_depth_ = 0;
-        out.state = SlamState::kRelocalised;
+        out.state = moved ? SlamState::kRelocalised : SlamState::kOk;
         out.source = PoseSource::kMap;
-        out.reason = how;
-        may_be_keyframe = false;
-        result = std::move(moved);
-      } else {
-        const CheckedPose checked = ApplyFeatureCheck(fused, found.has_value(), !elsewhere);
-        out.state = checked.state;
-        out.reason = checked.reason;
-        may_be_keyframe = checked.may_be_keyframe;
+        out.reason = moved ? how
+                           : absl::StrCat("the odometry failed; ", how,
+                                          " where the motion model expected it");
+        // A place the features found and the map explains at the sensor's noise may grow the
+        // map; a jump may not on its first frame (as every relocalisation).
+        may_be_keyframe = !moved;
+        result = std::move(placed);
+      }
+    }
+    if (!result) {
+      const std::optional<SE3> map_start = from_odometry ? odometry->pose : prior;
+      stage = Clock::now();
+      tracker_.set_iterations(
+          from_odometry ? OdometryStartIterations(options_) : options_.tracker.iterations);
+      PLX_ASSIGN_OR_RETURN(TrackingResult tracked, tracker_.Track(frame, k, map_start));
+      out.timings.map_ms += MillisecondsSince(stage);
+      const FusedPose fused = FusePoses(tracked, odometry, options_.fusion);
+      // The map tracker's motion model follows the pose given out when it is not its own.
+      if (fused.source == PoseSource::kOdometry) tracker_.Reset(fused.pose, frame.timestamp);
+      out.state = fused.state;
+      out.source = fused.source;
+      out.reason = fused.reason;
+      may_be_keyframe = fused.may_be_keyframe;
+      result = std::move(tracked);
+      result->pose = fused.pose;
+      // The map renders the view but contradicts the odometry's pose (moving things do that,
+      // and so does a kidnap the odometry followed with confidence: a jump in the stream that
+      // its gates could not tell from motion), or the map's pose has nothing to back it (the
+      // odometry failed): the keyframes' features decide. Where they agree with the pose given
+      // out, that is all (no dense work); only a place elsewhere costs a dense verification.
+      const bool contradicted =
+          fused.source == PoseSource::kOdometry && result->cause != TrackingCause::kFewValidRays;
+      if (contradicted || fused.confirm) {
+        stage = Clock::now();
+        std::optional<FeatureRelocalisation> found;
+        if (looked) {
+          found = *looked;  // looked already: nothing, or a place whose check failed above
+        } else {
+          PLX_ASSIGN_OR_RETURN(found, FindByFeatures(frame, k, view));
+        }
+        const bool elsewhere = found && !PosesAgree(found->pose, fused.pose, options_.fusion);
+        std::optional<TrackingResult> moved;
+        std::string how;
+        if (elsewhere && !looked) {
+          if (checks_to_skip_ > 0) {
+            --checks_to_skip_;  // a check just failed: the stretch the map contradicts goes on
+          } else {
+            // On a tracked frame's path: the odometry start's share of the schedule, as above.
+            PLX_ASSIGN_OR_RETURN(moved, VerifyFeaturePose(*found, frame, k, &how, nullptr,
+                                                          OdometryStartIterations(options_)));
+            if (!moved) checks_to_skip_ = options_.skip_checks_after_failed_check;
+          }
+        }
+        out.timings.relocalisation_ms += MillisecondsSince(stage);
+        if (moved) {
+          tracker_.Reset(moved->pose, frame.timestamp);
+          lost_with_depth_ = 0;
+          out.state = SlamState::kRelocalised;
+          out.source = PoseSource::kMap;
+          out.reason = how;
+          may_be_keyframe = false;
+          result = std::move(moved);
+        } else {
+          const CheckedPose checked = ApplyFeatureCheck(fused, found.has_value(), !elsewhere);
+          out.state = checked.state;
+          out.reason = checked.reason;
+          may_be_keyframe = checked.may_be_keyframe;
+        }
       }
     }
   }

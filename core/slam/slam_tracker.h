@@ -133,6 +133,13 @@ struct SlamTrackerOptions {
   // In a segment, frames between attempts to find the main map by features (each costs the
   // frame's features and a match against the main map's keyframes; a dense check when found).
   int segment_join_interval = 5;
+  // A tracked frame the map contradicts pays a dense check when the features place it
+  // elsewhere. After such a check fails, this many of the next frames that would pay one do
+  // not (their pose stays the odometry's, DEGRADED, never a keyframe): on infinitam_teddy
+  // frames 472-494 each paid 110-150 ms for checks that failed. A jump the odometry could
+  // not follow is unaffected (the features look first there); one it followed with
+  // confidence is found at most this many frames later.
+  int skip_checks_after_failed_check = 5;
   // How long (the frames' own clock, from keyframe 0 of the map or the segment) the odometry
   // may carry the camera while the map has no version yet; a frame after that waits for it
   // (NeedsVersion). A second covers keyframe 0's integration at 640x480 on 2 cores when frames
@@ -334,6 +341,7 @@ class SlamTracker {
   std::optional<SE3> last_good_pose_;
   int relocalisation_cursor_ = 0;  // the next attempt near the last good pose
   int lost_with_depth_ = 0;  // LOST frames in a row that had depth to start a segment
+  int checks_to_skip_ = 0;  // skip_checks_after_failed_check, counting down
   int frames_in_segment_ = 0;  // frames tracked since the camera started its segment
   double carry_start_ = 0.0;  // keyframe 0's timestamp (of the map or the camera's segment)
   SE3 carry_origin_;          // and its pose

@@ -68,20 +68,13 @@ SE3 Tracker::Predict(double timestamp) const {
   return last_pose_ * SE3::Exp(*velocity_ * dt);
 }
 
-void Tracker::SamplePixels(const RgbdFrame& frame, int count) {
-  valid_pixels_.clear();
-  const UnifiedVector<float>& depth = frame.depth.data;
-  for (int32_t p = 0; p < static_cast<int32_t>(depth.size()); ++p) {
-    if (depth[p] > 0.0f && depth[p] <= options_.params.max_depth) valid_pixels_.push_back(p);
-  }
-  pixels_.clear();
-  if (valid_pixels_.empty()) return;
-  // Uniform over valid pixels, a fresh draw per frame; the first rays / coarse_divisor of the
-  // list serve the coarse level.
+void Tracker::SamplePixels(const RgbdFrame& frame, int count, PixelSampling sampling) {
+  // A fresh draw per frame; the first rays / coarse_divisor of the list serve the coarse level.
   std::mt19937 rng(options_.seed ^ (frame_counter_ * 2654435761u));
-  std::uniform_int_distribution<size_t> pick(0, valid_pixels_.size() - 1);
-  pixels_.resize(static_cast<size_t>(count));
-  for (int32_t& p : pixels_) p = valid_pixels_[pick(rng)];
+  PixelSelectionOptions selection;
+  selection.sampling = sampling;
+  selection.max_depth = options_.params.max_depth;
+  SelectTrackingPixels(frame, selection, count, &rng, &selection_scratch_, &pixels_);
 }
 
 absl::StatusOr<TrackingSums> Tracker::Evaluate(const SE3& pose, const RgbdFrame& frame,
@@ -186,7 +179,7 @@ absl::Status Tracker::RunAdam(const RgbdFrame& frame, const PinholeIntrinsics& k
   TrackingParams saved = options_.params;
   options_.params.l1_paper_weights = true;
   for (int it = 0; it < options_.iterations; ++it) {
-    SamplePixels(frame, options_.rays);  // the reference draws new rays every step
+    SamplePixels(frame, options_.rays, PixelSampling::kUniform);  // new rays every step (paper)
     ++frame_counter_;
     float unit[2] = {1.0f, 1.0f};
     absl::StatusOr<TrackingSums> evaluated = Evaluate(
@@ -211,7 +204,7 @@ absl::Status Tracker::RunAdam(const RgbdFrame& frame, const PinholeIntrinsics& k
   }
   options_.params = saved;
   // Score the final pose with the Gauss-Newton residuals so states mean the same in both modes.
-  SamplePixels(frame, options_.rays);
+  SamplePixels(frame, options_.rays, PixelSampling::kUniform);
   float unit[2] = {1.0f, 1.0f};
   PLX_ASSIGN_OR_RETURN(*last, Evaluate(*pose, frame, k, static_cast<int>(pixels_.size()),
                                        TrackingLoss::kHuber, unit, false));
@@ -273,7 +266,7 @@ absl::StatusOr<TrackingResult> Tracker::Track(const RgbdFrame& frame,
   if (sizes_ok && map_->grid.num_bricks() > 0) {
     options_.params.render = map_->render;
     if (options_.mode == TrackingMode::kGaussNewton) {
-      SamplePixels(frame, options_.rays);
+      SamplePixels(frame, options_.rays, options_.sampling);
       ++frame_counter_;
       if (!pixels_.empty()) PLX_RETURN_IF_ERROR(RunGaussNewton(frame, k, &pose, &result, &last));
     } else {

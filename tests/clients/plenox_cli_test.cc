@@ -102,14 +102,14 @@ TEST(PlenoxUsageTest, EveryCommandHelpListsItsFlags) {
        {"--map", "--pose", "--intrinsics", "--color", "--depth", "--json", "--backend", "--device",
         "--threads", "--help"}},
       {"track",
-       {"--map", "--dataset", "--out", "--mode", "--rays", "--iterations", "--backend", "--device",
-        "--threads", "--json", "--quiet", "--help"}},
+       {"--map", "--dataset", "--out", "--mode", "--rays", "--iterations", "--pixels",
+        "--backend", "--device", "--threads", "--json", "--quiet", "--help"}},
       {"slam",
        {"--dataset", "--out", "--map-out", "--keyframes-out", "--realtime", "--speed",
         "--deterministic", "--max-frames", "--iterations-per-keyframe", "--kf-translation",
         "--kf-rotation", "--kf-unmapped", "--kf-interval", "--window", "--refine-window",
         "--mapping-nice", "--new-segment-after", "--mode", "--rays", "--iterations",
-        "--voxel-size", "--backend",
+        "--pixels", "--voxel-size", "--backend",
         "--device", "--threads", "--json", "--quiet", "--help"}},
       {"synth",
        {"--out", "--frames", "--width", "--height", "--noise", "--noise-seed", "--help"}},
@@ -797,7 +797,8 @@ TEST_F(PlenoxEndToEndTest, TrackRejectsBadFlagsBeforeWork) {
   ScopedTempDir work("plenox_cli_track_bad");
   for (const std::vector<std::string>& extra :
        {std::vector<std::string>{"--mode", "newton"}, std::vector<std::string>{"--rays", "3"},
-        std::vector<std::string>{"--iterations", "0"}}) {
+        std::vector<std::string>{"--iterations", "0"},
+        std::vector<std::string>{"--pixels", "random"}}) {
     std::vector<std::string> args = {"track", "--map", *map_, "--dataset", *dataset_, "--out",
                                      work.path() + "/t.txt"};
     args.insert(args.end(), extra.begin(), extra.end());

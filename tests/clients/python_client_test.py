@@ -248,6 +248,20 @@ def main():
                            and estimates[-1].timestamp == frames[-1].timestamp,
                            "streaming: the first and the newest frame are always served")
 
+        def track_uniform_pixels():
+            # The tracker's pixel choice travels as TrackOptions.pixels; uniform draws (the
+            # paper's) still track this easy sequence.
+            options = {"rays": 1024, "pixels": "uniform"}
+            estimates = list(client.track("room", frames[:6], initial_pose=frames[0].pose,
+                                          options=options))
+            t, _ = convert.pose_from_proto(estimates[-1].pose)
+            failures.check(len(estimates) == 6 and all(state_name(e) == "OK" for e in estimates)
+                           and np.linalg.norm(t - frames[5].pose[0]) < 0.01,
+                           "track with uniform pixels: every frame OK, within 1 cm")
+            bad = pb.TrackOptions(pixels=7)
+            failures.expect_error(lambda: list(client.track("room", frames[:2], options=bad)),
+                                  "INVALID_ARGUMENT", "an unknown pixels choice", "pixels")
+
         def slam_lockstep():
             # Deterministic: the daemon maps each keyframe before the next frame, so the run is
             # repeatable (in-process at this size and voxel size: 0.68 cm ATE, no alignment).
@@ -485,6 +499,7 @@ def main():
         run_step(failures, "integrate every 10th frame", integrate)
         run_step(failures, "track lock-step", track_lockstep)
         run_step(failures, "track streaming (latest wins)", track_streaming)
+        run_step(failures, "track with uniform pixels", track_uniform_pixels)
         run_step(failures, "slam lock-step (deterministic)", slam_lockstep)
         run_step(failures, "slam streaming (backpressure)", slam_streaming)
         run_step(failures, "slam realtime (latest wins)", slam_realtime)

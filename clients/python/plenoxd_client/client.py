@@ -354,6 +354,12 @@ def _track_options(options):
         o.mode = int(mode)
     o.rays = int(options.get("rays", 0))
     o.iterations = int(options.get("iterations", 0))
+    pixels = options.get("pixels")
+    if isinstance(pixels, str):
+        o.pixels = {"informative": pb.TrackOptions.PIXELS_INFORMATIVE,
+                    "uniform": pb.TrackOptions.PIXELS_UNIFORM}[pixels.lower()]
+    elif pixels is not None:
+        o.pixels = int(pixels)
     return o
 
 
@@ -574,7 +580,8 @@ class Client:
         estimate's `dropped` (and TrackStream.dropped) counts the skipped ones.
         priors=True also sends dataset frames' poses, which the tracker uses as initial guesses
         (e.g. VIO poses); leave it False when the poses are ground truth.
-        options: TrackOptions or a dict (mode "gauss_newton"/"adam", rays, iterations)."""
+        options: TrackOptions or a dict (mode "gauss_newton"/"adam", rays, iterations, pixels
+            "informative"/"uniform")."""
         return TrackStream(self, map_name, frames, initial_pose, lockstep, options, priors, fps)
 
     # --- SLAM ---

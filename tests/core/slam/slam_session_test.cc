@@ -190,6 +190,10 @@ struct KidnapRun {
   double worst_error_after_m = 0.0;  // from the relocalisation on
   int lost_after = 0;                // LOST frames after the relocalisation
   bool keyframe_while_lost = false;
+  // The relocalised frame: whether its odometry had failed, and its map tracker's time (0
+  // when the features' place was checked instead of tracking from the motion model first).
+  bool odometry_failed_there = false;
+  double map_ms_there = -1.0;
 };
 
 KidnapRun RunKidnap(const InMemoryDataset& dataset, Backend* backend, bool features) {
@@ -212,7 +216,11 @@ KidnapRun RunKidnap(const InMemoryDataset& dataset, Backend* backend, bool featu
     if (!r.ok()) return run;
     if (i < 60) continue;
     if (r->state == SlamState::kLost && r->keyframe) run.keyframe_while_lost = true;
-    if (run.relocalised_at < 0 && r->state == SlamState::kRelocalised) run.relocalised_at = i;
+    if (run.relocalised_at < 0 && r->state == SlamState::kRelocalised) {
+      run.relocalised_at = i;
+      run.odometry_failed_there = r->odometry.points > 0 && !r->odometry.ok;
+      run.map_ms_there = r->timings.map_ms;
+    }
     if (run.relocalised_at >= 0) {
       run.lost_after += r->state == SlamState::kLost;
       run.worst_error_after_m = std::max(
@@ -232,6 +240,11 @@ TEST_F(SlamSessionTest, AKidnapRelocalisesByKeyframeFeaturesWithinAFewFrames) {
   EXPECT_EQ(with.lost_after, 0);
   EXPECT_LT(with.worst_error_after_m, 0.02);
   EXPECT_FALSE(with.keyframe_while_lost);
+  // The odometry cannot follow the jump; the features look first, and the dense check of
+  // their place is the frame's whole map tracking: no full schedule from the motion model
+  // before it (that was half of the jump frame's cost).
+  EXPECT_TRUE(with.odometry_failed_there);
+  EXPECT_EQ(with.map_ms_there, 0.0);
   // Near the last good pose alone, the same jump takes longer or never relocalises: the
   // features are what finds the place.
   const KidnapRun without = RunKidnap(*dataset_, backend_.get(), false);
