@@ -158,19 +158,9 @@ Mapper::Mapper(const MapperOptions& options, Backend* backend, std::unique_ptr<P
   ResizeOptimizerBuffers();
 }
 
-bool Mapper::map_complete() const {
-  return !integrating() || integration_->phase == Integration::Phase::kBuffers;
-}
-
 absl::StatusOr<std::shared_ptr<const PlenoxelMap>> Mapper::Publish() {
-  // Unfused bricks must not reach readers; the optimiser's buffers can grow afterwards.
-  if (!map_complete()) {
-    const auto start = Clock::now();
-    while (!map_complete()) {
-      PLX_RETURN_IF_ERROR(AdvanceIntegration(Clock::time_point::max()));
-    }
-    summary_.allocation_s += Seconds(start);
-  }
+  // Unfused bricks must not reach readers.
+  if (integrating()) PLX_RETURN_IF_ERROR(IntegrateSlice(0.0).status());
   PLX_RETURN_IF_ERROR(RefreshOccupancyIfStale(*backend_, map_->grid, map_->render.sigma_threshold));
   return CatchAllocationFailure("publishing the map",
                                 [&]() -> absl::StatusOr<std::shared_ptr<const PlenoxelMap>> {

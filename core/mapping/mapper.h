@@ -22,9 +22,7 @@
 // The result is bit-identical to integrating in one go, whatever the slices. While an
 // integration is in progress the map holds allocated but unfused bricks, so it must be neither
 // optimised nor published: Optimize and Publish finish the integration first, which makes a
-// half-integrated map impossible to optimise or hand out, whoever calls them. Only in the
-// buffers phase is the map itself complete (the buffers are the optimiser's alone): Publish
-// hands it out from there without waiting for them.
+// half-integrated map impossible to optimise or hand out, whoever calls them.
 #pragma once
 
 #include <chrono>
@@ -162,12 +160,8 @@ class Mapper {
   // in progress afterwards (keyframes added after it began wait for the next one). On an error
   // the integration stays where it was, and the next slice retries the failed piece.
   absl::StatusOr<bool> IntegrateSlice(double max_seconds);
-  // An integration has begun and not finished: the map has bricks that are not fused yet, or
-  // (map_complete) only the optimiser's buffers are still growing.
+  // An integration has begun and not finished: the map has bricks that are not fused yet.
   bool integrating() const { return integration_ != nullptr; }
-  // No integration, or one whose bricks are all fused with exact occupancy: what Publish
-  // would hand out now is the integrated map.
-  bool map_complete() const;
   // Keyframes whose integration is complete.
   int integrated_keyframes() const { return integrated_frames_; }
 

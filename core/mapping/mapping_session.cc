@@ -143,18 +143,8 @@ absl::StatusOr<MappingStepResult> MappingSession::Step(bool finish) {
     // between an integration and its first chunk: the version comes after that chunk, as it did
     // when both ran in one step (publishing first would make the chunk clone, or with a clone
     // cap defer, the bricks it writes).
-    // The exception is the first version of a map: until it is out, every reader (a SLAM
-    // camera past its odometry's carry) waits, and the fused depth alone is worth tracking
-    // against. It goes out as soon as the keyframe's bricks are fused (the optimiser's buffers
-    // grow after it: on teddy they were half the integration); the chunk then clones the few
-    // bricks it writes.
     const bool chunk_follows = chunk_before_next_keyframe_ && BudgetLeft();
-    const bool first_version = latest_ == nullptr;
-    if (first_version && mapper_->integrating() && mapper_->map_complete()) {
-      PLX_RETURN_IF_ERROR(PublishInto(&result));
-      result.keyframes_in_published += 1;  // the keyframe whose buffers are still growing
-      published_mid_integration_ = true;
-    } else if (!mapper_->integrating() && (!chunk_follows || first_version)) {
+    if (!mapper_->integrating() && !chunk_follows) {
       const double now = NowSeconds();
       const double gap = std::max(options_.min_publish_interval_s, 10.0 * last_publish_cost_s_);
       const bool enough_new = keyframes_since_publish_ > 0 ||
@@ -174,12 +164,8 @@ absl::Status MappingSession::IntegrateSlice(double max_seconds, MappingStepResul
   result->integrate_s += NowSeconds() - start;
   if (!done) return absl::OkStatus();
   ++integrated_;
-  if (published_mid_integration_) {
-    published_mid_integration_ = false;  // that version holds this keyframe's bricks already
-  } else {
-    ++keyframes_since_publish_;
-    changed_since_publish_ = true;
-  }
+  ++keyframes_since_publish_;
+  changed_since_publish_ = true;
   mapper_->set_max_iterations(options_.iterations_per_keyframe * integrated_);
   result->keyframes_integrated = 1;
   chunk_before_next_keyframe_ = true;
@@ -223,8 +209,7 @@ MappingSessionProgress MappingSession::progress() const {
     std::lock_guard<std::mutex> lock(mutex_);
     p.keyframes_added = added_;
   }
-  // A keyframe whose bricks went out in the first version counts (its buffers still grow).
-  p.keyframes_integrated = integrated_ + (published_mid_integration_ ? 1 : 0);
+  p.keyframes_integrated = integrated_;
   p.iterations = mapper_->iterations_done();
   p.iteration_budget = options_.iterations_per_keyframe * integrated_;
   p.fraction = p.iteration_budget > 0

@@ -71,9 +71,7 @@ struct MappingStepResult {
 
 struct MappingSessionProgress {
   int keyframes_added = 0;       // AddKeyframe calls accepted
-  // Allocated and initialised in the map, every slice done (or every brick fused, for the
-  // keyframe of a first version published while its optimiser buffers grow).
-  int keyframes_integrated = 0;
+  int keyframes_integrated = 0;  // allocated and initialised in the map, every slice done
   int iterations = 0;
   int iteration_budget = 0;      // iterations_per_keyframe * keyframes integrated
   double fraction = 0.0;         // iterations / budget, capped at 1
@@ -152,8 +150,6 @@ class MappingSession {
   MappingProgress last_;
   std::shared_ptr<const PlenoxelMap> latest_;
   int published_versions_ = 0;
-  // The first version went out while its keyframe's optimiser buffers were still growing.
-  bool published_mid_integration_ = false;
   bool changed_since_publish_ = false;
   int keyframes_since_publish_ = 0;
   int iterations_at_publish_ = 0;

@@ -321,16 +321,12 @@ TEST_F(MappingSessionTest, AHalfIntegratedMapIsNeitherPublishedNorOptimised) {
   ASSERT_TRUE(AddKeyframe(sliced, 0).ok());
   for (int i = 0; i < 3; ++i) ASSERT_TRUE(sliced.IntegrateSlice(kTinySlice).ok());
   ASSERT_TRUE(sliced.integrating());
-  ASSERT_FALSE(sliced.map_complete());
-  // Publishing fuses every brick first (the optimiser's buffers may grow after it): the version
-  // is the map of the whole integration.
+  // Publishing finishes the integration first: the version has every brick fused.
   absl::StatusOr<std::shared_ptr<const PlenoxelMap>> version = sliced.Publish();
   ASSERT_TRUE(version.ok()) << version.status();
-  EXPECT_TRUE(sliced.map_complete());
-  ExpectSameMap(whole.map(), **version);
-  while (sliced.integrating()) ASSERT_TRUE(sliced.IntegrateSlice(kTinySlice).ok());
+  EXPECT_FALSE(sliced.integrating());
   EXPECT_EQ(sliced.integrated_keyframes(), 1);
-  ExpectSameMap(whole.map(), sliced.map());
+  ExpectSameMap(whole.map(), **version);
 
   // So does optimising.
   ASSERT_TRUE(AddKeyframe(whole, 10).ok());
@@ -371,57 +367,38 @@ TEST_F(MappingSessionTest, StepsIntegrateInSlicesWithoutOptimisingOrPublishing) 
     ASSERT_TRUE(AddKeyframe(whole, keyframe).ok());
     const int integrated = sliced.progress().keyframes_integrated;
 
-    // With room for it, one step integrates the keyframe, and does nothing else; but the map's
-    // first version is published as soon as it is fused (readers wait for it), a later one
-    // after the keyframe's first chunk.
-    const bool first = keyframe == 0;
+    // With room for it, one step integrates the keyframe, and does nothing else.
     absl::StatusOr<MappingStepResult> one = whole.Step();
     ASSERT_TRUE(one.ok()) << one.status();
     EXPECT_EQ(one->keyframes_integrated, 1);
     EXPECT_EQ(one->iterations, 0);
-    EXPECT_EQ(one->published != nullptr, first);
+    EXPECT_EQ(one->published, nullptr) << "published before the keyframe's first chunk";
 
     int steps = 0;
     absl::StatusOr<MappingStepResult> step;
-    std::shared_ptr<const PlenoxelMap> sliced_version;  // published while integrating
     for (;;) {
       step = sliced.Step();
       ASSERT_TRUE(step.ok()) << step.status();
       ++steps;
       EXPECT_EQ(step->iterations, 0) << "step " << steps << " optimised while integrating";
-      if (step->published != nullptr) {
-        // Only the map's first version, and only once its bricks are fused.
-        EXPECT_TRUE(first) << "step " << steps << " published before the keyframe's chunk";
-        EXPECT_EQ(sliced_version, nullptr) << "step " << steps << " published again";
-        EXPECT_EQ(step->keyframes_in_published, 1);
-        sliced_version = step->published;
-      }
       if (step->keyframes_integrated > 0) break;
-      // The first version's keyframe counts from when it is out.
-      EXPECT_EQ(sliced.progress().keyframes_integrated,
-                integrated + (sliced_version != nullptr ? 1 : 0));
+      EXPECT_EQ(step->published, nullptr) << "step " << steps << " published unfused bricks";
+      EXPECT_EQ(sliced.progress().keyframes_integrated, integrated);
       EXPECT_TRUE(sliced.has_work());
       ASSERT_LT(steps, 100000);
     }
     EXPECT_GT(steps, 10);
     EXPECT_EQ(sliced.progress().keyframes_integrated, integrated + 1);
-    EXPECT_EQ(sliced_version != nullptr, first);
-    if (first) {
-      ASSERT_NE(one->published, nullptr);
-      ASSERT_NE(sliced_version, nullptr);
-      ExpectSameMap(*one->published, *sliced_version);
-    }
-    // The next step of each is that chunk (one iteration), and then a later keyframe's version
-    // is due (the first keyframe's was published before it, and one iteration is not enough
-    // new work for another).
+    EXPECT_EQ(step->published, nullptr) << "published before the keyframe's first chunk";
+    // The next step of each is that chunk (one iteration), and then the version is due.
     absl::StatusOr<MappingStepResult> whole_chunk = whole.Step();
     absl::StatusOr<MappingStepResult> sliced_chunk = sliced.Step();
     ASSERT_TRUE(whole_chunk.ok() && sliced_chunk.ok());
     EXPECT_EQ(sliced_chunk->iterations, 1);
     EXPECT_EQ(whole_chunk->iterations, 1);
-    EXPECT_EQ(whole_chunk->published == nullptr, first);
-    EXPECT_EQ(sliced_chunk->published == nullptr, first);
-    if (!first) ExpectSameMap(*whole_chunk->published, *sliced_chunk->published);
+    ASSERT_NE(whole_chunk->published, nullptr);
+    ASSERT_NE(sliced_chunk->published, nullptr);
+    ExpectSameMap(*whole_chunk->published, *sliced_chunk->published);
 
     // The budgets run out the same way, whatever the chunks.
     while (whole.has_work()) ASSERT_TRUE(whole.Step(/*finish=*/true).ok());

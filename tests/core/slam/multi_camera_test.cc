@@ -114,9 +114,9 @@ TEST(SlamMultiCameraTest, TwoCamerasTrackInOneGrowingMap) {
   const SlamMapperProgress p = map->progress();
   std::printf("camera A ATE %.2f mm, camera B ATE %.2f mm; %d keyframes (%d from B)\n",
               1000 * ate_a, 1000 * ate_b, p.keyframes, b_keyframes);
-  // Single-camera SLAM on this path: 4.0 mm (slam_session_test); B only revisits A's map.
-  EXPECT_LE(ate_a, 0.005);
-  EXPECT_LE(ate_b, 0.005);
+  // Single-camera SLAM on this path: 5.4 mm (slam_session_test); B only revisits A's map.
+  EXPECT_LE(ate_a, 0.006);
+  EXPECT_LE(ate_b, 0.006);
   // B walks where A's keyframes already are: the policy checks every keyframe of the map.
   EXPECT_LE(b_keyframes, 1);
   EXPECT_EQ(p.keyframes_integrated, p.keyframes);

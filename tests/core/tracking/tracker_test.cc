@@ -48,13 +48,15 @@ Backend* TrackerTest::backend_ = nullptr;
 PlenoxelMap* TrackerTest::map_ = nullptr;
 
 // 5.4 cm and 3.1 degrees off: recovered to well under a millimetre and 0.1 degree (measured
-// 0.52 mm / 0.007 deg on the keyframe).
+// 0.93 mm / 0.014 deg on the keyframe with the default 2048 chosen rays). So far out, 12
+// iterations were not always enough (one draw of 2048 chosen rays stopped at 16 mm; 1024 and
+// 4096, chosen or uniform, reached 0.4-0.8 mm): 16 leave the schedule room.
 TEST_F(TrackerTest, RecoversAPerturbedPose) {
   const SE3 truth = *dataset_->frames()[10].ground_truth;
   Vector6d offset;
   offset << 0.03, -0.04, 0.02, 0.03, -0.02, 0.04;
   TrackerOptions options;
-  options.iterations = 12;
+  options.iterations = 16;
   const TrackingResult r = TrackFrom(truth * SE3::Exp(offset), 10, options);
   EXPECT_EQ(r.state, TrackingState::kOk) << r.reason;
   const SE3 error = truth.Inverse() * r.pose;
