@@ -243,6 +243,17 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::VerifyFeaturePose(
   return verified;
 }
 
+TrackingResult SlamTracker::AdoptVerifiedPlace(TrackingResult place, SlamState state,
+                                               std::string reason, double timestamp,
+                                               SlamFrameResult* out) {
+  tracker_.Reset(place.pose, timestamp);
+  lost_with_depth_ = 0;
+  out->state = state;
+  out->source = PoseSource::kMap;
+  out->reason = std::move(reason);
+  return place;
+}
+
 absl::StatusOr<std::optional<TrackingResult>> SlamTracker::Relocalise(
     const RgbdFrame& frame, const PinholeIntrinsics& k, const std::optional<SE3>& prior,
     const SlamMapView& view, std::string* reason) {
@@ -531,17 +542,15 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       if (placed) {
         const SE3 predicted = prior.value_or(tracker_.Predict(frame.timestamp));
         const bool moved = !PosesAgree(placed->pose, predicted, options_.fusion);
-        tracker_.Reset(placed->pose, frame.timestamp);
-        lost_with_depth_ = 0;
-        out.state = moved ? SlamState::kRelocalised : SlamState::kOk;
-        out.source = PoseSource::kMap;
-        out.reason = moved ? how
-                           : absl::StrCat("the odometry failed; ", how,
-                                          " where the motion model expected it");
         // A place the features found and the map explains at the sensor's noise may grow the
         // map; a jump may not on its first frame (as every relocalisation).
         may_be_keyframe = !moved;
-        result = std::move(placed);
+        result = AdoptVerifiedPlace(
+            *std::move(placed), moved ? SlamState::kRelocalised : SlamState::kOk,
+            moved ? how
+                  : absl::StrCat("the odometry failed; ", how,
+                                 " where the motion model expected it"),
+            frame.timestamp, &out);
       }
     }
     if (!result) {
@@ -590,13 +599,9 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
         }
         out.timings.relocalisation_ms += MillisecondsSince(stage);
         if (moved) {
-          tracker_.Reset(moved->pose, frame.timestamp);
-          lost_with_depth_ = 0;
-          out.state = SlamState::kRelocalised;
-          out.source = PoseSource::kMap;
-          out.reason = how;
           may_be_keyframe = false;
-          result = std::move(moved);
+          result = AdoptVerifiedPlace(*std::move(moved), SlamState::kRelocalised, how,
+                                      frame.timestamp, &out);
         } else {
           const CheckedPose checked = ApplyFeatureCheck(fused, found.has_value(), !elsewhere);
           out.state = checked.state;

@@ -297,6 +297,11 @@ class SlamTracker {
   absl::StatusOr<std::optional<TrackingResult>> VerifyFeaturePose(
       const FeatureRelocalisation& found, const RgbdFrame& frame, const PinholeIntrinsics& k,
       std::string* reason, const PlenoxelMap* map = nullptr, int iterations = 0);
+  // Gives out a place the features found and the map verified on a tracked frame: the map
+  // tracker's motion model restarts there, and `out` says `state` (OK or RELOCALISED), the map
+  // as its source and `reason`. Returns `place` as the frame's result.
+  TrackingResult AdoptVerifiedPlace(TrackingResult place, SlamState state, std::string reason,
+                                    double timestamp, SlamFrameResult* out);
   // A dense attempt of `iterations` from `start` in `map` (the tracked map when null): tracks
   // OK, ends within relocalisation_radius_m of it and explains the frame at the sensor's noise.
   absl::StatusOr<std::optional<TrackingResult>> TryRelocalisationFrom(

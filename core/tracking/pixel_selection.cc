@@ -10,12 +10,18 @@ bool ValidDepth(float d, float max_depth) { return d > 0.0f && d <= max_depth; }
 
 float Luminance(const float* rgb) { return 0.299f * rgb[0] + 0.587f * rgb[1] + 0.114f * rgb[2]; }
 
-// Uniform draws (with repetition, as the tracker has always drawn) from `candidates`.
-void DrawUniform(const std::vector<int32_t>& candidates, int count, std::mt19937* rng,
-                 UnifiedVector<int32_t>* out) {
-  std::uniform_int_distribution<size_t> pick(0, candidates.size() - 1);
+// Uniform draws (with repetition, as the tracker has always drawn) over the pixels with valid
+// depth, listed into `candidates`; none when there are none.
+void DrawUniform(const DepthImage& depth, float max_depth, int count, std::mt19937* rng,
+                 std::vector<int32_t>* candidates, UnifiedVector<int32_t>* out) {
+  candidates->clear();
+  for (int32_t p = 0; p < static_cast<int32_t>(depth.data.size()); ++p) {
+    if (ValidDepth(depth.data[p], max_depth)) candidates->push_back(p);
+  }
+  if (candidates->empty()) return;
+  std::uniform_int_distribution<size_t> pick(0, candidates->size() - 1);
   out->resize(static_cast<size_t>(count));
-  for (int32_t& p : *out) p = candidates[pick(*rng)];
+  for (int32_t& p : *out) p = (*candidates)[pick(*rng)];
 }
 
 }  // namespace
@@ -31,10 +37,7 @@ void SelectTrackingPixels(const RgbdFrame& frame, const PixelSelectionOptions& o
   if (count <= 0 || w <= 0 || h <= 0) return;
   if (options.sampling == PixelSampling::kUniform || frame.color.width != w ||
       frame.color.height != h || frame.color.channels != 3) {
-    for (int32_t p = 0; p < w * h; ++p) {
-      if (ValidDepth(depth[p], options.max_depth)) candidates.push_back(p);
-    }
-    if (!candidates.empty()) DrawUniform(candidates, count, rng, out);
+    DrawUniform(frame.depth, options.max_depth, count, rng, &candidates, out);
     return;
   }
 
@@ -66,15 +69,12 @@ void SelectTrackingPixels(const RgbdFrame& frame, const PixelSelectionOptions& o
   }
   if (candidates.empty()) {
     // Depth only on edges or at the border: better than no rays at all.
-    for (int32_t p = 0; p < w * h; ++p) {
-      if (ValidDepth(depth[p], options.max_depth)) candidates.push_back(p);
-    }
-    if (!candidates.empty()) DrawUniform(candidates, count, rng, out);
+    DrawUniform(frame.depth, options.max_depth, count, rng, &candidates, out);
     return;
   }
   // A textureless view weighs every pixel alike: coverage is all that counts there.
-  const double mean = gradient_sum > 0.0 ? gradient_sum / static_cast<double>(candidates.size())
-                                         : 1.0;
+  const double mean =
+      gradient_sum > 0.0 ? gradient_sum / static_cast<double>(candidates.size()) : 1.0;
   const double cap = options.gradient_cap * mean;
   double total = 0.0;
   for (double& c : weight) {
