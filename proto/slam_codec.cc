@@ -1,5 +1,6 @@
 #include "proto/slam_codec.h"
 
+#include <algorithm>
 #include <cmath>
 #include <utility>
 
@@ -85,6 +86,7 @@ absl::StatusOr<SlamOptions> SlamOptionsFromProto(const pb::SlamOptions& o, float
         "options: realtime and deterministic exclude each other (lock-step waits for mapping)");
   }
   s.deterministic = o.deterministic();
+  s.loop_closure.enabled = !o.has_loop_closure() || o.loop_closure();
   if (o.has_max_pending_keyframes()) {
     if (o.max_pending_keyframes() > static_cast<uint32_t>(kMaxPendingKeyframes)) {
       return Invalid("max_pending_keyframes", absl::StrCat("must be in [0, ", kMaxPendingKeyframes,
@@ -136,6 +138,7 @@ pb::SlamOptions SlamOptionsToProto(const SlamOptions& s, bool realtime,
   }
   wire.set_realtime(realtime);
   wire.set_deterministic(s.deterministic);
+  if (fields.loop_closure) wire.set_loop_closure(s.loop_closure.enabled);
   return wire;
 }
 
@@ -172,7 +175,35 @@ pb::SlamMapping SlamMappingToProto(const SlamMapperProgress& p, const std::strin
   mapping.set_map_bytes(static_cast<uint64_t>(p.map_bytes));
   mapping.set_streams(static_cast<uint32_t>(streams));
   mapping.set_finished(finished);
+  mapping.set_loops_accepted(static_cast<uint32_t>(p.loops.accepted));
+  mapping.set_loops_rejected(static_cast<uint32_t>(p.loops.rejected));
+  mapping.set_corrections(static_cast<uint32_t>(p.loops.corrections));
+  mapping.set_last_solve_ms(p.loops.last_solve_ms);
   return mapping;
+}
+
+pb::SlamCorrection SlamCorrectionToProto(const SlamCorrection& c, const SE3& camera_new_T_old) {
+  pb::SlamCorrection wire;
+  wire.set_generation(static_cast<uint32_t>(c.generation));
+  wire.set_map_version(static_cast<uint64_t>(c.map_version));
+  PoseToProto(camera_new_T_old, wire.mutable_camera_new_t_old());
+  const size_t n = std::min(c.before.size(), c.after.size());
+  for (size_t i = 0; i < n; ++i) {
+    // Unmoved keyframes are left out: a long map's far end barely moves, and a headset's
+    // update should stay small.
+    if ((c.after[i].translation() - c.before[i].translation()).norm() <= 1e-3 &&
+        RotationAngleBetween(c.before[i], c.after[i]) <= 1e-3) {
+      continue;
+    }
+    pb::KeyframeMove* move = wire.add_moved();
+    move->set_keyframe(static_cast<uint32_t>(i));
+    PoseToProto(c.before[i], move->mutable_before());
+    PoseToProto(c.after[i], move->mutable_after());
+  }
+  wire.set_keyframes(static_cast<uint32_t>(n));
+  wire.set_max_shift_m(c.max_shift_m);
+  wire.set_loops(static_cast<uint32_t>(c.loops));
+  return wire;
 }
 
 pb::SlamUpdate SlamUpdateToProto(const SlamFrameResult& result, uint32_t frame, double latency_ms,
@@ -191,6 +222,10 @@ pb::SlamUpdate SlamUpdateToProto(const SlamFrameResult& result, uint32_t frame, 
   update.set_segment(static_cast<uint32_t>(result.segment));
   update.set_new_segment(result.new_segment);
   if (result.main_T_segment) PoseToProto(*result.main_T_segment, update.mutable_main_t_segment());
+  update.set_correction_generation(static_cast<uint32_t>(result.correction_generation));
+  if (result.correction != nullptr) {
+    *update.mutable_correction() = SlamCorrectionToProto(*result.correction, result.frame_change);
+  }
   *update.mutable_mapping() = std::move(mapping);
   return update;
 }

@@ -51,6 +51,7 @@ struct SlamOptionsFields {
   bool rays_per_iteration = false;
   bool max_depth = false;
   bool max_pending_keyframes = false;
+  bool loop_closure = false;
 };
 
 // The inverse of SlamOptionsFromProto for the chosen fields; the tracker's mode, `realtime`
@@ -67,6 +68,11 @@ std::optional<SlamState> SlamStateFromProto(pb::SlamState state);
 // whether it has ended (its final version published).
 pb::SlamMapping SlamMappingToProto(const SlamMapperProgress& progress, const std::string& job_id,
                                    int streams, bool finished);
+
+// A loop closure's correction as a stream sends it: the keyframes that moved, and how this
+// camera moved with it (SlamFrameResult::frame_change).
+pb::SlamCorrection SlamCorrectionToProto(const SlamCorrection& correction,
+                                         const SE3& camera_new_T_old);
 
 // A tracked frame's update: the result's timestamp, pose, state, reason, keyframe flag, map
 // version and valid rays, with what the stream knows: the frame's 0-based index in the stream,

@@ -15,6 +15,8 @@ packages=(cmake ninja-build g++ pkg-config ccache
           grpc-proto python3-grpcio python3-grpc-tools python3-protobuf python3-numpy
           # The daemon's metrics HTTP server; OpenSSL to check TLS files before serving.
           libssl-dev
+          # Loop closure: the pose graph is solved with Ceres (core/slam/pose_graph.h).
+          libceres-dev
           # The web viewer (plenoxd --viewer, plenox view) runs on Debian's three.js; its
           # browser test loads the page in headless Chromium (WebGL on SwiftShader).
           libjs-three chromium)

@@ -22,4 +22,19 @@ std::vector<StampedPose> PosesInMainMap(const std::vector<SlamFrameResult>& resu
   return poses;
 }
 
+std::vector<StampedPose> CorrectedPoses(const std::vector<SlamFrameResult>& results,
+                                        const std::vector<StampedPose>& keyframes) {
+  std::vector<StampedPose> poses = PosesInMainMap(results);
+  for (size_t i = 0; i < results.size(); ++i) {
+    const SlamFrameResult& r = results[i];
+    if (r.segment != 0 || r.reference_keyframe < 0 ||
+        r.reference_keyframe >= static_cast<int>(keyframes.size())) {
+      continue;
+    }
+    poses[i].pose = keyframes[r.reference_keyframe].pose * r.reference_keyframe_pose.Inverse() *
+                    r.pose;
+  }
+  return poses;
+}
+
 }  // namespace plx

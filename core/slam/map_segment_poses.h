@@ -20,4 +20,11 @@ std::map<int, SE3> SegmentJoins(const std::vector<SlamFrameResult>& results);
 // Every result's pose, in the main map where its segment joined it (SegmentJoins).
 std::vector<StampedPose> PosesInMainMap(const std::vector<SlamFrameResult>& results);
 
+// Every result's pose in the main map's final frame (`plenox slam --corrected-out`): a frame
+// anchored to a keyframe (SlamFrameResult::reference_keyframe) keeps its pose relative to it,
+// moved to that keyframe's final pose (`keyframes`: the main map's, as refined and corrected at
+// the end); the others as PosesInMainMap.
+std::vector<StampedPose> CorrectedPoses(const std::vector<SlamFrameResult>& results,
+                                        const std::vector<StampedPose>& keyframes);
+
 }  // namespace plx

@@ -35,6 +35,7 @@ SlamSplitOptions SplitSlamOptions(const SlamOptions& o) {
 
   out.mapper.mapping = o.mapping;
   out.mapper.refinement = o.refinement;
+  out.mapper.loop_closure = o.loop_closure;
   if (o.deterministic) ApplyLockStepMappingPolicy(&out.mapper);
 
   out.gate.lock_step = o.deterministic;
@@ -78,16 +79,27 @@ absl::Status SlamCoordinator::StartMapper(Backend* backend) {
   return absl::OkStatus();
 }
 
-absl::Status SlamCoordinator::AddKeyframeLocked(const RgbdFrame& frame, const SE3& pose,
+absl::Status SlamCoordinator::AddKeyframeLocked(const RgbdFrame& frame, const SE3& given_pose,
                                                 const PinholeIntrinsics& k,
                                                 std::shared_ptr<const FrameFeatures> features,
-                                                Segment* to, bool keep) {
+                                                Segment* to, bool keep, int generation) {
+  SE3 pose = given_pose;
+  const bool main = to == segments_[0].get();
+  if (main && to->correction != nullptr && generation < to->correction->generation) {
+    pose = to->correction->Move(pose);  // tracked before the camera saw the correction
+  }
   if (to->mapper == nullptr) {
     // A mapper is made by the step-runner, with its backend (the daemon's first task).
     to->early.push_back({frame, pose, k});
     to->early.back().frame.ground_truth.reset();
   } else {
     PLX_RETURN_IF_ERROR(to->mapper->AddKeyframe(frame, pose, k));
+  }
+  if (main && to->rebuild_collecting) {
+    to->rebuild_backlog.push_back({frame, pose, k});
+    to->rebuild_backlog.back().frame.ground_truth.reset();
+  } else if (main && to->rebuild != nullptr) {
+    PLX_RETURN_IF_ERROR(to->rebuild->AddKeyframe(frame, to->rebuild_solve->Move(pose), k));
   }
   if (keep) {
     to->kept.push_back({frame, pose, k});
@@ -111,10 +123,11 @@ absl::Status SlamCoordinator::AddKeyframe(const RgbdFrame& frame, const SE3& pos
     return absl::InvalidArgumentError(absl::StrCat("no open map segment ", segment));
   }
   return AddKeyframeLocked(frame, pose, k, std::move(features), segments_[segment].get(),
-                           /*keep=*/segment != 0);
+                           /*keep=*/segment != 0, CurrentGenerationLocked());
 }
 
-absl::Status SlamCoordinator::JoinLocked(int segment, const SE3& main_T_segment) {
+absl::Status SlamCoordinator::JoinLocked(int segment, const SE3& main_T_segment,
+                                         int generation) {
   if (segment <= 0 || segment >= static_cast<int>(segments_.size()) ||
       segments_[segment]->joined) {
     return absl::InvalidArgumentError(absl::StrCat("no open map segment ", segment, " to join"));
@@ -127,7 +140,7 @@ absl::Status SlamCoordinator::JoinLocked(int segment, const SE3& main_T_segment)
     const SE3 pose = i < refined.size() ? refined[i].pose : from.kept[i].pose;
     PLX_RETURN_IF_ERROR(AddKeyframeLocked(from.kept[i].frame, main_T_segment * pose,
                                           from.kept[i].intrinsics, from.features[i],
-                                          segments_[0].get(), /*keep=*/false));
+                                          segments_[0].get(), /*keep=*/false, generation));
   }
   from.joined = true;
   from.kept.clear();
@@ -147,14 +160,16 @@ absl::StatusOr<bool> SlamCoordinator::Accept(const RgbdFrame& frame,
     *segment = static_cast<int>(segments_.size()) - 1;
     ++segment_counts_.started;
   } else if (result->main_T_segment && *segment != 0) {
-    PLX_RETURN_IF_ERROR(JoinLocked(*segment, *result->main_T_segment));
+    PLX_RETURN_IF_ERROR(
+        JoinLocked(*segment, *result->main_T_segment, result->correction_generation));
     *segment = 0;
     queued = true;
   }
   result->segment = *segment;
   if (result->keyframe) {
     PLX_RETURN_IF_ERROR(AddKeyframeLocked(frame, result->pose, k, result->features,
-                                          segments_[*segment].get(), /*keep=*/*segment != 0));
+                                          segments_[*segment].get(), /*keep=*/*segment != 0,
+                                          result->correction_generation));
     queued = true;
   }
   return queued;
@@ -200,10 +215,233 @@ absl::StatusOr<SlamCoordinator::Segment*> SlamCoordinator::SegmentToStep(SlamSte
 absl::StatusOr<SlamStepResult> SlamCoordinator::Step(SlamStepMode mode) {
   bool main = true;
   PLX_ASSIGN_OR_RETURN(Segment * segment, SegmentToStep(mode, &main));
+  bool rebuilding = false;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    Segment& m = *segments_[0];
+    if (m.rebuild != nullptr && mode == SlamStepMode::kDrain) {
+      // Draining (the daemon's shutdown) saves what was accepted, soon: a rebuild would take
+      // as long as mapping everything again. The map is saved uncorrected.
+      m.rebuild.reset();
+      m.rebuild_solve.reset();
+      ++loop_counts_.rebuilds_abandoned;
+    }
+    rebuilding = m.rebuild != nullptr;
+  }
+  if (rebuilding && main) {
+    // The main map and the rebuild in turn; the rebuild alone once the main one is idle.
+    Segment& m = *segments_[0];
+    m.step_rebuild_next = !m.step_rebuild_next;
+    if (m.step_rebuild_next || !m.mapper->has_work()) return StepRebuild();
+  }
   PLX_ASSIGN_OR_RETURN(SlamStepResult out, StepSegment(segment, main, mode));
-  // Out of work only once every map is (SegmentToStep chose the main map last).
+  if (main) PLX_RETURN_IF_ERROR(CloseLoops());
+  // Out of work only once every map is (SegmentToStep chose the main map last), and no
+  // rebuild or correction is under way.
   if (!main) out.out_of_work = false;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (segments_[0]->rebuild != nullptr || segments_[0]->correction_due) {
+      out.out_of_work = false;
+      segments_[0]->progress.idle = false;
+    }
+  }
   return out;
+}
+
+absl::Status SlamCoordinator::CloseLoops() {
+  Segment& main = *segments_[0];
+  const LoopClosureOptions& options = mapper_options_.loop_closure;
+  SlamMapper* mapper = nullptr;
+  std::vector<std::shared_ptr<const FrameFeatures>> features;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!options.enabled || main.rebuild != nullptr || main.mapper == nullptr) {
+      return absl::OkStatus();
+    }
+    mapper = main.mapper.get();
+    features = main.features;
+  }
+  const TrainingSet& set = mapper->integrated_keyframes();  // ours: we are the step-runner
+  const std::vector<SE3> poses = mapper->all_keyframe_poses();
+  const int integrated = std::min<int>(set.num_frames(), static_cast<int>(features.size()));
+  if (integrated > main.loop_checked) {
+    std::vector<LoopKeyframe> keyframes(integrated);
+    std::vector<double> timestamps(integrated);
+    for (int i = 0; i < integrated; ++i) {
+      keyframes[i] = {features[i].get(), &set.frame(i), &set.intrinsics(i), poses[i]};
+      timestamps[i] = set.frame(i).timestamp;
+    }
+    SlamLoopCounts found;
+    for (int q = main.loop_checked; q < integrated; ++q) {
+      PLX_ASSIGN_OR_RETURN(const LoopSearch search, SearchLoop(q, keyframes, timestamps, options));
+      ++found.checked;
+      found.proposed += search.proposed;
+      found.rejected += search.rejected;
+      if (search.loop) {
+        ++found.verified;
+        std::lock_guard<std::mutex> lock(mutex_);
+        main.loops.push_back(*search.loop);
+        main.correction_due = true;
+      }
+    }
+    main.loop_checked = integrated;
+    std::lock_guard<std::mutex> lock(mutex_);
+    loop_counts_.checked += found.checked;
+    loop_counts_.proposed += found.proposed;
+    loop_counts_.rejected += found.rejected;
+    loop_counts_.verified += found.verified;
+  }
+  // The solve needs every accepted keyframe integrated: the rebuild takes them from the
+  // mapper's own keyframes.
+  if (!main.correction_due || mapper->progress().pending_keyframes > 0) return absl::OkStatus();
+  return CorrectAndRebuild(mapper);
+}
+
+absl::Status SlamCoordinator::CorrectAndRebuild(SlamMapper* mapper) {
+  Segment& main = *segments_[0];
+  const LoopClosureOptions& options = mapper_options_.loop_closure;
+  const std::vector<SE3> poses = mapper->all_keyframe_poses();
+  std::vector<LoopEdge> loops;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    loops = main.loops;
+  }
+  PLX_ASSIGN_OR_RETURN(const LoopCorrection correction, CorrectKeyframes(poses, loops, options));
+  main.correction_due = false;
+  std::vector<LoopEdge> kept;
+  for (size_t i = 0; i < loops.size(); ++i) {
+    if (std::find(correction.rejected_loops.begin(), correction.rejected_loops.end(),
+                  static_cast<int>(i)) == correction.rejected_loops.end()) {
+      kept.push_back(loops[i]);
+    }
+  }
+  auto solve = std::make_shared<SlamCorrection>();
+  solve->before = poses;
+  solve->after = correction.poses;
+  solve->max_shift_m = correction.max_shift_m;
+  solve->solve_ms = correction.solve_seconds * 1e3;
+  solve->loops = static_cast<int>(kept.size());
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    loop_counts_.rejected += static_cast<int>(correction.rejected_loops.size());
+    loop_counts_.accepted = static_cast<int>(kept.size());
+    loop_counts_.last_solve_ms = solve->solve_ms;
+    loop_counts_.last_shift_m = correction.max_shift_m;
+    // A keyframe accepted since the poses were read is not in the mapper's keyframes yet
+    // (nor in the solve): the next step solves again.
+    if (mapper->progress().keyframes != static_cast<int>(poses.size())) {
+      main.correction_due = true;
+      main.loops = std::move(kept);
+      return absl::OkStatus();
+    }
+    main.loops = std::move(kept);
+    if (!correction.significant) return absl::OkStatus();
+    main.rebuild_collecting = true;
+    main.rebuild_solve = solve;
+    loop_counts_.rebuilding = true;
+  }
+  // Filled outside the lock (copies of every keyframe's images): cameras go on meanwhile and
+  // their keyframes wait in the backlog.
+  absl::StatusOr<std::unique_ptr<SlamMapper>> rebuild =
+      SlamMapper::Create(mapper_options_, backend_, base_);
+  const TrainingSet& set = mapper->integrated_keyframes();
+  for (int i = 0; rebuild.ok() && i < set.num_frames(); ++i) {
+    absl::Status added = (*rebuild)->AddKeyframe(set.frame(i), correction.poses[i],
+                                                 set.intrinsics(i));
+    if (!added.ok()) rebuild = added;
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  main.rebuild_collecting = false;
+  absl::Status status = rebuild.status();
+  for (const EarlyKeyframe& k : main.rebuild_backlog) {
+    if (!status.ok()) break;
+    status = (*rebuild)->AddKeyframe(k.frame, solve->Move(k.pose), k.intrinsics);
+  }
+  main.rebuild_backlog.clear();
+  if (!status.ok()) {
+    main.rebuild_solve.reset();
+    loop_counts_.rebuilding = false;
+    return status;
+  }
+  main.rebuild = *std::move(rebuild);
+  return absl::OkStatus();
+}
+
+absl::StatusOr<SlamStepResult> SlamCoordinator::StepRebuild() {
+  Segment& main = *segments_[0];
+  SlamMapper* rebuild = nullptr;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    rebuild = main.rebuild.get();
+  }
+  SlamStepResult out;
+  if (rebuild->has_work()) {
+    PLX_RETURN_IF_ERROR(rebuild->Step(/*finish=*/false).status());
+    out.stepped = true;
+  }
+  const SlamMapperProgress p = rebuild->progress();
+  const double budget = static_cast<double>(mapper_options_.mapping.iterations_per_keyframe) *
+                        p.keyframes_integrated;
+  // Ready once every keyframe is in and it has had its share of the iterations (the rest
+  // after the swap); finishing steps it until then too.
+  const bool trained = !rebuild->has_work() ||
+                       p.mapping_iterations >= mapper_options_.rebuild_iteration_share * budget;
+  if (p.pending_keyframes == 0 && trained) return SwapInRebuild();
+  return out;
+}
+
+absl::StatusOr<SlamStepResult> SlamCoordinator::SwapInRebuild() {
+  Segment& main = *segments_[0];
+  SlamMapper* rebuild = nullptr;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    rebuild = main.rebuild.get();
+  }
+  PLX_RETURN_IF_ERROR(rebuild->PublishIfChanged());
+  const SlamMapVersion latest = rebuild->latest();
+  int64_t number = 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    number = main.published.version + 1;
+  }
+  if (publisher_) {
+    PLX_ASSIGN_OR_RETURN(number, publisher_(latest.map, 0));
+  }
+  SlamStepResult out;
+  out.stepped = true;
+  out.published = true;
+  std::unique_ptr<SlamMapper> old;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto correction = std::make_shared<SlamCorrection>(*main.rebuild_solve);
+    correction->generation = main.correction != nullptr ? main.correction->generation + 1 : 1;
+    correction->map_version = number;
+    // Exactly how every keyframe moved between the frames: each mapper has every keyframe
+    // (both were given each one), the old one refined as mapping went on meanwhile.
+    correction->before = main.mapper->all_keyframe_poses();
+    correction->after = rebuild->all_keyframe_poses();
+    main.correction = std::move(correction);
+    old = std::move(main.mapper);
+    main.mapper = std::move(main.rebuild);
+    main.rebuild_solve.reset();
+    main.published = {latest.map, number};
+    main.version_offset = number - latest.version;
+    main.handed_mapper_version = latest.version;
+    const SlamMapperProgress p = main.mapper->progress();
+    main.integrated_at_publish = p.keyframes_integrated;
+    main.has_work = main.mapper->has_work();
+    const int keyframes = main.progress.keyframes;
+    main.progress = p;
+    main.progress.keyframes = keyframes;
+    main.progress.pending_keyframes = keyframes - p.keyframes_integrated;
+    main.progress.map_version = number;
+    main.progress.idle = IdleLocked(main);
+    ++loop_counts_.corrections;
+    loop_counts_.rebuilding = false;
+  }
+  out.out_of_work = !main.mapper->has_work();
+  return out;  // `old` goes here, outside the lock
 }
 
 absl::StatusOr<SlamStepResult> SlamCoordinator::StepSegment(Segment* segment, bool main,
@@ -233,7 +471,7 @@ absl::StatusOr<SlamStepResult> SlamCoordinator::StepSegment(Segment* segment, bo
   // mapper's own); a segment's versions keep the mapper's.
   const SlamMapVersion latest = mapper->latest();
   const int integrated = mapper->progress().keyframes_integrated;
-  int64_t number = latest.version;
+  int64_t number = latest.version + segment->version_offset;
   if (latest.map != nullptr && latest.version != segment->handed_mapper_version) {
     if (publisher_ && main) {
       PLX_ASSIGN_OR_RETURN(
@@ -258,7 +496,23 @@ absl::StatusOr<SlamStepResult> SlamCoordinator::StepSegment(Segment* segment, bo
 
 bool SlamCoordinator::IdleLocked(const Segment& segment) const {
   return segment.mapper != nullptr && !segment.has_work && segment.early.empty() &&
-         segment.progress.pending_keyframes == 0;
+         segment.progress.pending_keyframes == 0 && segment.rebuild == nullptr &&
+         !segment.correction_due;
+}
+
+int SlamCoordinator::CurrentGenerationLocked() const {
+  const Segment& main = *segments_[0];
+  return main.correction != nullptr ? main.correction->generation : 0;
+}
+
+std::vector<LoopEdge> SlamCoordinator::loops() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return segments_[0]->loops;
+}
+
+std::shared_ptr<const SlamCorrection> SlamCoordinator::correction() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return segments_[0]->correction;
 }
 
 SlamMapView SlamCoordinator::ViewLocked(int segment) const {
@@ -277,6 +531,7 @@ SlamMapView SlamCoordinator::ViewLocked(int segment) const {
     view.keyframe_features = s.features;
   }
   view.pending_keyframes = s.progress.pending_keyframes;
+  if (segment == 0) view.correction = s.correction;
   return view;
 }
 
@@ -310,7 +565,9 @@ bool SlamCoordinator::MayCameraProceed(int max_pending_keyframes, int segment,
 
 SlamMapperProgress SlamCoordinator::progress() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return segments_[0]->progress;
+  SlamMapperProgress progress = segments_[0]->progress;
+  progress.loops = loop_counts_;
+  return progress;
 }
 
 SlamMapVersion SlamCoordinator::latest() const {

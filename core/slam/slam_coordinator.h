@@ -22,6 +22,15 @@
 //     joined poses and the segment ends. Accept applies a camera's frame result to all this.
 //     Only the main map is published (the daemon's store, latest()); a segment never joined is
 //     left out of it (segments() says how many).
+//   - loop closure on the main map (docs/SLAM.md, "Loop closure"; core/slam/loop_closure.h):
+//     each integrated keyframe is searched for a loop on the step-runner; a verified loop goes
+//     into the pose graph, and a solve that moves the keyframes starts a rebuild: a second
+//     mapper fed every keyframe at its corrected pose (and every keyframe accepted meanwhile,
+//     moved with its nearest keyframe), stepped in turn with the main one so tracking never
+//     waits for it. Once it has integrated them all and spent rebuild_iteration_share of its
+//     budget it replaces the main mapper and its map is published as one version with a
+//     SlamCorrection (View().correction): cameras move with it before their next frame, and
+//     a keyframe tracked in the old frame is moved into the new one when it is accepted.
 //
 // Threads: AddKeyframe, View, MayCameraProceed and the accessors from any thread (an internal
 // lock guards the coordinator's state; the mapper has its own); StartMapper and Step from one
@@ -41,6 +50,8 @@
 #include "core/geometry/stamped_pose.h"
 #include "core/grid/plenoxel_map.h"
 #include "core/kernels/backend.h"
+#include "core/slam/loop_closure.h"
+#include "core/slam/slam_correction.h"
 #include "core/slam/slam_mapper.h"
 #include "core/slam/slam_tracker.h"
 
@@ -155,6 +166,10 @@ class SlamCoordinator {
   SlamMapVersion latest() const;  // the newest version with its number (View's map)
   std::vector<StampedPose> keyframe_poses() const;  // as refined so far, in order
   SlamSegmentCounts segments() const;
+  // The main map's latest loop-closure correction (null: none).
+  std::shared_ptr<const SlamCorrection> correction() const;
+  // The loop edges in the main map's pose graph now (keyframe indices; the viewer draws them).
+  std::vector<LoopEdge> loops() const;
 
  private:
   struct EarlyKeyframe {
@@ -179,21 +194,50 @@ class SlamCoordinator {
     // Step-runner only.
     int64_t handed_mapper_version = 0;  // the mapper's version last given a number
     int integrated_at_publish = 0;
+    // Without a publisher: added to the mapper's own numbers (a rebuilt map's mapper counts
+    // from 1 again; the map's numbers go on).
+    int64_t version_offset = 0;
+
+    // Loop closure (the main map only). Step-runner:
+    int loop_checked = 0;          // keyframes searched for a loop so far
+    bool correction_due = false;   // a loop was accepted since the last solve
+    bool step_rebuild_next = false;
+    // Guarded by the coordinator's lock (written by the step-runner):
+    std::vector<LoopEdge> loops;   // verified and not rejected, in keyframe indices
+    std::unique_ptr<SlamMapper> rebuild;  // the map at corrected poses, being built
+    // The solve the rebuild is built from (before: the poses it saw; after: corrected): a
+    // keyframe accepted while it runs reaches the rebuild moved by it.
+    std::shared_ptr<const SlamCorrection> rebuild_solve;
+    bool rebuild_collecting = false;       // the rebuild is being filled outside the lock...
+    std::vector<EarlyKeyframe> rebuild_backlog;  // ...and these came meanwhile
+    std::shared_ptr<const SlamCorrection> correction;  // the latest published
   };
 
   bool IdleLocked(const Segment& segment) const;
   SlamMapView ViewLocked(int segment) const;
+  // `generation`: the main map's frame `pose` is in (SlamFrameResult::correction_generation);
+  // a pose from before the latest correction moves with it.
   absl::Status AddKeyframeLocked(const RgbdFrame& frame, const SE3& pose,
                                  const PinholeIntrinsics& k,
                                  std::shared_ptr<const FrameFeatures> features, Segment* to,
-                                 bool keep);
-  // Moves `segment`'s keyframes into the main map at main_T_segment times their poses.
-  absl::Status JoinLocked(int segment, const SE3& main_T_segment);
+                                 bool keep, int generation);
+  // Moves `segment`'s keyframes into the main map at main_T_segment times their poses
+  // (main_T_segment measured in the main map's frame `generation`).
+  absl::Status JoinLocked(int segment, const SE3& main_T_segment, int generation);
+  int CurrentGenerationLocked() const;  // the main map's corrections so far
   // The segment Step works on in `mode` (the main map when none has work; `main` says whether
   // it is), the segments' mappers made if needed.
   absl::StatusOr<Segment*> SegmentToStep(SlamStepMode mode, bool* main);
   // One step of `segment` (the main map: index 0) in `mode`.
   absl::StatusOr<SlamStepResult> StepSegment(Segment* segment, bool main, SlamStepMode mode);
+  // Loop closure after a main-map step: searches the newly integrated keyframes, solves the
+  // pose graph when a loop was accepted and starts a rebuild when the solve moved keyframes.
+  absl::Status CloseLoops();
+  // Solves the graph and starts the rebuild (the main mapper has nothing pending).
+  absl::Status CorrectAndRebuild(SlamMapper* mapper);
+  // One step of the rebuild; once it is ready, swaps it in and publishes it.
+  absl::StatusOr<SlamStepResult> StepRebuild();
+  absl::StatusOr<SlamStepResult> SwapInRebuild();
 
   const SlamMapperOptions mapper_options_;
   const SlamGateOptions gate_;
@@ -205,6 +249,7 @@ class SlamCoordinator {
   std::vector<std::unique_ptr<Segment>> segments_;  // [0]: the main map; never shrinks
   bool started_ = false;                            // StartMapper ran
   SlamSegmentCounts segment_counts_;
+  SlamLoopCounts loop_counts_;
 };
 
 }  // namespace plx

@@ -9,6 +9,10 @@ namespace plx {
 
 absl::Status ValidateSlamMapperOptions(const SlamMapperOptions& options) {
   PLX_RETURN_IF_ERROR(ValidateMappingSessionOptions(options.mapping));
+  PLX_RETURN_IF_ERROR(ValidateLoopClosureOptions(options.loop_closure));
+  if (!(options.rebuild_iteration_share >= 0.0 && options.rebuild_iteration_share <= 1.0)) {
+    return absl::InvalidArgumentError("rebuild_iteration_share must be in [0, 1]");
+  }
   return ValidateKeyframeRefinementOptions(options.refinement);
 }
 
@@ -119,6 +123,16 @@ std::vector<StampedPose> SlamMapper::accepted_keyframes() const {
 std::vector<StampedPose> SlamMapper::keyframe_poses() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return refined_;
+}
+
+std::vector<SE3> SlamMapper::all_keyframe_poses() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  std::vector<SE3> poses;
+  poses.reserve(accepted_.size());
+  for (size_t i = 0; i < accepted_.size(); ++i) {
+    poses.push_back(i < refined_.size() ? refined_[i].pose : accepted_[i].pose);
+  }
+  return poses;
 }
 
 SlamMapperProgress SlamMapper::progress() const {

@@ -27,12 +27,18 @@
 #include "core/kernels/backend.h"
 #include "core/mapping/mapping_session.h"
 #include "core/slam/keyframe_refinement.h"
+#include "core/slam/loop_closure.h"
 
 namespace plx {
 
 struct SlamMapperOptions {
   MappingSessionOptions mapping;
   KeyframeRefinementOptions refinement;  // refinement.window = 0 turns it off
+  // Loop closure on the main map (SlamCoordinator; loop_closure.enabled = false turns it off).
+  LoopClosureOptions loop_closure;
+  // A map rebuilt at corrected poses replaces the published one once every keyframe is
+  // integrated and it has run this share of its iteration budget (it spends the rest after).
+  double rebuild_iteration_share = 0.5;
 };
 
 absl::Status ValidateSlamMapperOptions(const SlamMapperOptions& options);
@@ -41,6 +47,20 @@ absl::Status ValidateSlamMapperOptions(const SlamMapperOptions& options);
 struct SlamMapVersion {
   std::shared_ptr<const PlenoxelMap> map;
   int64_t version = 0;
+};
+
+// Loop closure's counters (SlamCoordinator, the main map's).
+struct SlamLoopCounts {
+  int checked = 0;      // keyframes searched for a loop
+  int proposed = 0;     // candidates place recognition ranked (above the similarity floor)
+  int verified = 0;     // of them, passed the features' and the dense check
+  int rejected = 0;     // failed a check, or the pose graph's
+  int accepted = 0;     // loop edges in the pose graph now
+  int corrections = 0;  // corrected maps published (rebuilds swapped in)
+  int rebuilds_abandoned = 0;  // a drain (the daemon's shutdown) came first
+  bool rebuilding = false;     // a map at corrected poses is being built
+  double last_solve_ms = 0.0;  // the last pose-graph solve
+  double last_shift_m = 0.0;   // the largest keyframe move it made
 };
 
 struct SlamMapperProgress {
@@ -56,6 +76,7 @@ struct SlamMapperProgress {
   // No keyframe waiting and the iteration budget spent, the last version published
   // (SlamCoordinator::progress; the mapper's own progress leaves it false).
   bool idle = false;
+  SlamLoopCounts loops;  // SlamCoordinator's; the mapper's own leaves them 0
 };
 
 // Bytes a keyframe keeps for mapping: float RGB + float depth per pixel, and two 32-bit ray
@@ -90,7 +111,11 @@ class SlamMapper {
   SlamMapVersion latest() const;
   std::vector<StampedPose> accepted_keyframes() const;  // poses as accepted, in order
   std::vector<StampedPose> keyframe_poses() const;      // as refined so far, in order
+  // Every accepted keyframe's pose: as refined when integrated, else as accepted.
+  std::vector<SE3> all_keyframe_poses() const;
   SlamMapperProgress progress() const;
+  // The keyframes integrated so far with their images (loop closure, rebuilds). Step-runner.
+  const TrainingSet& integrated_keyframes() const { return mapping_->keyframes(); }
 
  private:
   SlamMapper(const SlamMapperOptions& options, Backend* backend,

@@ -59,6 +59,9 @@ struct SlamOptions {
   MappingSessionOptions mapping;
   KeyframePolicy keyframes;
   KeyframeRefinementOptions refinement;  // refinement.window = 0 turns it off
+  // Loop closure and the map's rebuild at corrected poses (core/slam/loop_closure.h;
+  // loop_closure.enabled = false turns it off).
+  LoopClosureOptions loop_closure;
 
   // Lock-step mapping on the caller's thread (see above). Bit-identical results also need a
   // mapping backend whose gradient scatter has a fixed order: the CPU backend on one thread

@@ -416,6 +416,31 @@ SlamFrameResult SlamTracker::Bootstrap(const RgbdFrame& frame, const std::option
   return out;
 }
 
+void SlamTracker::FollowCorrection(const SlamMapView& view, SlamFrameResult* out) {
+  const SlamMapView* main = view.segment == 0 ? &view : view.main.get();
+  const std::shared_ptr<const SlamCorrection> correction =
+      main != nullptr ? main->correction : nullptr;
+  if (correction != nullptr && correction->generation > correction_generation_) {
+    correction_generation_ = correction->generation;
+    // A camera in a segment keeps the segment's frame (its join measures main_T_segment in
+    // the corrected main map); one in the main map moves with the keyframe nearest to it.
+    // A camera that missed a correction (two came while it was not tracking) moves by the
+    // latest only: its poses are then off by what the one it missed moved them.
+    const std::optional<SE3> at =
+        previous_ && previous_->pose ? previous_->pose : last_good_pose_;
+    if (view.segment == 0 && at) {
+      const SE3 change = correction->FrameChangeAt(*at);
+      if (previous_ && previous_->pose) previous_->pose = change * *previous_->pose;
+      if (last_good_pose_) last_good_pose_ = change * *last_good_pose_;
+      carry_origin_ = change * carry_origin_;
+      tracker_.MoveWorld(change);
+      out->correction = correction;
+      out->frame_change = change;
+    }
+  }
+  out->correction_generation = correction_generation_;
+}
+
 absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
                                                    const PinholeIntrinsics& k,
                                                    const std::optional<SE3>& prior,
@@ -455,6 +480,7 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
     tracker_.Reset(pose, frame.timestamp);
     last_good_pose_ = pose;
   }
+  FollowCorrection(view, &out);
   tracked_map_ = view.map;
   tracker_.set_map(tracked_map_.get());
   std::optional<TrackingResult> result;
@@ -677,6 +703,17 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       stage = Clock::now();
       PLX_ASSIGN_OR_RETURN(out.features, FeaturesOf(frame, k));
       out.timings.features_ms += MillisecondsSince(stage);
+    }
+  }
+  // The keyframe the pose is anchored to, should a correction move the keyframes later.
+  const SlamMapView* main = view.segment == 0 ? &view : view.main.get();
+  if (main != nullptr && (view.segment == 0 || out.main_T_segment)) {
+    SlamCorrection anchors;
+    for (const StampedPose& kf : main->keyframe_poses) anchors.before.push_back(kf.pose);
+    anchors.after = anchors.before;
+    out.reference_keyframe = anchors.NearestKeyframe(out.pose);
+    if (out.reference_keyframe >= 0) {
+      out.reference_keyframe_pose = anchors.before[out.reference_keyframe];
     }
   }
   counts_.ok += out.state == SlamState::kOk;

@@ -59,6 +59,7 @@
 #include "core/relocalisation/frame_features.h"
 #include "core/slam/keyframe_policy.h"
 #include "core/slam/pose_fusion.h"
+#include "core/slam/slam_correction.h"
 #include "core/slam/slam_state.h"
 #include "core/tracking/tracker.h"
 
@@ -166,6 +167,9 @@ struct SlamMapView {
   // The keyframes' features, in the same order as keyframe_poses (null: none were extracted).
   std::vector<std::shared_ptr<const FrameFeatures>> keyframe_features;
   int pending_keyframes = 0;  // accepted, not integrated yet
+  // The map's latest loop-closure correction (null: none yet): a camera whose poses are in an
+  // earlier frame moves with it before it tracks (SlamTracker::Track). The main map's only.
+  std::shared_ptr<const SlamCorrection> correction;
   // The map segment the view is of (0: the main map; SlamCoordinator::View). A segment's view
   // carries the main map's (map, keyframe poses and features) to find it again.
   int segment = 0;
@@ -203,6 +207,18 @@ struct SlamFrameResult {
   // in the main map. The segment's earlier poses map into the main map by it.
   std::optional<SE3> main_T_segment;
   int64_t map_version = 0;      // the published version the frame was tracked against
+  // The main map's frame `pose` is in: the loop-closure corrections the camera has followed
+  // (SlamCorrection::generation; 0 before any).
+  int correction_generation = 0;
+  // Set on the first frame tracked after a correction: the correction, and how the camera
+  // moved with it (new_T_old at the camera: SlamCorrection::FrameChangeAt).
+  std::shared_ptr<const SlamCorrection> correction;
+  SE3 frame_change;
+  // The main map's keyframe nearest the frame when it was tracked and that keyframe's pose
+  // then (-1: none; frames in a segment): the frame keeps its pose relative to that keyframe
+  // when later corrections move it (CorrectedPoses, core/slam/map_segment_poses.h).
+  int reference_keyframe = -1;
+  SE3 reference_keyframe_pose;
   TrackingResult tracking;      // the map tracker's rays, iterations, residual and state
   OdometryResult odometry;      // the odometry's (points 0: not run)
   double milliseconds = 0.0;    // tracking time (SlamSession: the whole ProcessFrame)
@@ -319,6 +335,10 @@ class SlamTracker {
                                                            double timestamp,
                                                            const std::optional<SE3>& prior,
                                                            OdometryResult* result) const;
+  // Follows the map's loop-closure corrections up to `view`'s: the camera's poses (the
+  // previous frame's, the last good one, the motion model's, keyframe 0's for carrying) move
+  // with their nearest keyframe; `out` records it on the frame that does.
+  void FollowCorrection(const SlamMapView& view, SlamFrameResult* out);
   // Keeps `pyramid` as the next frame's reference, at `pose` (none: the frame was LOST).
   // `continues`: the pose follows from the previous frame's (not a relocalisation's jump), so
   // the motion between them is the next frame's constant-velocity guess.
@@ -350,6 +370,7 @@ class SlamTracker {
   int frames_in_segment_ = 0;  // frames tracked since the camera started its segment
   double carry_start_ = 0.0;  // keyframe 0's timestamp (of the map or the camera's segment)
   SE3 carry_origin_;          // and its pose
+  int correction_generation_ = 0;  // the main map's corrections followed (FollowCorrection)
   // The current frame's features once extracted (FeaturesOf), reset per frame.
   std::shared_ptr<const FrameFeatures> frame_features_;
   SlamTrackerCounts counts_;

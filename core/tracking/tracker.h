@@ -120,6 +120,9 @@ class Tracker {
 
   // Starts from a known pose (e.g. the first frame's ground truth) at `timestamp`.
   void Reset(const SE3& world_T_camera, double timestamp);
+  // The world's frame changed (a loop closure's correction): the last pose moves by
+  // new_T_old; the motion model (a velocity in the camera's frame) carries over.
+  void MoveWorld(const SE3& new_T_old) { last_pose_ = new_T_old * last_pose_; }
 
   // Tracks one frame. `prior` (e.g. a headset's VIO pose) replaces the constant-velocity
   // prediction as the initial guess. Errors are the backend's (device, memory), not the

@@ -1,0 +1,125 @@
+// Loop closure for one map (docs/SLAM.md, "Loop closure"): each keyframe, once integrated, is
+// checked for a place seen long before, and a verified loop corrects every keyframe's pose by a
+// pose-graph solve (core/posegraph/pose_graph.h). Runs on the mapping side (SlamCoordinator's
+// step-runner), never on a tracking frame's path.
+//
+// A loop is accepted in four steps, each of which can only say no:
+//   1. Proposal (place recognition): the keyframe's thumbnail against every keyframe at least
+//      `min_keyframes_apart` keyframes and `min_seconds_apart` seconds older (a dot product of
+//      1200 floats each: microseconds, a few milliseconds at thousands of keyframes; measured in
+//      bench/pose_graph_bench.cc); the `candidates` most similar above `min_similarity`.
+//   2. Features: ORB matches (mutual best, ratio test) and RANSAC PnP of the old keyframe's 3D
+//      points in the new keyframe's pixels give old_T_new with at least `min_inliers` inliers.
+//   3. Dense: the map-free RGB-D odometry aligns the two keyframes' images from that pose
+//      (core/odometry/rgbd_odometry.h); it must converge (its own quality gates), agree with the
+//      features' pose within `max_dense_shift_m`, and explain most of the overlap
+//      (`min_depth_inlier_fraction`).
+//   4. The graph: the drift the loop claims must be one the chain of keyframes between them
+//      could have made (PoseGraphOptions::max_loop_innovation), and the loop must still fit
+//      after the solve; otherwise it is rejected and moves nothing.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/geometry/intrinsics.h"
+#include "core/geometry/rgbd_frame.h"
+#include "core/geometry/se3.h"
+#include "core/odometry/odometry_pyramid.h"
+#include "core/odometry/rgbd_odometry.h"
+#include "core/posegraph/pose_graph.h"
+#include "core/relocalisation/feature_relocaliser.h"
+#include "core/relocalisation/frame_features.h"
+
+namespace plx {
+
+struct LoopClosureOptions {
+  bool enabled = true;
+  // Proposals: only keyframes this far back (in keyframes and in the frames' seconds) are
+  // candidates; nearer ones are the chain's own neighbours, not a loop.
+  int min_keyframes_apart = 10;
+  double min_seconds_apart = 3.0;
+  int candidates = 3;
+  float min_similarity = 0.3f;
+  // Features: the relocaliser's matching, with a stricter inlier count than relocalisation
+  // (a wrong loop costs more than a LOST frame).
+  FeatureRelocaliserOptions matching;
+  int min_inliers = 30;
+  // Dense: the two keyframes aligned by the odometry.
+  OdometryPyramidOptions pyramid;
+  OdometryOptions odometry;
+  double max_dense_shift_m = 0.10;
+  double max_dense_rotation_rad = 0.10;
+  double min_depth_inlier_fraction = 0.6;
+  // The edges' standard deviations. Sequential edges: what tracking may drift between two
+  // keyframes, a floor plus a share of the motion; loop edges: the dense alignment's.
+  double sequential_sigma_m = 0.005;
+  double sequential_sigma_per_m = 0.05;
+  double sequential_sigma_rad = 0.003;
+  double sequential_sigma_per_rad = 0.05;
+  double loop_sigma_m = 0.005;
+  double loop_sigma_rad = 0.005;
+  PoseGraphOptions graph;
+  // A solve that moves no keyframe more than this is applied to the poses but is no reason to
+  // rebuild the map (SlamCoordinator).
+  double min_correction_m = 0.01;
+  double min_correction_rad = 0.01;
+};
+
+absl::Status ValidateLoopClosureOptions(const LoopClosureOptions& options);
+
+// A keyframe as loop closure sees it. The pointers must outlive the call.
+struct LoopKeyframe {
+  const FrameFeatures* features = nullptr;  // null: this keyframe takes no part
+  const RgbdFrame* frame = nullptr;
+  const PinholeIntrinsics* intrinsics = nullptr;
+  SE3 pose;  // world_T_camera as mapping refined it
+};
+
+// A verified loop: keyframe `to` (the newer) seen from keyframe `from`.
+struct LoopEdge {
+  int from = 0, to = 0;
+  SE3 from_T_to;
+  int inliers = 0;               // PnP's
+  double depth_inlier_fraction = 0.0;  // the dense alignment's
+};
+
+// What one keyframe's check found (counters for observability).
+struct LoopSearch {
+  int proposed = 0;  // candidates ranked above min_similarity
+  int rejected = 0;  // of them, failed features or dense verification
+  std::optional<LoopEdge> loop;  // the best verified one
+  std::string reason;            // why the last candidate was rejected
+};
+
+// Checks keyframe `query` against the older keyframes (steps 1-3 above).
+absl::StatusOr<LoopSearch> SearchLoop(int query, const std::vector<LoopKeyframe>& keyframes,
+                                      const std::vector<double>& timestamps,
+                                      const LoopClosureOptions& options);
+
+// The pose graph over `poses` (keyframes in order): a sequential edge between each keyframe and
+// the next (their current relative pose, the options' sigmas), then one edge per loop.
+std::vector<PoseGraphEdge> LoopClosureGraph(const std::vector<SE3>& poses,
+                                            const std::vector<LoopEdge>& loops,
+                                            const LoopClosureOptions& options);
+
+struct LoopCorrection {
+  std::vector<SE3> poses;          // every keyframe's corrected pose
+  std::vector<int> rejected_loops; // indices into the loops given
+  double max_shift_m = 0.0;        // the largest keyframe translation the solve made
+  double max_rotation_rad = 0.0;
+  double solve_seconds = 0.0;
+  int iterations = 0;
+  // The shift is large enough to rebuild the map at the new poses (min_correction_*).
+  bool significant = false;
+};
+
+// Solves LoopClosureGraph with keyframe 0 fixed (step 4).
+absl::StatusOr<LoopCorrection> CorrectKeyframes(const std::vector<SE3>& poses,
+                                                const std::vector<LoopEdge>& loops,
+                                                const LoopClosureOptions& options);
+
+}  // namespace plx

@@ -1,0 +1,35 @@
+// A loop closure's correction of a map's frame of reference (docs/SLAM.md, "Loop closure").
+// When the pose graph moves the keyframes, the map is rebuilt at the new poses and published as
+// one version; from that version on, every pose in the map's frame is a corrected one. Anything
+// a camera or a client holds in the old frame (its pose, its motion model's origin, a headset's
+// anchors) moves with the keyframe nearest to it: a pose p near keyframe i becomes
+// after[i] * before[i]^-1 * p. The correction is rigid per keyframe, not per map: the start of a
+// loop barely moves, its end moves most.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "core/geometry/se3.h"
+
+namespace plx {
+
+struct SlamCorrection {
+  int generation = 0;       // 1, 2, ...: the map's corrections so far, this one included
+  int64_t map_version = 0;  // the first published version in the corrected frame
+  // Every keyframe's pose in the frame before and after, in keyframe order.
+  std::vector<SE3> before, after;
+  double max_shift_m = 0.0;  // the largest keyframe translation
+  double solve_ms = 0.0;     // the pose-graph solve that made it
+  int loops = 0;             // loop edges in that solve
+
+  // The keyframe whose pose in the old frame is nearest to `pose` (position, then a metre per
+  // radian of viewing direction); -1 when there is none.
+  int NearestKeyframe(const SE3& pose) const;
+  // `pose` (in the old frame) in the corrected frame, moved with its nearest keyframe.
+  SE3 Move(const SE3& pose) const;
+  // new_T_old at `pose`: what Move left-multiplies it by.
+  SE3 FrameChangeAt(const SE3& pose) const;
+};
+
+}  // namespace plx
