@@ -50,6 +50,9 @@ absl::Status ValidateLoopClosureOptions(const LoopClosureOptions& o) {
       !(o.min_correction_m >= 0.0) || !(o.min_correction_rad >= 0.0)) {
     return absl::InvalidArgumentError("loop closure's per-motion sigmas and corrections >= 0");
   }
+  if (o.min_keyframes_between_rebuilds < 0) {
+    return absl::InvalidArgumentError("loop closure's min_keyframes_between_rebuilds >= 0");
+  }
   PLX_RETURN_IF_ERROR(ValidateFeatureRelocaliserOptions(o.matching));
   PLX_RETURN_IF_ERROR(ValidateOdometryPyramidOptions(o.pyramid));
   PLX_RETURN_IF_ERROR(ValidateOdometryOptions(o.odometry));

@@ -63,10 +63,13 @@ struct LoopClosureOptions {
   double loop_sigma_m = 0.005;
   double loop_sigma_rad = 0.005;
   PoseGraphOptions graph;
-  // A solve that moves no keyframe more than this is applied to the poses but is no reason to
-  // rebuild the map (SlamCoordinator).
+  // A solve that moves no keyframe more than this is no reason to rebuild the map
+  // (SlamCoordinator); its loops stay in the graph for the next solve.
   double min_correction_m = 0.01;
   double min_correction_rad = 0.01;
+  // A rebuild re-maps every keyframe: a correction found fewer keyframes than this after the
+  // last rebuild started waits (its loops kept) until then or the end of the run.
+  int min_keyframes_between_rebuilds = 10;
 };
 
 absl::Status ValidateLoopClosureOptions(const LoopClosureOptions& options);

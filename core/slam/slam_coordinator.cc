@@ -235,7 +235,7 @@ absl::StatusOr<SlamStepResult> SlamCoordinator::Step(SlamStepMode mode) {
     if (m.step_rebuild_next || !m.mapper->has_work()) return StepRebuild();
   }
   PLX_ASSIGN_OR_RETURN(SlamStepResult out, StepSegment(segment, main, mode));
-  if (main) PLX_RETURN_IF_ERROR(CloseLoops());
+  if (main) PLX_RETURN_IF_ERROR(CloseLoops(mode));
   // Out of work only once every map is (SegmentToStep chose the main map last), and no
   // rebuild or correction is under way.
   if (!main) out.out_of_work = false;
@@ -249,7 +249,7 @@ absl::StatusOr<SlamStepResult> SlamCoordinator::Step(SlamStepMode mode) {
   return out;
 }
 
-absl::Status SlamCoordinator::CloseLoops() {
+absl::Status SlamCoordinator::CloseLoops(SlamStepMode mode) {
   Segment& main = *segments_[0];
   const LoopClosureOptions& options = mapper_options_.loop_closure;
   SlamMapper* mapper = nullptr;
@@ -291,6 +291,18 @@ absl::Status SlamCoordinator::CloseLoops() {
     loop_counts_.proposed += found.proposed;
     loop_counts_.rejected += found.rejected;
     loop_counts_.verified += found.verified;
+  }
+  // A rebuild costs about as much as mapping its keyframes again: one that would start soon
+  // after the last waits for min_keyframes_between_rebuilds more (or the end of the run), the
+  // loops found meanwhile kept for its solve.
+  const bool soon = main.rebuilt_at >= 0 &&
+                    integrated - main.rebuilt_at < options.min_keyframes_between_rebuilds;
+  if (main.correction_due && soon && mode == SlamStepMode::kMap) {
+    main.correction_due = false;
+    main.correction_deferred = true;
+  } else if (main.correction_deferred && (!soon || mode == SlamStepMode::kFinish)) {
+    main.correction_deferred = false;
+    main.correction_due = true;
   }
   // The solve needs every accepted keyframe integrated: the rebuild takes them from the
   // mapper's own keyframes.
@@ -339,6 +351,7 @@ absl::Status SlamCoordinator::CorrectAndRebuild(SlamMapper* mapper) {
     if (!correction.significant) return absl::OkStatus();
     main.rebuild_collecting = true;
     main.rebuild_solve = solve;
+    main.rebuilt_at = static_cast<int>(poses.size());
     loop_counts_.rebuilding = true;
   }
   // Filled outside the lock (copies of every keyframe's images): cameras go on meanwhile and

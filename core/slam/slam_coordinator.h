@@ -26,11 +26,12 @@
 //     each integrated keyframe is searched for a loop on the step-runner; a verified loop goes
 //     into the pose graph, and a solve that moves the keyframes starts a rebuild: a second
 //     mapper fed every keyframe at its corrected pose (and every keyframe accepted meanwhile,
-//     moved with its nearest keyframe), stepped in turn with the main one so tracking never
-//     waits for it. Once it has integrated them all and spent rebuild_iteration_share of its
-//     budget it replaces the main mapper and its map is published as one version with a
-//     SlamCorrection (View().correction): cameras move with it before their next frame, and
-//     a keyframe tracked in the old frame is moved into the new one when it is accepted.
+//     moved with the keyframe it is anchored to), stepped in turn with the main one so
+//     tracking never waits for it. Once it has integrated them all and spent
+//     rebuild_iteration_share of its budget it replaces the main mapper and its map is
+//     published as one version with a SlamCorrection (View().correction): cameras move with
+//     it before their next frame, and a keyframe tracked in the old frame is moved into the
+//     new one when it is accepted.
 //
 // Threads: AddKeyframe, View, MayCameraProceed and the accessors from any thread (an internal
 // lock guards the coordinator's state; the mapper has its own); StartMapper and Step from one
@@ -201,6 +202,8 @@ class SlamCoordinator {
     // Loop closure (the main map only). Step-runner:
     int loop_checked = 0;          // keyframes searched for a loop so far
     bool correction_due = false;   // a loop was accepted since the last solve
+    bool correction_deferred = false;  // ...and waits for min_keyframes_between_rebuilds
+    int rebuilt_at = -1;           // the keyframes when the last rebuild started
     bool step_rebuild_next = false;
     // Guarded by the coordinator's lock (written by the step-runner):
     std::vector<LoopEdge> loops;   // verified and not rejected, in keyframe indices
@@ -232,7 +235,7 @@ class SlamCoordinator {
   absl::StatusOr<SlamStepResult> StepSegment(Segment* segment, bool main, SlamStepMode mode);
   // Loop closure after a main-map step: searches the newly integrated keyframes, solves the
   // pose graph when a loop was accepted and starts a rebuild when the solve moved keyframes.
-  absl::Status CloseLoops();
+  absl::Status CloseLoops(SlamStepMode mode);
   // Solves the graph and starts the rebuild (the main mapper has nothing pending).
   absl::Status CorrectAndRebuild(SlamMapper* mapper);
   // One step of the rebuild; once it is ready, swaps it in and publishes it.

@@ -2,9 +2,9 @@
 // When the pose graph moves the keyframes, the map is rebuilt at the new poses and published as
 // one version; from that version on, every pose in the map's frame is a corrected one. Anything
 // a camera or a client holds in the old frame (its pose, its motion model's origin, a headset's
-// anchors) moves with the keyframe nearest to it: a pose p near keyframe i becomes
-// after[i] * before[i]^-1 * p. The correction is rigid per keyframe, not per map: the start of a
-// loop barely moves, its end moves most.
+// anchors) moves with the keyframe it is anchored to (NearestKeyframe): a pose p anchored to
+// keyframe i becomes after[i] * before[i]^-1 * p. The correction is rigid per keyframe, not
+// per map: the start of a loop barely moves, its end moves most.
 #pragma once
 
 #include <cstdint>
@@ -23,10 +23,12 @@ struct SlamCorrection {
   double solve_ms = 0.0;     // the pose-graph solve that made it
   int loops = 0;             // loop edges in that solve
 
-  // The keyframe whose pose in the old frame is nearest to `pose` (position, then a metre per
-  // radian of viewing direction); -1 when there is none.
+  // The keyframe `pose` (in the old frame) is anchored to: the newest of the keyframes within
+  // kRecentKeyframeMargin of the nearest (distance: metres of position plus radians of viewing
+  // direction); -1 when there is none.
+  static constexpr double kRecentKeyframeMargin = 0.3;
   int NearestKeyframe(const SE3& pose) const;
-  // `pose` (in the old frame) in the corrected frame, moved with its nearest keyframe.
+  // `pose` (in the old frame) in the corrected frame, moved with its keyframe.
   SE3 Move(const SE3& pose) const;
   // new_T_old at `pose`: what Move left-multiplies it by.
   SE3 FrameChangeAt(const SE3& pose) const;

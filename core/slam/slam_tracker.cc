@@ -423,7 +423,7 @@ void SlamTracker::FollowCorrection(const SlamMapView& view, SlamFrameResult* out
   if (correction != nullptr && correction->generation > correction_generation_) {
     correction_generation_ = correction->generation;
     // A camera in a segment keeps the segment's frame (its join measures main_T_segment in
-    // the corrected main map); one in the main map moves with the keyframe nearest to it.
+    // the corrected main map); one in the main map moves with the keyframe it is anchored to.
     // A camera that missed a correction (two came while it was not tracking) moves by the
     // latest only: its poses are then off by what the one it missed moved them.
     const std::optional<SE3> at =

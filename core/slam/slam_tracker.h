@@ -214,9 +214,10 @@ struct SlamFrameResult {
   // moved with it (new_T_old at the camera: SlamCorrection::FrameChangeAt).
   std::shared_ptr<const SlamCorrection> correction;
   SE3 frame_change;
-  // The main map's keyframe nearest the frame when it was tracked and that keyframe's pose
-  // then (-1: none; frames in a segment): the frame keeps its pose relative to that keyframe
-  // when later corrections move it (CorrectedPoses, core/slam/map_segment_poses.h).
+  // The main map's keyframe the frame was anchored to when it was tracked
+  // (SlamCorrection::NearestKeyframe) and that keyframe's pose then (-1: none; frames in a
+  // segment): the frame keeps its pose relative to that keyframe when later corrections move
+  // it (CorrectedPoses, core/slam/map_segment_poses.h).
   int reference_keyframe = -1;
   SE3 reference_keyframe_pose;
   TrackingResult tracking;      // the map tracker's rays, iterations, residual and state
@@ -337,7 +338,7 @@ class SlamTracker {
                                                            OdometryResult* result) const;
   // Follows the map's loop-closure corrections up to `view`'s: the camera's poses (the
   // previous frame's, the last good one, the motion model's, keyframe 0's for carrying) move
-  // with their nearest keyframe; `out` records it on the frame that does.
+  // with the keyframe they are anchored to; `out` records it on the frame that does.
   void FollowCorrection(const SlamMapView& view, SlamFrameResult* out);
   // Keeps `pyramid` as the next frame's reference, at `pose` (none: the frame was LOST).
   // `continues`: the pose follows from the previous frame's (not a relocalisation's jump), so
