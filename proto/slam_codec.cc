@@ -187,23 +187,32 @@ pb::SlamCorrection SlamCorrectionToProto(const SlamCorrection& c, const SE3& cam
   wire.set_generation(static_cast<uint32_t>(c.generation));
   wire.set_map_version(static_cast<uint64_t>(c.map_version));
   PoseToProto(camera_new_T_old, wire.mutable_camera_new_t_old());
+  // Every keyframe, the unmoved ones too: a client anchors a pose to the keyframe the daemon
+  // would (SlamCorrection::NearestKeyframe), which needs them all.
   const size_t n = std::min(c.before.size(), c.after.size());
   for (size_t i = 0; i < n; ++i) {
-    // Unmoved keyframes are left out: a long map's far end barely moves, and a headset's
-    // update should stay small.
-    if ((c.after[i].translation() - c.before[i].translation()).norm() <= 1e-3 &&
-        RotationAngleBetween(c.before[i], c.after[i]) <= 1e-3) {
-      continue;
-    }
-    pb::KeyframeMove* move = wire.add_moved();
-    move->set_keyframe(static_cast<uint32_t>(i));
+    pb::KeyframeMove* move = wire.add_keyframes();
     PoseToProto(c.before[i], move->mutable_before());
     PoseToProto(c.after[i], move->mutable_after());
   }
-  wire.set_keyframes(static_cast<uint32_t>(n));
   wire.set_max_shift_m(c.max_shift_m);
   wire.set_loops(static_cast<uint32_t>(c.loops));
   return wire;
+}
+
+absl::StatusOr<SlamCorrection> SlamCorrectionFromProto(const pb::SlamCorrection& wire) {
+  SlamCorrection c;
+  c.generation = static_cast<int>(wire.generation());
+  c.map_version = static_cast<int64_t>(wire.map_version());
+  for (const pb::KeyframeMove& move : wire.keyframes()) {
+    PLX_ASSIGN_OR_RETURN(SE3 before, PoseFromProto(move.before(), "correction.keyframes.before"));
+    PLX_ASSIGN_OR_RETURN(SE3 after, PoseFromProto(move.after(), "correction.keyframes.after"));
+    c.before.push_back(before);
+    c.after.push_back(after);
+  }
+  c.max_shift_m = wire.max_shift_m();
+  c.loops = static_cast<int>(wire.loops());
+  return c;
 }
 
 pb::SlamUpdate SlamUpdateToProto(const SlamFrameResult& result, uint32_t frame, double latency_ms,

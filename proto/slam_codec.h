@@ -69,10 +69,13 @@ std::optional<SlamState> SlamStateFromProto(pb::SlamState state);
 pb::SlamMapping SlamMappingToProto(const SlamMapperProgress& progress, const std::string& job_id,
                                    int streams, bool finished);
 
-// A loop closure's correction as a stream sends it: the keyframes that moved, and how this
-// camera moved with it (SlamFrameResult::frame_change).
+// A loop closure's correction as a stream sends it: every keyframe before and after, and how
+// this camera moved with it (SlamFrameResult::frame_change); and back, for a client to move
+// what it holds (SlamCorrection::Move; camera_new_T_old is the update's to read).
 pb::SlamCorrection SlamCorrectionToProto(const SlamCorrection& correction,
                                          const SE3& camera_new_T_old);
+// (InvalidArgument: a pose that is not one).
+absl::StatusOr<SlamCorrection> SlamCorrectionFromProto(const pb::SlamCorrection& wire);
 
 // A tracked frame's update: the result's timestamp, pose, state, reason, keyframe flag, map
 // version and valid rays, with what the stream knows: the frame's 0-based index in the stream,

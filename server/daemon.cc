@@ -264,6 +264,10 @@ std::string Daemon::RenderMetrics() const {
     ++g.slam_jobs;
     g.slam_pending_keyframes += s.mapping.pending_keyframes;
     g.slam_last_publish_s = std::max(g.slam_last_publish_s, s.mapping.last_publish_s);
+    g.slam_loops += s.mapping.loops.accepted;
+    g.slam_loops_rejected += s.mapping.loops.rejected;
+    g.slam_corrections += s.mapping.loops.corrections;
+    g.slam_last_solve_s = std::max(g.slam_last_solve_s, s.mapping.loops.last_solve_ms / 1e3);
   }
   for (size_t i = 0; i < workers_->size(); ++i) {
     const DeviceWorker& w = workers_->worker(i);

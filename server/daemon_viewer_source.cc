@@ -35,6 +35,7 @@ absl::StatusOr<web::ViewerTrajectories> DaemonViewerSource::Trajectories(
   if (const std::shared_ptr<const TrajectoryRecord> record = state_->slam_jobs->Trajectory(name)) {
     out.cameras = record->Cameras();
     out.keyframes = record->Keyframes();
+    out.loops = record->Loops();
     if (!out.slam_running) out.keyframes_integrated = static_cast<int>(out.keyframes.size());
   }
   return out;

@@ -126,6 +126,18 @@ std::string Metrics::Render(const Gauges& g) const {
                   "running SLAM jobs.\n# TYPE plenoxd_slam_last_publish_seconds gauge\n"
                   "plenoxd_slam_last_publish_seconds ",
                   absl::StrFormat("%.6f", g.slam_last_publish_s), "\n");
+  gauge("plenoxd_slam_loops", "Loop edges in the running SLAM jobs' pose graphs.", g.slam_loops);
+  gauge("plenoxd_slam_loops_rejected",
+        "Loop candidates the running SLAM jobs rejected (a failed check or the pose graph).",
+        g.slam_loops_rejected);
+  gauge("plenoxd_slam_corrections",
+        "Loop-closure corrections (rebuilt maps) the running SLAM jobs published.",
+        g.slam_corrections);
+  absl::StrAppend(&out,
+                  "# HELP plenoxd_slam_last_solve_seconds The slowest last pose-graph solve of "
+                  "the running SLAM jobs.\n# TYPE plenoxd_slam_last_solve_seconds gauge\n"
+                  "plenoxd_slam_last_solve_seconds ",
+                  absl::StrFormat("%.6f", g.slam_last_solve_s), "\n");
   slam_latency_.Render("plenoxd_slam_latency_seconds",
                        "Time from receiving a Slam frame to its update.", &out);
   // The HTTP port's bounds at work: a rising refusal or timeout count is a client (or an

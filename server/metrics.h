@@ -56,6 +56,12 @@ class Metrics {
     int64_t slam_jobs = 0;
     int64_t slam_pending_keyframes = 0;
     double slam_last_publish_s = 0.0;
+    // Their loop closure (docs/SLAM.md, "Loop closure"), summed: loop edges in the pose
+    // graphs, candidates rejected, corrected maps published; the slowest last graph solve.
+    int64_t slam_loops = 0;
+    int64_t slam_loops_rejected = 0;
+    int64_t slam_corrections = 0;
+    double slam_last_solve_s = 0.0;
     // One per compute worker: plenoxd_device_info{device, kind, name} 1 and, per device, the
     // tasks queued or running and the streams bound to it.
     struct Device {

@@ -150,10 +150,16 @@ void SlamJob::RunStep(Backend* backend, bool cancelled) {
   {
     const SlamMapperProgress p = coordinator_->progress();
     std::lock_guard<std::mutex> lock(mutex_);
-    // The viewer's keyframes: copied only when one more is in the map (O(keyframes) each).
-    if (p.keyframes_integrated != keyframes_recorded_) {
+    // The viewer's keyframes: copied only when one more is in the map or a loop closure
+    // changed them (O(keyframes) each).
+    if (p.keyframes_integrated != keyframes_recorded_ ||
+        p.loops.accepted != loops_recorded_ || p.loops.corrections != corrections_recorded_) {
       keyframes_recorded_ = p.keyframes_integrated;
-      trajectory_->SetKeyframes(coordinator_->keyframe_poses());
+      loops_recorded_ = p.loops.accepted;
+      corrections_recorded_ = p.loops.corrections;
+      std::vector<std::pair<int, int>> loops;
+      for (const LoopEdge& loop : coordinator_->loops()) loops.emplace_back(loop.from, loop.to);
+      trajectory_->SetKeyframes(coordinator_->keyframe_poses(), loops);
     }
     if (!step.ok()) {
       LogEvent("error", "slam_mapping_failed",

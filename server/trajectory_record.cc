@@ -59,11 +59,19 @@ void TrajectoryRecord::Close(int id) {
   if (Camera* camera = FindLocked(id)) camera->track.active = false;
 }
 
-void TrajectoryRecord::SetKeyframes(const std::vector<StampedPose>& keyframes) {
+void TrajectoryRecord::SetKeyframes(const std::vector<StampedPose>& keyframes,
+                                    const std::vector<std::pair<int, int>>& loops) {
   std::lock_guard<std::mutex> lock(mutex_);
   keyframes_.clear();
+  loops_.clear();
   const size_t first = keyframes.size() > kMaxKeyframes ? keyframes.size() - kMaxKeyframes : 0;
   for (size_t i = first; i < keyframes.size(); ++i) keyframes_.push_back(keyframes[i].pose);
+  const int begin = static_cast<int>(first), end = static_cast<int>(keyframes.size());
+  for (const auto& [from, to] : loops) {
+    if (from >= begin && to >= begin && from < end && to < end) {
+      loops_.emplace_back(from - begin, to - begin);
+    }
+  }
 }
 
 std::vector<web::CameraTrack> TrajectoryRecord::Cameras() const {
@@ -84,6 +92,11 @@ std::vector<web::CameraTrack> TrajectoryRecord::Cameras() const {
 std::vector<SE3> TrajectoryRecord::Keyframes() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return keyframes_;
+}
+
+std::vector<std::pair<int, int>> TrajectoryRecord::Loops() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return loops_;
 }
 
 }  // namespace plx::server

@@ -11,6 +11,7 @@
 #include <deque>
 #include <mutex>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/geometry/se3.h"
@@ -32,11 +33,14 @@ class TrajectoryRecord {
               SlamState state);
   // The camera's stream ended.
   void Close(int id);
-  // The job's refined keyframe poses (the newest kMaxKeyframes are kept).
-  void SetKeyframes(const std::vector<StampedPose>& keyframes);
+  // The job's refined keyframe poses (the newest kMaxKeyframes are kept) and its loop edges
+  // (those between kept keyframes).
+  void SetKeyframes(const std::vector<StampedPose>& keyframes,
+                    const std::vector<std::pair<int, int>>& loops = {});
 
   std::vector<web::CameraTrack> Cameras() const;
   std::vector<SE3> Keyframes() const;
+  std::vector<std::pair<int, int>> Loops() const;  // indices into Keyframes()
 
  private:
   struct Camera {
@@ -48,6 +52,7 @@ class TrajectoryRecord {
   mutable std::mutex mutex_;
   std::deque<Camera> cameras_;
   std::vector<SE3> keyframes_;
+  std::vector<std::pair<int, int>> loops_;
   int next_id_ = 0;
 };
 

@@ -235,6 +235,16 @@ HttpResponse Viewer::Trajectory(const std::string& map) {
   const size_t n = t->keyframes.size();
   const size_t keep = std::min(n, static_cast<size_t>(options_.max_keyframes));
   for (size_t i = n - keep; i < n; ++i) PoseJson(json, t->keyframes[i]);
+  json.EndArray();
+  // Loop edges as [from, to] indices into the keyframes sent (both ends among them).
+  json.Key("loops").BeginArray();
+  const int first = static_cast<int>(n - keep);
+  for (const auto& [from, to] : t->loops) {
+    if (from < first || to < first || from >= static_cast<int>(n) || to >= static_cast<int>(n)) {
+      continue;
+    }
+    json.BeginArray().Int(from - first).Int(to - first).EndArray();
+  }
   json.EndArray().EndObject();
   return HttpResponse{200, kJson, json.str(), {kNoStore}};
 }

@@ -9,6 +9,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -49,6 +50,8 @@ struct ViewerTrajectories {
   uint64_t map_version = 0;
   std::vector<CameraTrack> cameras;
   std::vector<SE3> keyframes;   // refined keyframe poses (newest kept when over the bound)
+  // Loop-closure edges (docs/SLAM.md, "Loop closure"): indices into `keyframes`.
+  std::vector<std::pair<int, int>> loops;
 };
 
 class ViewerSource {

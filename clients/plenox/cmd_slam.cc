@@ -15,6 +15,7 @@
 #include "core/common/status_macros.h"
 #include "core/formats/map_file.h"
 #include "core/formats/trajectory_file.h"
+#include "core/slam/map_segment_poses.h"
 #include "core/slam/slam_dataset.h"
 
 namespace plx::cli {
@@ -127,9 +128,10 @@ int RunSlam(const std::vector<std::string>& args) {
   if (!rpe_delta.ok()) return ReportError(kCommand, rpe_delta.status(), true);
   SlamReport report;
   report.trajectory = flags.GetString("out");
+  report.corrected_trajectory = flags.GetString("corrected-out");
   for (const std::string& path :
-       {report.trajectory, flags.GetString("map-out"), flags.GetString("keyframes-out"),
-        flags.GetString("frames-out")}) {
+       {report.trajectory, report.corrected_trajectory, flags.GetString("map-out"),
+        flags.GetString("keyframes-out"), flags.GetString("frames-out")}) {
     if (path.empty()) continue;
     if (absl::Status s = CheckOutputDirectory(path); !s.ok()) return ReportError(kCommand, s);
   }
@@ -161,6 +163,15 @@ int RunSlam(const std::vector<std::string>& args) {
       SlamTrajectoryHeader(dataset->name(), "", result->started_from_ground_truth);
   if (absl::Status s = WriteTumTrajectory(report.trajectory, result->trajectory, header); !s.ok()) {
     return ReportError(kCommand, s);
+  }
+  // Each frame kept where it was relative to its keyframe, that keyframe at its final pose.
+  const std::vector<StampedPose> corrected = CorrectedPoses(result->results, result->keyframes);
+  if (!report.corrected_trajectory.empty()) {
+    if (absl::Status s = WriteTumTrajectory(report.corrected_trajectory, corrected,
+                                            absl::StrCat(header, ", in the map's final frame"));
+        !s.ok()) {
+      return ReportError(kCommand, s);
+    }
   }
   if (!flags.GetString("keyframes-out").empty()) {
     if (absl::Status s = WriteTumTrajectory(flags.GetString("keyframes-out"), result->keyframes,
@@ -199,8 +210,11 @@ int RunSlam(const std::vector<std::string>& args) {
   report.map_mb = p.mapping.map_bytes / 1e6;
   report.keyframe_mb = p.mapping.keyframe_bytes / 1e6;
   report.peak_rss_mb = PeakRssMb();
+  report.loops_accepted = p.mapping.loops.accepted;
+  report.loops_rejected = p.mapping.loops.rejected;
+  report.corrections = p.mapping.loops.corrections;
   report.started_from_ground_truth = result->started_from_ground_truth;
-  ScoreSlamTrajectory(*dataset, result->trajectory, *rpe_delta, &report);
+  ScoreSlamTrajectory(*dataset, result->trajectory, corrected, *rpe_delta, &report);
   line.Finish(SlamSummaryText(report, absl::StrCat(" [", BackendText(*backend), "]")));
   PrintSlamResult(report, flags.GetSwitch("json"),
                   JsonObject()

@@ -60,7 +60,8 @@ SlamOptionsFields SlamOptionsFieldsFromFlags(const FlagSet& flags) {
           .kf_unmapped_fraction = flags.IsSet("kf-unmapped"),
           .kf_interval = flags.IsSet("kf-interval"),
           .iterations_per_keyframe = flags.IsSet("iterations-per-keyframe"),
-          .max_pending_keyframes = flags.IsSet("max-pending-keyframes")};
+          .max_pending_keyframes = flags.IsSet("max-pending-keyframes"),
+          .loop_closure = flags.IsSet("no-loop-closure")};
 }
 
 FlagSet RemoteSlamFlags() {
@@ -107,7 +108,9 @@ struct SlamStream {
   double speed = 1.0;
 
   std::vector<StampedPose> trajectory{};  // in the main map's frame (PosesInMainMap) at the end
+  std::vector<StampedPose> corrected{};   // and moved by the corrections (FollowCorrections)
   std::vector<SlamFrameResult> given{};   // each update's pose with its segment, as given
+  std::vector<SlamCorrection> corrections{};  // the loop-closure corrections the stream sent
   pb::SlamMapping mapping{};  // as of the last update (the done message's at the end)
   bool done = false;
   absl::Time done_at{};
@@ -124,6 +127,12 @@ absl::Status TakeUpdate(const pb::SlamUpdate& update, FrameRecord& record, SlamS
   given.timestamp = update.timestamp();
   given.pose = *pose;
   given.segment = static_cast<int>(update.segment());
+  given.correction_generation = static_cast<int>(update.correction_generation());
+  if (update.has_correction()) {
+    absl::StatusOr<SlamCorrection> correction = SlamCorrectionFromProto(update.correction());
+    if (!correction.ok()) return correction.status();
+    s.corrections.push_back(*std::move(correction));
+  }
   if (update.has_main_t_segment()) {
     absl::StatusOr<SE3> joined = PoseFromProto(update.main_t_segment(), "update.main_T_segment");
     if (!joined.ok()) return joined.status();
@@ -196,9 +205,13 @@ absl::Status StreamFrames(SlamStream& s, SlamReport& report, ProgressLine& line)
 absl::StatusOr<std::optional<pb::MapInfo>> WriteAndSave(const FlagSet& flags, const SlamStream& s,
                                                         const SlamReport& report) {
   const std::string where = absl::StrCat(" on map ", s.map_name, " at ", s.client->server());
-  PLX_RETURN_IF_ERROR(WriteTumTrajectory(
-      report.trajectory, s.trajectory,
-      SlamTrajectoryHeader(s.dataset->name(), where, report.started_from_ground_truth)));
+  const std::string header =
+      SlamTrajectoryHeader(s.dataset->name(), where, report.started_from_ground_truth);
+  PLX_RETURN_IF_ERROR(WriteTumTrajectory(report.trajectory, s.trajectory, header));
+  if (!report.corrected_trajectory.empty()) {
+    PLX_RETURN_IF_ERROR(WriteTumTrajectory(report.corrected_trajectory, s.corrected,
+                                           absl::StrCat(header, ", in the map's final frame")));
+  }
   if (const std::string timings = flags.GetString("timings"); !timings.empty()) {
     PLX_RETURN_IF_ERROR(WriteFileAtomically(
         timings,
@@ -230,6 +243,9 @@ void PrintRemoteSlamResult(const FlagSet& flags, const SlamDatasetOptions& optio
   report.wall_s = absl::ToDoubleSeconds(s.done_at - s.result.started);
   report.mapping_iterations = static_cast<int>(s.mapping.iterations());
   report.map_mb = s.mapping.map_bytes() / 1e6;
+  report.loops_accepted = static_cast<int>(s.mapping.loops_accepted());
+  report.loops_rejected = static_cast<int>(s.mapping.loops_rejected());
+  report.corrections = static_cast<int>(s.mapping.corrections());
   const double roundtrip_median = Percentile(roundtrip_ms, 0.5);
   const double roundtrip_p95 = Percentile(roundtrip_ms, 0.95);
   std::string summary = SlamSummaryText(
@@ -279,7 +295,9 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
   if (!rpe_delta.ok()) return ReportError(kCommand, rpe_delta.status(), true);
   SlamReport report;
   report.trajectory = flags.GetString("out");
-  for (const std::string& path : {report.trajectory, flags.GetString("timings")}) {
+  report.corrected_trajectory = flags.GetString("corrected-out");
+  for (const std::string& path :
+       {report.trajectory, report.corrected_trajectory, flags.GetString("timings")}) {
     if (path.empty()) continue;
     if (absl::Status s = CheckOutputDirectory(path); !s.ok()) return ReportError(kCommand, s);
   }
@@ -308,9 +326,12 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
   if (absl::Status s = StreamFrames(stream, report, line); !s.ok()) return ReportError(kCommand, s);
   // A segment's poses, once it joined the map, in the map's frame (docs/SLAM.md).
   stream.trajectory = PosesInMainMap(stream.given);
+  // Each pose moved by the corrections after it, as the stream sent them (the daemon's final
+  // keyframe poses are not sent).
+  stream.corrected = FollowCorrections(stream.given, stream.corrections);
   absl::StatusOr<std::optional<pb::MapInfo>> saved = WriteAndSave(flags, stream, report);
   if (!saved.ok()) return ReportError(kCommand, saved.status());
-  ScoreSlamTrajectory(*dataset, stream.trajectory, *rpe_delta, &report);
+  ScoreSlamTrajectory(*dataset, stream.trajectory, stream.corrected, *rpe_delta, &report);
   PrintRemoteSlamResult(flags, *options, stream, *saved, report, line);
   return kExitOk;
 }

@@ -17,6 +17,10 @@ void AddSlamFlags(FlagSet& flags, const std::string& voxel_help) {
   const SlamOptions d = DefaultSlamOptions();
   flags.Add("out", "TRAJ.txt", "trajectory to write (TUM format, one pose per processed frame)",
             std::nullopt, true)
+      .Add("corrected-out", "TRAJ.txt",
+           "also write the trajectory in the map's final frame: each pose moved with its "
+           "keyframe by the loop closures' corrections (TUM format)",
+           "")
       .AddSwitch("realtime",
                  "replay at the frames' timestamps; frames the tracker cannot keep up with are "
                  "dropped (latest wins), as from a live sensor")
@@ -41,6 +45,8 @@ void AddSlamFlags(FlagSet& flags, const std::string& voxel_help) {
                         "; a keyframe beyond them is deferred): 0 = a keyframe's frame waits "
                         "for its integration; ignored with --deterministic"),
            absl::StrCat(d.max_pending_keyframes))
+      .AddSwitch("no-loop-closure",
+                 "no loop closure: keyframes keep the poses tracking gave them (docs/SLAM.md)")
       .Add("rpe-delta", "M", "RPE pair distance in metres of path (as eval-traj --delta)", "1");
   AddTrackerFlags(flags);
   AddVoxelSizeFlag(flags, voxel_help);
@@ -63,6 +69,7 @@ absl::StatusOr<SlamDatasetOptions> SlamOptionsFromFlags(const FlagSet& flags) {
   PLX_ASSIGN_OR_RETURN(s.keyframes.max_unmapped_fraction, flags.GetDouble("kf-unmapped", 0.001, 1));
   PLX_ASSIGN_OR_RETURN(s.keyframes.max_interval_s, flags.GetDouble("kf-interval", 0, 3600));
   s.deterministic = flags.GetSwitch("deterministic");
+  s.loop_closure.enabled = !flags.GetSwitch("no-loop-closure");
   PLX_ASSIGN_OR_RETURN(s.max_pending_keyframes,
                        flags.GetInt("max-pending-keyframes", 0, kMaxPendingKeyframes));
   if (s.deterministic && flags.IsSet("max-pending-keyframes") && s.max_pending_keyframes > 0) {
@@ -107,7 +114,8 @@ int SlamFrameCount(const RgbdDataset& dataset, const SlamDatasetOptions& options
 }
 
 void ScoreSlamTrajectory(const RgbdDataset& dataset, const std::vector<StampedPose>& trajectory,
-                         double rpe_delta_m, SlamReport* report) {
+                         const std::vector<StampedPose>& corrected, double rpe_delta_m,
+                         SlamReport* report) {
   std::vector<StampedPose> gt;
   for (int i = 0; i < dataset.size(); ++i) {
     if (std::optional<SE3> pose = dataset.ground_truth(i)) {
@@ -115,17 +123,26 @@ void ScoreSlamTrajectory(const RgbdDataset& dataset, const std::vector<StampedPo
     }
   }
   if (gt.size() < 3) return;
-  TrajectoryEvalOptions options;
-  options.rpe_delta_m = rpe_delta_m;
-  absl::StatusOr<TrajectoryEvalResult> none = EvaluateTrajectory(trajectory, gt, options);
-  options.alignment = TrajectoryAlignment::kSE3;
-  absl::StatusOr<TrajectoryEvalResult> se3 = EvaluateTrajectory(trajectory, gt, options);
-  if (!none.ok() || !se3.ok()) return;
-  report->ate_none_m = none->ate.translation_m.rmse;
-  report->ate_se3_m = se3->ate.translation_m.rmse;
-  if (!se3->rpe.pairs.empty()) {
-    report->rpe_m = se3->rpe.translation_m.rmse;
-    report->rpe_deg = se3->rpe.rotation_deg.rmse;
+  TrajectoryEvalOptions none;
+  none.rpe_delta_m = rpe_delta_m;
+  TrajectoryEvalOptions se3 = none;
+  se3.alignment = TrajectoryAlignment::kSE3;
+  absl::StatusOr<TrajectoryEvalResult> online_none = EvaluateTrajectory(trajectory, gt, none);
+  absl::StatusOr<TrajectoryEvalResult> online_se3 = EvaluateTrajectory(trajectory, gt, se3);
+  if (online_none.ok() && online_se3.ok()) {
+    report->ate_none_m = online_none->ate.translation_m.rmse;
+    report->ate_se3_m = online_se3->ate.translation_m.rmse;
+    if (!online_se3->rpe.pairs.empty()) {
+      report->rpe_m = online_se3->rpe.translation_m.rmse;
+      report->rpe_deg = online_se3->rpe.rotation_deg.rmse;
+    }
+  }
+  if (corrected.empty()) return;
+  absl::StatusOr<TrajectoryEvalResult> final_none = EvaluateTrajectory(corrected, gt, none);
+  absl::StatusOr<TrajectoryEvalResult> final_se3 = EvaluateTrajectory(corrected, gt, se3);
+  if (final_none.ok() && final_se3.ok()) {
+    report->corrected_ate_none_m = final_none->ate.translation_m.rmse;
+    report->corrected_ate_se3_m = final_se3->ate.translation_m.rmse;
   }
 }
 
@@ -160,11 +177,21 @@ std::string SlamSummaryText(const SlamReport& r, const std::string& tag) {
             ? " (the others' keyframes are not in the map, their poses not in its frame)"
             : "");
   }
+  if (r.loops_accepted > 0 || r.loops_rejected > 0) {
+    text += absl::StrFormat(
+        "\nslam: loop closure: %d loops in the pose graph, %d candidates rejected, %d "
+        "corrections",
+        r.loops_accepted, r.loops_rejected, r.corrections);
+  }
   if (r.ate_none_m && r.ate_se3_m) {
     text += absl::StrFormat("\nslam: ATE %.2f cm (no alignment), %.2f cm (SE(3))",
                             100.0 * *r.ate_none_m, 100.0 * *r.ate_se3_m);
     if (r.rpe_m && r.rpe_deg) {
       text += absl::StrFormat(", RPE %.2f cm / %.2f deg", 100.0 * *r.rpe_m, *r.rpe_deg);
+    }
+    if (r.corrected_ate_se3_m && r.corrections > 0) {
+      text += absl::StrFormat("; in the final frame ATE %.2f cm (SE(3))",
+                              100.0 * *r.corrected_ate_se3_m);
     }
   }
   text += r.started_from_ground_truth
@@ -201,11 +228,17 @@ void PrintSlamResult(const SlamReport& r, bool json, const JsonObject& more) {
       .Add("keyframe_mb", r.keyframe_mb.value_or(unknown))
       .Add("peak_rss_mb", r.peak_rss_mb.value_or(unknown))
       .AddBool("started_from_ground_truth", r.started_from_ground_truth)
-      .Add("trajectory", r.trajectory);
+      .Add("loops_accepted", r.loops_accepted)
+      .Add("loops_rejected", r.loops_rejected)
+      .Add("corrections", r.corrections)
+      .Add("trajectory", r.trajectory)
+      .Add("corrected_trajectory", r.corrected_trajectory);
   if (r.ate_none_m) out.Add("ate_none_m", *r.ate_none_m);
   if (r.ate_se3_m) out.Add("ate_se3_m", *r.ate_se3_m);
   if (r.rpe_m) out.Add("rpe_m", *r.rpe_m);
   if (r.rpe_deg) out.Add("rpe_deg", *r.rpe_deg);
+  if (r.corrected_ate_none_m) out.Add("corrected_ate_none_m", *r.corrected_ate_none_m);
+  if (r.corrected_ate_se3_m) out.Add("corrected_ate_se3_m", *r.corrected_ate_se3_m);
   out.Append(more);
   std::cout << out.str() << "\n";
 }

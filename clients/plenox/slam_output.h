@@ -17,10 +17,10 @@
 
 namespace plx::cli {
 
-// The flags both forms take, in this order: --out; the replay (--realtime, --speed,
+// The flags both forms take, in this order: --out, --corrected-out; the replay (--realtime, --speed,
 // --deterministic, --max-frames); the mapping budget (--iterations-per-keyframe); the keyframe
-// thresholds (--kf-translation, --kf-rotation, --kf-unmapped, --kf-interval); --rpe-delta; the
-// tracker flags (--mode, --rays, --iterations) and --voxel-size (`voxel_help`).
+// thresholds (--kf-translation, --kf-rotation, --kf-unmapped, --kf-interval);
+// --no-loop-closure; --rpe-delta; the tracker flags (--mode, --rays, --iterations) and --voxel-size (`voxel_help`).
 void AddSlamFlags(FlagSet& flags, const std::string& voxel_help);
 
 // The options those flags ask for, on top of DefaultSlamOptions (the flags the in-process form
@@ -39,6 +39,7 @@ int SlamFrameCount(const RgbdDataset& dataset, const SlamDatasetOptions& options
 
 struct SlamReport {
   std::string trajectory;  // --out
+  std::string corrected_trajectory;  // --corrected-out ("": not written)
   int frames = 0;          // in the dataset (or --max-frames)
   int processed = 0;
   int dropped = 0;         // --realtime: skipped while the tracker was behind
@@ -60,9 +61,14 @@ struct SlamReport {
   // summary otherwise.
   std::optional<double> keyframe_mb;
   std::optional<double> peak_rss_mb;
+  // Loop closure on the map (docs/SLAM.md, "Loop closure"): loop edges in its pose graph,
+  // candidates rejected, corrected maps published.
+  int loops_accepted = 0, loops_rejected = 0, corrections = 0;
   bool started_from_ground_truth = false;
-  // With ground truth (eval-traj's definitions).
+  // With ground truth (eval-traj's definitions): the online trajectory's, and the ATE of the
+  // trajectory in the map's final frame (what --corrected-out writes).
   std::optional<double> ate_none_m, ate_se3_m, rpe_m, rpe_deg;
+  std::optional<double> corrected_ate_none_m, corrected_ate_se3_m;
 
   // Frames per second of the stream, mapping running beside it.
   double fps() const {
@@ -74,8 +80,10 @@ struct SlamReport {
 // ATE (no alignment and SE(3)) and RPE (pairs `rpe_delta_m` of path apart) of `trajectory`
 // against the dataset's ground truth, as eval-traj computes them, into `report`; nothing when
 // the dataset has fewer than 3 ground-truth poses.
+// `corrected`: the trajectory in the map's final frame, scored into corrected_ate_* (empty: not).
 void ScoreSlamTrajectory(const RgbdDataset& dataset, const std::vector<StampedPose>& trajectory,
-                         double rpe_delta_m, SlamReport* report);
+                         const std::vector<StampedPose>& corrected, double rpe_delta_m,
+                         SlamReport* report);
 
 // The trajectory file's header: "plenox slam: DATASET<where> (started at ...)".
 std::string SlamTrajectoryHeader(const std::string& dataset, const std::string& where,

@@ -37,4 +37,29 @@ std::vector<StampedPose> CorrectedPoses(const std::vector<SlamFrameResult>& resu
   return poses;
 }
 
+std::vector<StampedPose> FollowCorrections(const std::vector<SlamFrameResult>& results,
+                                           const std::vector<SlamCorrection>& corrections) {
+  std::vector<StampedPose> poses = PosesInMainMap(results);
+  std::map<int, int> join_generation;  // segment -> the generation its join was measured in
+  for (size_t i = 1; i < results.size(); ++i) {
+    const int left = results[i - 1].segment;
+    if (results[i].main_T_segment && left != 0) {
+      join_generation[left] = results[i].correction_generation;
+    }
+  }
+  for (size_t i = 0; i < results.size(); ++i) {
+    const SlamFrameResult& r = results[i];
+    int generation = r.correction_generation;
+    if (r.segment != 0) {
+      const auto join = join_generation.find(r.segment);
+      if (join == join_generation.end()) continue;
+      generation = join->second;
+    }
+    for (const SlamCorrection& c : corrections) {
+      if (c.generation > generation) poses[i].pose = c.Move(poses[i].pose);
+    }
+  }
+  return poses;
+}
+
 }  // namespace plx

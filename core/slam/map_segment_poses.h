@@ -27,4 +27,12 @@ std::vector<StampedPose> PosesInMainMap(const std::vector<SlamFrameResult>& resu
 std::vector<StampedPose> CorrectedPoses(const std::vector<SlamFrameResult>& results,
                                         const std::vector<StampedPose>& keyframes);
 
+// Every result's pose (as PosesInMainMap) moved through each of `corrections` (in generation
+// order) newer than the frame it is in (SlamFrameResult::correction_generation; a segment's
+// frames: the generation of the frame that joined it), by SlamCorrection::Move: the poses in
+// the latest frame as a client that only sees the stream's corrections can hold them (`plenox
+// --server ... slam --corrected-out`). A segment never joined keeps its own frame.
+std::vector<StampedPose> FollowCorrections(const std::vector<SlamFrameResult>& results,
+                                           const std::vector<SlamCorrection>& corrections);
+
 }  // namespace plx

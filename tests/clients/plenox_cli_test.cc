@@ -105,9 +105,10 @@ TEST(PlenoxUsageTest, EveryCommandHelpListsItsFlags) {
        {"--map", "--dataset", "--out", "--mode", "--rays", "--iterations", "--pixels",
         "--backend", "--device", "--threads", "--json", "--quiet", "--help"}},
       {"slam",
-       {"--dataset", "--out", "--map-out", "--keyframes-out", "--realtime", "--speed",
-        "--deterministic", "--max-frames", "--iterations-per-keyframe", "--kf-translation",
-        "--kf-rotation", "--kf-unmapped", "--kf-interval", "--window", "--refine-window",
+       {"--dataset", "--out", "--corrected-out", "--map-out", "--keyframes-out", "--realtime",
+        "--speed", "--deterministic", "--max-frames", "--iterations-per-keyframe",
+        "--kf-translation", "--kf-rotation", "--kf-unmapped", "--kf-interval",
+        "--no-loop-closure", "--window", "--refine-window",
         "--mapping-nice", "--new-segment-after", "--mode", "--rays", "--iterations",
         "--pixels", "--voxel-size", "--backend",
         "--device", "--threads", "--json", "--quiet", "--help"}},
@@ -730,10 +731,11 @@ TEST_F(PlenoxEndToEndTest, SlamWritesTrajectoryKeyframesAndMapAndScoresThem) {
   const std::string trajectory = work.path() + "/slam.txt";
   const std::string keyframes = work.path() + "/keyframes.txt";
   const std::string map = work.path() + "/slam.plx";
+  const std::string corrected = work.path() + "/corrected.txt";
   const CommandResult r = RunPlenox(
       {"slam", "--dataset", *dataset_, "--out", trajectory, "--keyframes-out", keyframes,
-       "--map-out", map, "--deterministic", "--voxel-size", "0.03", "--rays", "1024",
-       "--iterations-per-keyframe", "20", "--json"},
+       "--map-out", map, "--corrected-out", corrected, "--deterministic", "--voxel-size",
+       "0.03", "--rays", "1024", "--iterations-per-keyframe", "20", "--json"},
       "", /*timeout_s=*/300.0);
   ASSERT_EQ(r.exit_code, kExitOk) << r.Describe();
   EXPECT_THAT(r.err, HasSubstr("started at frame 0's ground-truth pose")) << r.Describe();
@@ -754,6 +756,12 @@ TEST_F(PlenoxEndToEndTest, SlamWritesTrajectoryKeyframesAndMapAndScoresThem) {
   EXPECT_LT(JsonNumber(json, "ate_se3_m").value_or(1), 0.03) << r.Describe();
   EXPECT_EQ(ReadRows(trajectory).size(), static_cast<size_t>(kFrames));
   EXPECT_EQ(ReadRows(keyframes).size(), static_cast<size_t>(keyframe_count));
+  // One arc of the room, no place seen twice: no loop, no correction; the trajectory in the
+  // map's final frame (each pose on its keyframe as refined at the end) is scored as well.
+  EXPECT_EQ(JsonNumber(json, "loops_accepted").value_or(-1), 0);
+  EXPECT_EQ(JsonNumber(json, "corrections").value_or(-1), 0);
+  EXPECT_EQ(ReadRows(corrected).size(), static_cast<size_t>(kFrames));
+  EXPECT_LT(JsonNumber(json, "corrected_ate_se3_m").value_or(1), 0.03) << r.Describe();
   // The same ATE as eval-traj computes from the written file.
   const CommandResult scored =
       RunPlenox({"eval-traj", "--est", trajectory, "--gt", *dataset_ + "/groundtruth.txt",

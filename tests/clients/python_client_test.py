@@ -32,8 +32,8 @@ except ImportError as missing:
           "install Debian's python3-grpcio and python3-numpy")
     sys.exit(77)
 
-from plenoxd_client import (Client, PlenoxdError, TumDataset, convert, pb, slam_pose,
-                            slam_state_name, state_name)
+from plenoxd_client import (Client, PlenoxdError, TumDataset, convert, correct_pose, pb,
+                            slam_pose, slam_state_name, state_name)
 
 FRAMES, WIDTH, HEIGHT, EVERY = 30, 96, 72, 10
 VOXEL_SIZE = 0.04         # what the plenox CLI end-to-end test maps this sequence with
@@ -173,6 +173,18 @@ def main():
         failures.check(np.allclose([wire.qx, wire.qy, wire.qz, wire.qw], [0.0, 0.0, 0.6, 0.8])
                        and (wire.tx, wire.ty, wire.tz) == (1.0, 2.0, 3.0),
                        "pose_to_proto writes a unit quaternion with qw >= 0")
+        # A loop closure's correction: a pose moves with its anchor keyframe, the newest of
+        # those about as near as the nearest (a place passed twice: the later pass).
+        correction = pb.SlamCorrection(generation=1)
+        for before, lift in (([0, 0, 0], 0.0), ([2, 0, 0], 0.5), ([0.1, 0, 0], 0.2)):
+            move = correction.keyframes.add()
+            convert.pose_to_proto((before, [0, 0, 0, 1]), move.before)
+            convert.pose_to_proto((np.add(before, [0, lift, 0]), [0, 0, 0, 1]), move.after)
+        near_second, _ = correct_pose(correction, ([1.8, 0, 0], [0, 0, 0, 1]))
+        at_start, _ = correct_pose(correction, np.eye(4))
+        failures.check(np.allclose(near_second, [1.8, 0.5, 0]) and np.allclose(at_start,
+                                                                               [0, 0.2, 0]),
+                       "correct_pose moves a pose with its anchor keyframe")
         t_back, q_back = convert.pose_from_proto(convert.pose_to_proto(frames[0].pose))
         failures.check(np.allclose(t_back, frames[0].pose[0], atol=1e-12)
                        and abs(abs(np.dot(q_back, frames[0].pose[1])) - 1.0) < 1e-12,
@@ -284,6 +296,10 @@ def main():
                   f"iterations, version {done.mapping.map_version}")
             failures.check(done.mapping.finished, "the last stream's done message comes after "
                            "the mapping job finished")
+            # Three seconds of one arc: nothing to close, and nothing false closed.
+            failures.check(done.mapping.loops_accepted == 0 and done.mapping.corrections == 0
+                           and not stream.corrections,
+                           f"no loop on an open arc ({done.mapping.loops_accepted} accepted)")
             failures.check(2 <= stream.keyframes < FRAMES
                            and done.mapping.keyframes == stream.keyframes
                            and sum(u.keyframe for u in updates) == stream.keyframes,

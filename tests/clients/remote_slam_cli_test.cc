@@ -192,9 +192,9 @@ TEST_F(RemoteSlamBadInputTest, HelpListsTheFlagsTheDaemonHonours) {
   for (const char* flag :
        {"--dataset", "--name", "--out", "--realtime", "--speed", "--deterministic", "--max-frames",
         "--iterations-per-keyframe", "--kf-translation", "--kf-rotation", "--kf-unmapped",
-        "--kf-interval", "--rpe-delta", "--mode", "--rays", "--iterations", "--pixels",
-        "--voxel-size",
-        "--encoding", "--save", "--json", "--quiet"}) {
+        "--kf-interval", "--no-loop-closure", "--rpe-delta", "--mode", "--rays",
+        "--iterations", "--pixels", "--voxel-size", "--corrected-out", "--encoding", "--save",
+        "--json", "--quiet"}) {
     EXPECT_THAT(r.out, HasSubstr(std::string("\n  ") + flag + " ")) << flag;
   }
   for (const char* flag : {"--map-out", "--keyframes-out", "--window", "--backend", "--threads"}) {

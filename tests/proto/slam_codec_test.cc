@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -46,6 +47,7 @@ SlamOptions ChosenOptions() {
   s.mapping.mapper.allocation.max_depth = 6.5f;
   s.mapping.mapper.fusion.max_depth = 6.5f;
   s.max_pending_keyframes = 2;
+  s.loop_closure.enabled = false;
   return s;
 }
 
@@ -59,7 +61,8 @@ SlamOptionsFields AllFields() {
           .iterations_per_keyframe = true,
           .rays_per_iteration = true,
           .max_depth = true,
-          .max_pending_keyframes = true};
+          .max_pending_keyframes = true,
+          .loop_closure = true};
 }
 
 // The settings the wire carries, compared (floats travel as float: 1e-6 relative).
@@ -79,6 +82,7 @@ void ExpectSameWireSettings(const SlamOptions& got, const SlamOptions& want) {
   EXPECT_FLOAT_EQ(got.mapping.mapper.fusion.max_depth, want.mapping.mapper.fusion.max_depth);
   EXPECT_EQ(got.max_pending_keyframes, want.max_pending_keyframes);
   EXPECT_EQ(got.deterministic, want.deterministic);
+  EXPECT_EQ(got.loop_closure.enabled, want.loop_closure.enabled);
 }
 
 TEST(SlamCodecTest, DefaultMessageIsCoresSlamDefaults) {
@@ -285,6 +289,50 @@ TEST(SlamCodecTest, MappingCarriesTheJobsProgress) {
   EXPECT_EQ(m.streams(), 2u);
   EXPECT_TRUE(m.finished());
   EXPECT_FALSE(SlamMappingToProto(Progress(), "slam-3", 1, false).finished());
+}
+
+TEST(SlamCodecTest, MappingCarriesTheLoopClosureCounts) {
+  SlamMapperProgress p = Progress();
+  p.loops.accepted = 3;
+  p.loops.rejected = 2;
+  p.loops.corrections = 1;
+  p.loops.last_solve_ms = 4.5;
+  const pb::SlamMapping m = SlamMappingToProto(p, "slam-3", 1, false);
+  EXPECT_EQ(m.loops_accepted(), 3u);
+  EXPECT_EQ(m.loops_rejected(), 2u);
+  EXPECT_EQ(m.corrections(), 1u);
+  EXPECT_DOUBLE_EQ(m.last_solve_ms(), 4.5);
+}
+
+TEST(SlamCodecTest, ACorrectionRoundTripsWithEveryKeyframe) {
+  SlamCorrection c;
+  c.generation = 2;
+  c.map_version = 17;
+  const SE3 lift(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0.5, 0));
+  c.before = {SE3::Identity(), SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(1, 0, 0))};
+  c.after = {c.before[0], lift * c.before[1]};  // keyframe 0 did not move: it is sent too
+  c.max_shift_m = 0.5;
+  c.loops = 1;
+  SlamFrameResult result;
+  result.correction = std::make_shared<SlamCorrection>(c);
+  result.frame_change = lift;
+  result.correction_generation = 2;
+  const pb::SlamUpdate update = SlamUpdateToProto(result, 4, 1.0, 0, pb::SlamMapping());
+  EXPECT_EQ(update.correction_generation(), 2u);
+  ASSERT_TRUE(update.has_correction());
+  EXPECT_NEAR(update.correction().camera_new_t_old().ty(), 0.5, 1e-12);
+  ASSERT_EQ(update.correction().keyframes_size(), 2);
+  const absl::StatusOr<SlamCorrection> back = SlamCorrectionFromProto(update.correction());
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(back->generation, 2);
+  EXPECT_EQ(back->map_version, 17);
+  EXPECT_EQ(back->loops, 1);
+  EXPECT_DOUBLE_EQ(back->max_shift_m, 0.5);
+  ASSERT_EQ(back->after.size(), 2u);
+  EXPECT_TRUE(back->after[1].translation().isApprox(Eigen::Vector3d(1, 0.5, 0)));
+  // Without a correction, none is sent.
+  EXPECT_FALSE(SlamUpdateToProto(SlamFrameResult{}, 5, 1.0, 0, pb::SlamMapping())
+                   .has_correction());
 }
 
 TEST(SlamCodecTest, UpdateCarriesTheFramesResult) {

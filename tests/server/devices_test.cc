@@ -275,5 +275,19 @@ TEST(MetricsDevicesTest, LabelValuesAreEscaped) {
   EXPECT_THAT(text, HasSubstr("plenoxd_device_streams{device=\"cuda:0\"} 2\n"));
 }
 
+TEST(MetricsRenderTest, LoopClosureGaugesAreWrittenAsGiven) {
+  Metrics metrics;
+  Metrics::Gauges g;
+  g.slam_loops = 4;
+  g.slam_loops_rejected = 2;
+  g.slam_corrections = 1;
+  g.slam_last_solve_s = 0.0125;
+  const std::string text = metrics.Render(g);
+  EXPECT_THAT(text, HasSubstr("plenoxd_slam_loops 4\n"));
+  EXPECT_THAT(text, HasSubstr("plenoxd_slam_loops_rejected 2\n"));
+  EXPECT_THAT(text, HasSubstr("plenoxd_slam_corrections 1\n"));
+  EXPECT_THAT(text, HasSubstr("plenoxd_slam_last_solve_seconds 0.012500\n"));
+}
+
 }  // namespace
 }  // namespace plx::server::testing

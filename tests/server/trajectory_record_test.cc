@@ -151,5 +151,23 @@ TEST(TrajectoryRecordTest, KeepsTheNewestKeyframesAndReplacesThemEachTime) {
   EXPECT_EQ(kept[0].translation().x(), -1);
 }
 
+TEST(TrajectoryRecordTest, LoopsIndexTheKeptKeyframes) {
+  constexpr int kExtra = 10;
+  std::vector<StampedPose> keyframes;
+  for (int i = 0; i < static_cast<int>(TrajectoryRecord::kMaxKeyframes) + kExtra; ++i) {
+    keyframes.push_back(StampedPose{static_cast<double>(i), At(static_cast<double>(i))});
+  }
+  TrajectoryRecord record;
+  // A loop to a keyframe no longer kept is dropped; the others shift with the kept ones.
+  record.SetKeyframes(keyframes, {{3, 2000}, {kExtra + 5, 3000}});
+  const std::vector<std::pair<int, int>> loops = record.Loops();
+  ASSERT_EQ(loops.size(), 1u);
+  EXPECT_EQ(loops[0], std::make_pair(5, 3000 - kExtra));
+  const std::vector<SE3> kept = record.Keyframes();
+  EXPECT_EQ(kept[loops[0].first].translation().x(), kExtra + 5);
+  record.SetKeyframes(keyframes);
+  EXPECT_TRUE(record.Loops().empty());
+}
+
 }  // namespace
 }  // namespace plx::server

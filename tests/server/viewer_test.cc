@@ -269,6 +269,7 @@ TEST(ViewerTest, TrajectoryFollowsARunningSlamStream) {
   EXPECT_NE(t.body.find("\"active\":true"), std::string::npos) << t.body;
   EXPECT_EQ(JsonNumber(t.body, "frames"), 6) << t.body;
   EXPECT_NE(t.body.find("\"keyframes\":[["), std::string::npos) << t.body;
+  EXPECT_NE(t.body.find("\"loops\":[]"), std::string::npos) << t.body;  // six frames: no loop
   // The camera's pose is frame 5's, near the truth.
   const size_t pose_at = t.body.find("\"pose\":[");
   ASSERT_NE(pose_at, std::string::npos);

@@ -10,6 +10,7 @@
 
   const TRACK_COLORS = [0xff2bd6, 0x2bff88, 0xffa62b, 0x2bd9ff, 0xb388ff, 0xff5252];
   const KEYFRAME_COLOR = 0xffe14d;
+  const LOOP_COLOR = 0xffffff;  // loop-closure edges between keyframes
   const MAPS_EVERY_MS = 2000;
   const TRAJECTORY_EVERY_MS = 500;
   const POINTS_MIN_INTERVAL_MS = 1500;  // while a map grows, at most one cloud per 1.5 s
@@ -559,6 +560,19 @@
       addPickable(o, k, 'keyframe ' + i, frustum * 0.5);
       slamGroup.add(o);
     });
+    // Loop closures: an edge between the two keyframes that saw one place.
+    const loops = t.loops || [];
+    if (loops.length > 0) {
+      const v = [];
+      for (const [a, b] of loops) {
+        const p = t.keyframes[a], q = t.keyframes[b];
+        if (p && q) v.push(p[0], p[1], p[2], q[0], q[1], q[2]);
+      }
+      const g = new THREE.BufferGeometry();
+      g.setAttribute('position', new THREE.Float32BufferAttribute(v, 3));
+      slamGroup.add(new THREE.LineSegments(g, new THREE.LineBasicMaterial({ color: LOOP_COLOR })));
+    }
+    body.dataset.loops = String(loops.length);
     body.dataset.cameras = String(t.cameras.filter((c) => c.frames > 0).length);
     body.dataset.pathPoints = String(pathPoints);
     body.dataset.keyframes = String(t.keyframes.length);

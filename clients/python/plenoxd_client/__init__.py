@@ -19,14 +19,14 @@ except ImportError as _e:  # pragma: no cover - depends on the environment
 
 from . import convert, dataset, trajectory
 from .client import (DEFAULT_MAX_MESSAGE_BYTES, Client, MeshExport, PlenoxdError, Rendering,
-                     SlamStream, TrackStream, as_dict, estimate_pose, slam_pose, slam_state_name,
-                     state_name)
+                     SlamStream, TrackStream, as_dict, correct_pose, estimate_pose, slam_pose,
+                     slam_state_name, state_name)
 from .convert import pb
 from .dataset import Frame, Intrinsics, TumDataset
 
 __all__ = [
     "Client", "PlenoxdError", "TrackStream", "SlamStream", "Rendering", "MeshExport",
-    "DEFAULT_MAX_MESSAGE_BYTES", "as_dict", "estimate_pose", "state_name", "slam_pose",
+    "DEFAULT_MAX_MESSAGE_BYTES", "as_dict", "correct_pose", "estimate_pose", "state_name", "slam_pose",
     "slam_state_name", "convert", "dataset", "trajectory", "pb", "Frame", "Intrinsics", "TumDataset",
 ]
 __version__ = "0.1.0"

@@ -20,6 +20,7 @@ import threading
 from collections import namedtuple
 
 import grpc
+import numpy as np
 
 import health_pb2
 import health_pb2_grpc
@@ -298,7 +299,10 @@ class SlamStream(_FrameStream):
     the server skipped with options realtime=True, the sum of SlamUpdate.dropped), keyframes
     (frames handed to the mapping job), lost / degraded / relocalised / waiting (updates in
     those states; WAITING: the map has no keyframe yet and the frame had too little depth to
-    start it); mapping: the SlamMapping of the latest message. cancel() ends the call early."""
+    start it); mapping: the SlamMapping of the latest message (its loops_accepted,
+    loops_rejected, corrections and last_solve_ms: the map's loop closure); corrections: every
+    SlamCorrection the stream carried, in order (a loop closure moved the map's keyframes: move
+    what you hold in the old frame with correct_pose()). cancel() ends the call early."""
 
     _method = "Slam"
     _request_type = pb.SlamRequest
@@ -313,6 +317,7 @@ class SlamStream(_FrameStream):
         self.waiting = 0
         self.mapping = None
         self.done = None
+        self.corrections = []
 
     @staticmethod
     def _options_to_proto(options):
@@ -326,6 +331,8 @@ class SlamStream(_FrameStream):
         self.received += 1
         self.dropped += update.dropped
         self.keyframes += int(update.keyframe)
+        if update.HasField("correction"):
+            self.corrections.append(update.correction)
         if update.state == pb.SLAM_STATE_LOST:
             self.lost += 1
         elif update.state == pb.SLAM_STATE_DEGRADED:
@@ -378,7 +385,7 @@ def _slam_options(options):
     if isinstance(options, pb.SlamOptions):
         return options
     known = set(_SLAM_FLOAT_OPTIONS + _SLAM_INT_OPTIONS + _SLAM_BOOL_OPTIONS +
-                ("tracking", "max_pending_keyframes"))
+                ("tracking", "max_pending_keyframes", "loop_closure"))
     unknown = sorted(set(options) - known)
     if unknown:
         raise ValueError(f"unknown SlamOptions field(s) {unknown}; known: {sorted(known)}")
@@ -393,6 +400,8 @@ def _slam_options(options):
         o.tracking.CopyFrom(_track_options(options["tracking"]))
     if options.get("max_pending_keyframes") is not None:  # 0 is a value here, not "default"
         o.max_pending_keyframes = int(options["max_pending_keyframes"])
+    if options.get("loop_closure") is not None:  # False is a value here, not "default"
+        o.loop_closure = bool(options["loop_closure"])
     return o
 
 
@@ -701,6 +710,33 @@ def slam_pose(update):
     if update.done:
         raise ValueError("a done SlamUpdate carries no frame and no pose")
     return convert.pose_from_proto(update.pose)
+
+
+# A pose's anchor keyframe is the newest of those this near (metres plus radians of viewing
+# direction) to the nearest one: the daemon's rule (core/slam/slam_correction.h).
+_RECENT_KEYFRAME_MARGIN = 0.3
+
+
+def correct_pose(correction, pose):
+    """`pose` (any form convert.as_pose() reads) held in the frame before a SlamCorrection, as
+    (t, q) in the corrected frame: moved with the keyframe it is anchored to, as the daemon
+    moves its cameras and keyframes. A correction without keyframes leaves it as it is."""
+    t, q = convert.as_pose(pose)
+    m = convert.pose_to_matrix(t, q)
+    best, distances = None, []
+    for move in correction.keyframes:
+        bt, bq = convert.pose_from_proto(move.before)
+        cos_half = min(1.0, abs(float(np.dot(bq / np.linalg.norm(bq), q / np.linalg.norm(q)))))
+        distances.append(float(np.linalg.norm(bt - t)) + 2.0 * float(np.arccos(cos_half)))
+    if distances:
+        nearest = min(distances)
+        best = max(i for i, d in enumerate(distances) if d <= nearest + _RECENT_KEYFRAME_MARGIN)
+    if best is None:
+        return t, q
+    move = correction.keyframes[best]
+    before = convert.pose_to_matrix(*convert.pose_from_proto(move.before))
+    after = convert.pose_to_matrix(*convert.pose_from_proto(move.after))
+    return convert.matrix_to_pose(after @ np.linalg.inv(before) @ m)
 
 
 def slam_state_name(update):

@@ -260,5 +260,28 @@ TEST(CorrectedPosesTest, AFrameKeepsItsPoseRelativeToItsKeyframe) {
   EXPECT_TRUE(poses[1].pose.translation().isApprox(Eigen::Vector3d(5, 0, 0)));
 }
 
+TEST(FollowCorrectionsTest, APoseMovesThroughTheCorrectionsAfterItsFrame) {
+  const SE3 at_one(Eigen::Quaterniond::Identity(), Eigen::Vector3d(1, 0, 0));
+  const SE3 lift(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0.5, 0));
+  SlamCorrection first;
+  first.generation = 1;
+  first.before = {SE3::Identity(), at_one};
+  first.after = {SE3::Identity(), lift * at_one};
+  SlamFrameResult old_frame;  // tracked before the correction: moves with keyframe 1
+  old_frame.pose = at_one;
+  SlamFrameResult new_frame;  // tracked in the corrected frame: stays
+  new_frame.pose = lift * at_one;
+  new_frame.correction_generation = 1;
+  SlamFrameResult lost_segment;  // a segment never joined keeps its own frame
+  lost_segment.segment = 1;
+  lost_segment.pose = at_one;
+  const std::vector<StampedPose> poses =
+      FollowCorrections({old_frame, new_frame, lost_segment}, {first});
+  ASSERT_EQ(poses.size(), 3u);
+  EXPECT_TRUE(poses[0].pose.translation().isApprox(Eigen::Vector3d(1, 0.5, 0)));
+  EXPECT_TRUE(poses[1].pose.translation().isApprox(Eigen::Vector3d(1, 0.5, 0)));
+  EXPECT_TRUE(poses[2].pose.translation().isApprox(Eigen::Vector3d(1, 0, 0)));
+}
+
 }  // namespace
 }  // namespace plx
