@@ -184,7 +184,8 @@ int TwoLapLoop(const Flags& flags) {
     for (size_t i = 0; i < truth.size(); ++i) {
       sum += (r->keyframes[i].translation() - truth[i].translation()).norm();
     }
-    absl::StatusOr<plx::AteResult> ate = plx::ComputeAte(r->keyframes, truth, plx::TrajectoryAlignment::kSE3);
+    absl::StatusOr<plx::AteResult> ate =
+        plx::ComputeAte(r->keyframes, truth, plx::TrajectoryAlignment::kSE3);
     const double end =
         (r->keyframes.back().translation() - truth.back().translation()).norm();
     std::printf("%-22s %9.2f %9.2f %9.2f %6d %6d %6d %8.2fcm %7.2f %7.1f\n", c.name, 100 * end,

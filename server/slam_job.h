@@ -118,9 +118,11 @@ class SlamJob : public std::enable_shared_from_this<SlamJob> {
   // when it has content) and its publisher the store. Stepped by the job's task only.
   std::unique_ptr<SlamCoordinator> coordinator_;
 
+  // Keyframes integrated, loop edges and corrections when trajectory_ last got the keyframes'
+  // poses (task).
   int keyframes_recorded_ = 0;
-  int loops_recorded_ = 0;        // and the loop edges and corrections then
-  int corrections_recorded_ = 0;  // keyframes integrated when trajectory_ last got their poses (task)
+  int loops_recorded_ = 0;
+  int corrections_recorded_ = 0;
 
   mutable std::mutex mutex_;  // guards what follows
   std::vector<std::shared_ptr<SlamJobListener>> members_;    // the streams on the job

@@ -15,6 +15,7 @@
 #include "core/common/status_macros.h"
 #include "core/formats/map_file.h"
 #include "core/formats/trajectory_file.h"
+#include "core/io/atomic_write.h"
 #include "core/slam/map_segment_poses.h"
 #include "core/slam/slam_dataset.h"
 
@@ -29,6 +30,10 @@ void AddInProcessSlamFlags(FlagSet& flags) {
   const SlamOptions d = DefaultSlamOptions();
   flags.Add("map-out", "MAP.plx", "write the final map here", "")
       .Add("keyframes-out", "F", "write the keyframes' (refined) poses here (TUM format)", "")
+      .Add("loops-out", "F",
+           "write the map's loop edges here, one per line: the two keyframes' timestamps, the "
+           "measured from_T_to (tx ty tz qx qy qz qw), PnP inliers, dense inlier fraction",
+           "")
       .Add("frames-out", "F.csv",
            "write one line per processed frame here: frame,timestamp,state,ms,keyframe,"
            "segment,odometry_ms,map_ms,relocalisation_ms,features_ms,reason",
@@ -94,6 +99,26 @@ absl::Status WriteFramesCsv(const std::string& path, const std::vector<SlamFrame
   return absl::OkStatus();
 }
 
+// --loops-out: the loop edges by their keyframes' timestamps (a benchmark checks each against
+// the ground truth: a false loop is one far from it).
+absl::Status WriteLoops(const std::string& path, const std::vector<LoopEdge>& loops,
+                        const std::vector<StampedPose>& keyframes) {
+  std::string text = "# t_from t_to tx ty tz qx qy qz qw inliers depth_inlier_fraction\n";
+  for (const LoopEdge& loop : loops) {
+    if (loop.from >= static_cast<int>(keyframes.size()) ||
+        loop.to >= static_cast<int>(keyframes.size())) {
+      continue;
+    }
+    const Eigen::Vector3d& t = loop.from_T_to.translation();
+    const Eigen::Quaterniond& q = loop.from_T_to.rotation();
+    absl::StrAppendFormat(&text, "%.6f %.6f %.6f %.6f %.6f %.9f %.9f %.9f %.9f %d %.3f\n",
+                          keyframes[loop.from].timestamp, keyframes[loop.to].timestamp, t.x(),
+                          t.y(), t.z(), q.x(), q.y(), q.z(), q.w(), loop.inliers,
+                          loop.depth_inlier_fraction);
+  }
+  return WriteFileAtomically(path, text, "cannot write --loops-out");
+}
+
 // The slowest frame's ProcessFrame time (every processed frame, LOST ones included).
 double MaxFrameMilliseconds(const std::vector<SlamFrameResult>& results) {
   double worst = 0.0;
@@ -131,7 +156,8 @@ int RunSlam(const std::vector<std::string>& args) {
   report.corrected_trajectory = flags.GetString("corrected-out");
   for (const std::string& path :
        {report.trajectory, report.corrected_trajectory, flags.GetString("map-out"),
-        flags.GetString("keyframes-out"), flags.GetString("frames-out")}) {
+        flags.GetString("keyframes-out"), flags.GetString("frames-out"),
+        flags.GetString("loops-out")}) {
     if (path.empty()) continue;
     if (absl::Status s = CheckOutputDirectory(path); !s.ok()) return ReportError(kCommand, s);
   }
@@ -182,6 +208,12 @@ int RunSlam(const std::vector<std::string>& args) {
   }
   if (!flags.GetString("map-out").empty() && result->map != nullptr) {
     if (absl::Status s = SaveMap(*result->map, flags.GetString("map-out")); !s.ok()) {
+      return ReportError(kCommand, s);
+    }
+  }
+  if (!flags.GetString("loops-out").empty()) {
+    if (absl::Status s = WriteLoops(flags.GetString("loops-out"), result->loops, result->keyframes);
+        !s.ok()) {
       return ReportError(kCommand, s);
     }
   }

@@ -33,6 +33,9 @@ const std::vector<UnavailableFlag>& InProcessOnlyFlags() {
       {"keyframes-out",
        "the daemon does not send the keyframes' refined poses (each update says whether its "
        "frame became a keyframe)"},
+      {"loops-out",
+       "the daemon does not send the loop edges (the viewer draws them; the stream's "
+       "corrections say how the keyframes moved)"},
       {"window", "the daemon's mapping job sets its own mapping window"},
       {"refine-window", "the daemon's mapping job sets its own keyframe refinement"},
       {"mapping-nice", "the daemon's mapping job runs at the daemon's priority"},
@@ -79,7 +82,7 @@ FlagSet RemoteSlamFlags() {
                 "daemon's data directory. Times reported: the daemon's latency (frame received\n"
                 "to update sent) and the round trip seen here (frame sent to update read,\n"
                 "encoding excluded). Not here (the daemon decides them): --map-out,\n"
-                "--keyframes-out, --window, --refine-window, --mapping-nice,\n"
+                "--keyframes-out, --loops-out, --window, --refine-window, --mapping-nice,\n"
                 "--new-segment-after, --backend, --device, --threads, --no-odometry,\n"
                 "--no-feature-relocalisation.");
   AddDatasetFlags(flags);

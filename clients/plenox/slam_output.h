@@ -17,10 +17,11 @@
 
 namespace plx::cli {
 
-// The flags both forms take, in this order: --out, --corrected-out; the replay (--realtime, --speed,
-// --deterministic, --max-frames); the mapping budget (--iterations-per-keyframe); the keyframe
-// thresholds (--kf-translation, --kf-rotation, --kf-unmapped, --kf-interval);
-// --no-loop-closure; --rpe-delta; the tracker flags (--mode, --rays, --iterations) and --voxel-size (`voxel_help`).
+// The flags both forms take, in this order: --out, --corrected-out; the replay (--realtime,
+// --speed, --deterministic, --max-frames); the mapping budget (--iterations-per-keyframe); the
+// keyframe thresholds (--kf-translation, --kf-rotation, --kf-unmapped, --kf-interval);
+// --no-loop-closure; --rpe-delta; the tracker flags (--mode, --rays, --iterations) and
+// --voxel-size (`voxel_help`).
 void AddSlamFlags(FlagSet& flags, const std::string& voxel_help);
 
 // The options those flags ask for, on top of DefaultSlamOptions (the flags the in-process form

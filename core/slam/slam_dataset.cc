@@ -73,6 +73,7 @@ absl::StatusOr<SlamDatasetResult> RunSlamOnDataset(
   out.wall_s = SecondsSince(wall_start);
   out.map = session->latest_map();
   out.keyframes = session->keyframe_poses();
+  out.loops = session->loops();
   out.progress = session->progress();
   out.ms_per_frame_median = Percentile(ms, 0.5);
   out.ms_per_frame_p95 = Percentile(ms, 0.95);

@@ -33,6 +33,7 @@ struct SlamDatasetResult {
   std::vector<StampedPose> trajectory;
   std::vector<SlamFrameResult> results;    // per processed frame
   std::vector<StampedPose> keyframes;      // final (refined) keyframe poses
+  std::vector<LoopEdge> loops;             // the map's loop edges at the end (keyframe indices)
   std::shared_ptr<const PlenoxelMap> map;  // the final version
   SlamProgress progress;
   bool started_from_ground_truth = false;

@@ -265,6 +265,8 @@ std::vector<StampedPose> SlamSession::keyframe_poses() const {
   return coordinator_.keyframe_poses();
 }
 
+std::vector<LoopEdge> SlamSession::loops() const { return coordinator_.loops(); }
+
 SlamProgress SlamSession::progress() const {
   SlamProgress p;
   p.mapping = coordinator_.progress();

@@ -149,6 +149,8 @@ class SlamSession {
   std::shared_ptr<const PlenoxelMap> latest_map() const;
   // Keyframe poses as refined so far (timestamp, world_T_camera), in keyframe order.
   std::vector<StampedPose> keyframe_poses() const;
+  // The loop edges in the map's pose graph (keyframe indices; docs/SLAM.md, "Loop closure").
+  std::vector<LoopEdge> loops() const;
   SlamProgress progress() const;
 
  private:
