@@ -66,6 +66,10 @@ std::string Metrics::Render(const Gauges& g) const {
     absl::StrAppend(&out, "# HELP ", name, " ", help, "\n# TYPE ", name, " gauge\n", name, " ",
                     value, "\n");
   };
+  auto seconds_gauge = [&](const char* name, const char* help, double seconds) {
+    absl::StrAppend(&out, "# HELP ", name, " ", help, "\n# TYPE ", name, " gauge\n", name, " ",
+                    absl::StrFormat("%.6f", seconds), "\n");
+  };
   counter("plenoxd_frames_tracked_total", "Frames tracked.", frames_tracked.load());
   counter("plenoxd_frames_dropped_total", "Frames dropped by latest-wins tracking streams.",
           frames_dropped.load());
@@ -121,11 +125,8 @@ std::string Metrics::Render(const Gauges& g) const {
   gauge("plenoxd_slam_pending_keyframes",
         "Keyframes accepted by SLAM jobs and not integrated yet (mapping lag).",
         g.slam_pending_keyframes);
-  absl::StrAppend(&out,
-                  "# HELP plenoxd_slam_last_publish_seconds The longest last publish of the "
-                  "running SLAM jobs.\n# TYPE plenoxd_slam_last_publish_seconds gauge\n"
-                  "plenoxd_slam_last_publish_seconds ",
-                  absl::StrFormat("%.6f", g.slam_last_publish_s), "\n");
+  seconds_gauge("plenoxd_slam_last_publish_seconds",
+                "The longest last publish of the running SLAM jobs.", g.slam_last_publish_s);
   gauge("plenoxd_slam_loops", "Loop edges in the running SLAM jobs' pose graphs.", g.slam_loops);
   gauge("plenoxd_slam_loops_rejected",
         "Loop candidates the running SLAM jobs rejected (a failed check or the pose graph).",
@@ -133,11 +134,9 @@ std::string Metrics::Render(const Gauges& g) const {
   gauge("plenoxd_slam_corrections",
         "Loop-closure corrections (rebuilt maps) the running SLAM jobs published.",
         g.slam_corrections);
-  absl::StrAppend(&out,
-                  "# HELP plenoxd_slam_last_solve_seconds The slowest last pose-graph solve of "
-                  "the running SLAM jobs.\n# TYPE plenoxd_slam_last_solve_seconds gauge\n"
-                  "plenoxd_slam_last_solve_seconds ",
-                  absl::StrFormat("%.6f", g.slam_last_solve_s), "\n");
+  seconds_gauge("plenoxd_slam_last_solve_seconds",
+                "The slowest last pose-graph solve of the running SLAM jobs.",
+                g.slam_last_solve_s);
   slam_latency_.Render("plenoxd_slam_latency_seconds",
                        "Time from receiving a Slam frame to its update.", &out);
   // The HTTP port's bounds at work: a rising refusal or timeout count is a client (or an

@@ -63,26 +63,44 @@ SlamFrameResult Process(SlamTracker& tracker, SlamCoordinator& coordinator, cons
   return *r;
 }
 
-TEST(SlamMultiCameraTest, TwoCamerasTrackInOneGrowingMap) {
+// 160x120, 90 frames of the circling path, one map's coordinator (mapping on its own backend)
+// and the trackers' backend: two cameras' room.
+class SlamTwoCameraRoomTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    room_ = testing::MakeSyntheticRoom(160, 120, 90);
+    ASSERT_NE(room_, nullptr);
+    k_ = room_->calibration().pinhole;
+    map_ = StartedCoordinator(options_, mapping_.get());
+    ASSERT_NE(map_, nullptr);
+  }
+  // A camera starting at frame `start`'s true pose (none: no initial pose, the identity).
+  std::unique_ptr<SlamTracker> Camera(std::optional<int> start) const {
+    SlamTrackerOptions o = SplitSlamOptions(options_).tracker;
+    if (start) o.initial_pose = *room_->ground_truth(*start);
+    return std::make_unique<SlamTracker>(o, tracking_.get());
+  }
+
+  const SlamOptions options_ = TestOptions();
+  std::unique_ptr<Backend> tracking_ = MakeCpuBackend(2);
+  std::unique_ptr<Backend> mapping_ = MakeCpuBackend(1);
+  std::unique_ptr<InMemoryDataset> room_;
+  PinholeIntrinsics k_;
+  std::unique_ptr<SlamCoordinator> map_;
+};
+
+TEST_F(SlamTwoCameraRoomTest, TwoCamerasTrackInOneGrowingMap) {
   // 160x120, 90 frames of the circling path. Camera A walks it from frame 0 to 89. Once A has
   // mapped frames 0-40, camera B joins at frame 40's place (its initial pose, as a client
   // would give it) and walks back to frame 0 while A goes on: B's frames interleave with A's.
-  std::unique_ptr<InMemoryDataset> room = testing::MakeSyntheticRoom(160, 120, 90);
-  ASSERT_NE(room, nullptr);
-  const PinholeIntrinsics k = room->calibration().pinhole;
-  std::unique_ptr<Backend> tracking = MakeCpuBackend(2);
-  std::unique_ptr<Backend> mapping = MakeCpuBackend(1);
-  const SlamOptions options = TestOptions();
-  std::unique_ptr<SlamCoordinator> map = StartedCoordinator(options, mapping.get());
-  ASSERT_NE(map, nullptr);
-
-  SlamTrackerOptions a_options = SplitSlamOptions(options).tracker;
-  a_options.initial_pose = *room->ground_truth(0);
-  SlamTracker a(a_options, tracking.get());
-  SlamTrackerOptions b_options = SplitSlamOptions(options).tracker;
-  b_options.initial_pose = *room->ground_truth(40);
+  const InMemoryDataset* room = room_.get();
+  const PinholeIntrinsics& k = k_;
+  SlamCoordinator* map = map_.get();
+  const std::unique_ptr<SlamTracker> a_camera = Camera(0);
   // B joins a map that has versions: its first frame relocalises from its initial pose.
-  SlamTracker b(b_options, tracking.get());
+  const std::unique_ptr<SlamTracker> b_camera = Camera(40);
+  SlamTracker& a = *a_camera;
+  SlamTracker& b = *b_camera;
 
   std::vector<StampedPose> a_trajectory, a_truth, b_trajectory, b_truth;
   int b_keyframes = 0;
@@ -143,25 +161,20 @@ SlamFrameResult ProcessInSegments(SlamTracker& tracker, SlamCoordinator& coordin
   return *r;
 }
 
-TEST(SlamMultiCameraTest, ASecondCameraStartingSomewhereUnknownEndsInTheFirstOnesFrame) {
+TEST_F(SlamTwoCameraRoomTest, ASecondCameraStartingSomewhereUnknownEndsInTheFirstOnesFrame) {
   // Camera A walks the circling path from frame 0 (its start is the map's frame). Camera B
   // starts at the same time at frame 89's place (the far side of the circle), with no initial
   // pose (its identity means nothing in A's frame), and walks back towards frame 0 while A
   // walks on: B is lost to the map (or in a segment of its own) until it sees a place A
   // mapped, then joins the map. Every pose B reported, mapped into the main map, must be in A's frame.
   constexpr int kBStart = 89;
-  std::unique_ptr<InMemoryDataset> room = testing::MakeSyntheticRoom(160, 120, 90);
-  ASSERT_NE(room, nullptr);
-  const PinholeIntrinsics k = room->calibration().pinhole;
-  std::unique_ptr<Backend> tracking = MakeCpuBackend(2);
-  std::unique_ptr<Backend> mapping = MakeCpuBackend(1);
-  const SlamOptions options = TestOptions();
-  std::unique_ptr<SlamCoordinator> map = StartedCoordinator(options, mapping.get());
-  ASSERT_NE(map, nullptr);
-  SlamTrackerOptions a_options = SplitSlamOptions(options).tracker;
-  a_options.initial_pose = *room->ground_truth(0);
-  SlamTracker a(a_options, tracking.get());
-  SlamTracker b(SplitSlamOptions(options).tracker, tracking.get());
+  const InMemoryDataset* room = room_.get();
+  const PinholeIntrinsics& k = k_;
+  SlamCoordinator* map = map_.get();
+  const std::unique_ptr<SlamTracker> a_camera = Camera(0);
+  const std::unique_ptr<SlamTracker> b_camera = Camera(std::nullopt);
+  SlamTracker& a = *a_camera;
+  SlamTracker& b = *b_camera;
   ASSERT_GT((room->ground_truth(kBStart)->translation() -
              room->ground_truth(0)->translation()).norm(), 0.5);
 
