@@ -166,7 +166,8 @@ TEST_F(SlamTwoCameraRoomTest, ASecondCameraStartingSomewhereUnknownEndsInTheFirs
   // starts at the same time at frame 89's place (the far side of the circle), with no initial
   // pose (its identity means nothing in A's frame), and walks back towards frame 0 while A
   // walks on: B is lost to the map (or in a segment of its own) until it sees a place A
-  // mapped, then joins the map. Every pose B reported, mapped into the main map, must be in A's frame.
+  // mapped, then joins the map. Every pose B reported, mapped into the main map, must be in
+  // A's frame.
   constexpr int kBStart = 89;
   const InMemoryDataset* room = room_.get();
   const PinholeIntrinsics& k = k_;
