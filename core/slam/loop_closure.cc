@@ -117,7 +117,7 @@ absl::StatusOr<LoopSearch> SearchLoop(int query, const std::vector<LoopKeyframe>
                          EstimateOdometry(old_pyramid, *query_pyramid, pnp->pose, odometry));
     const SE3 shift = pnp->pose.Inverse() * dense.reference_T_current;
     const double shift_m = shift.translation().norm();
-    const double shift_rad = Eigen::AngleAxisd(shift.rotation()).angle();
+    const double shift_rad = RotationAngleBetween(pnp->pose, dense.reference_T_current);
     if (!dense.ok || shift_m > options.max_dense_shift_m ||
         shift_rad > options.max_dense_rotation_rad) {
       ++search.rejected;

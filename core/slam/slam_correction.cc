@@ -6,22 +6,40 @@
 
 namespace plx {
 
-int SlamCorrection::NearestKeyframe(const SE3& pose) const {
-  const size_t n = std::min(before.size(), after.size());
+namespace {
+
+// The anchor rule over the first `n` keyframes, `keyframe(i)` giving keyframe i's pose.
+template <typename KeyframePose>
+int AnchorAmong(size_t n, const KeyframePose& keyframe, const SE3& pose) {
   std::vector<double> distance(n);
   double nearest = std::numeric_limits<double>::infinity();
   for (size_t i = 0; i < n; ++i) {
-    distance[i] = (before[i].translation() - pose.translation()).norm() +
-                  RotationAngleBetween(before[i], pose);
+    const SE3& k = keyframe(i);
+    distance[i] = (k.translation() - pose.translation()).norm() + RotationAngleBetween(k, pose);
     nearest = std::min(nearest, distance[i]);
   }
   // The newest of those about as near as the nearest: a camera walks on from the keyframes it
   // made last, and where it revisits a place before the loop is closed its pose agrees with
   // those (the drifted chain), not with the older ones there.
   for (size_t i = n; i-- > 0;) {
-    if (distance[i] <= nearest + kRecentKeyframeMargin) return static_cast<int>(i);
+    if (distance[i] <= nearest + SlamCorrection::kRecentKeyframeMargin) {
+      return static_cast<int>(i);
+    }
   }
   return -1;
+}
+
+}  // namespace
+
+int AnchorKeyframe(const std::vector<StampedPose>& keyframes, const SE3& pose) {
+  return AnchorAmong(
+      keyframes.size(), [&](size_t i) -> const SE3& { return keyframes[i].pose; }, pose);
+}
+
+int SlamCorrection::NearestKeyframe(const SE3& pose) const {
+  return AnchorAmong(
+      std::min(before.size(), after.size()), [&](size_t i) -> const SE3& { return before[i]; },
+      pose);
 }
 
 SE3 SlamCorrection::FrameChangeAt(const SE3& pose) const {

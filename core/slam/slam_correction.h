@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/geometry/se3.h"
+#include "core/geometry/stamped_pose.h"
 
 namespace plx {
 
@@ -33,5 +34,9 @@ struct SlamCorrection {
   // new_T_old at `pose`: what Move left-multiplies it by.
   SE3 FrameChangeAt(const SE3& pose) const;
 };
+
+// The same rule over a map's keyframes as they are now (SlamMapView::keyframe_poses): the
+// keyframe a pose tracked now is anchored to, should a later correction move it (-1: none).
+int AnchorKeyframe(const std::vector<StampedPose>& keyframes, const SE3& pose);
 
 }  // namespace plx

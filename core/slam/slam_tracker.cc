@@ -708,12 +708,9 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   // The keyframe the pose is anchored to, should a correction move the keyframes later.
   const SlamMapView* main = view.segment == 0 ? &view : view.main.get();
   if (main != nullptr && (view.segment == 0 || out.main_T_segment)) {
-    SlamCorrection anchors;
-    for (const StampedPose& kf : main->keyframe_poses) anchors.before.push_back(kf.pose);
-    anchors.after = anchors.before;
-    out.reference_keyframe = anchors.NearestKeyframe(out.pose);
+    out.reference_keyframe = AnchorKeyframe(main->keyframe_poses, out.pose);
     if (out.reference_keyframe >= 0) {
-      out.reference_keyframe_pose = anchors.before[out.reference_keyframe];
+      out.reference_keyframe_pose = main->keyframe_poses[out.reference_keyframe].pose;
     }
   }
   counts_.ok += out.state == SlamState::kOk;
