@@ -3,7 +3,7 @@
 every sequence twice, with loop closure and with --no-loop-closure, same flags otherwise.
 
     /usr/bin/python3 bench/loop_closure_slam_bench.py [--cases teddy,infinitam,laps,...]
-        [--quick] [--out FILE]
+        [--quick] [--deterministic] [--keep DIR] [--out FILE]
 
 Cases: the real sequences (tum_fr3_teddy, infinitam_teddy) and synthetic ones made here: two
 laps of the room's circle (`laps`), the same with Kinect-like depth noise and holes
@@ -64,7 +64,8 @@ def pose_matrix(values):
 
 
 def false_loops(loops_path, dataset):
-    """(false, checked) loop edges of --loops-out against the ground truth; None without it."""
+    """(false, checked, worst cm, worst deg): loop edges of --loops-out against the ground
+    truth; None without it."""
     gt_path = os.path.join(dataset, "groundtruth.txt")
     if not os.path.exists(gt_path):
         return None
@@ -72,6 +73,7 @@ def false_loops(loops_path, dataset):
     from bench_common import GroundTruth
     gt = GroundTruth(gt_path)
     wrong = checked = 0
+    worst_m = worst_deg = 0.0
     for r in read_rows(loops_path):
         a, b = gt.pose(float(r[0]), max_dt=0.02), gt.pose(float(r[1]), max_dt=0.02)
         if a is None or b is None:
@@ -82,7 +84,9 @@ def false_loops(loops_path, dataset):
         angle = np.degrees(np.arccos(np.clip((np.trace(error[:3, :3]) - 1) / 2, -1, 1)))
         checked += 1
         wrong += np.linalg.norm(error[:3, 3]) > FALSE_LOOP_M or angle > FALSE_LOOP_DEG
-    return wrong, checked
+        worst_m = max(worst_m, np.linalg.norm(error[:3, 3]))
+        worst_deg = max(worst_deg, angle)
+    return wrong, checked, worst_m, worst_deg
 
 
 def frame_times(csv_path):
@@ -99,6 +103,8 @@ def run(args, name, dataset, work, loop_closure):
                          files["loops.txt"], "--frames-out", files["frames.csv"], "--json"]
     if not loop_closure:
         cmd.append("--no-loop-closure")
+    if args.deterministic:
+        cmd.append("--deterministic")
     j = run_json("%s%s" % (name, "" if loop_closure else " (no loop closure)"), cmd,
                  args.timeout)
     ms = frame_times(files["frames.csv"])
@@ -115,12 +121,14 @@ def fmt(value, spec, scale=1.0):
 
 def table_row(name, lc, r):
     false = r["false"]
-    spec = ("| %s | %s | %d | %d | %d | %d | %d | %s | %d | %s | %s | %.0f | %.0f | %.2f | "
-            "%.1f | %.0f |")
+    spec = ("| %s | %s | %d | %d | %d | %d | %d | %s | %s | %d | %s | %s | %.0f | %.0f | "
+            "%.2f | %.1f | %.0f |")
     return spec % (
         name, "on" if lc else "off", r["processed"], r["lost"], r["keyframes"],
         r.get("loops_accepted", 0), r.get("loops_rejected", 0),
-        "–" if false is None else "%d/%d" % false, r.get("corrections", 0),
+        "–" if false is None else "%d/%d" % false[:2],
+        "–" if not false or not false[1] else "%.1f / %.2f" % (100 * false[2], false[3]),
+        r.get("corrections", 0),
         fmt(r.get("ate_se3_m"), "%.2f", 100), fmt(r.get("corrected_ate_se3_m"), "%.2f", 100),
         r["p50"], r["p99"], r["p99"] / max(r["p50"], 1e-9), r["fps"], r["wall_s"])
 
@@ -134,6 +142,11 @@ def main():
     ap.add_argument("--cases", default=",".join(CASE_KEYS),
                     help="comma-separated subset of %s" % ",".join(CASE_KEYS))
     ap.add_argument("--quick", action="store_true", help="synthetic cases at 320x240")
+    ap.add_argument("--deterministic", action="store_true",
+                    help="map in lock-step (plenox slam --deterministic): the difference loop "
+                         "closure makes without the CPU it takes from concurrent mapping")
+    ap.add_argument("--keep", help="make the sequences under this folder and keep them (a "
+                                   "second run reuses nothing; it only keeps them to look at)")
     ap.add_argument("--timeout", type=float, default=3600.0)
     ap.add_argument("--out", help="also write the report here")
     args = ap.parse_args()
@@ -151,12 +164,13 @@ def main():
                  datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M")),
              "",
              "| sequence | loop closure | frames | LOST | keyframes | loops | rejected | "
-             "false/checked | corrections | ATE online (cm) | ATE final frame (cm) | "
-             "median ms | p99 ms | p99/median | frames/s | wall s |",
+             "false/checked | worst loop error cm / deg | corrections | ATE online (cm) | "
+             "ATE final frame (cm) | median ms | p99 ms | p99/median | frames/s | wall s |",
              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | "
-             "--- | --- | --- |"]
+             "--- | --- | --- | --- |"]
     failed = False
-    with tempfile.TemporaryDirectory(prefix="loop_closure_slam_bench_") as root:
+    with tempfile.TemporaryDirectory(prefix="loop_closure_slam_bench_") as tmp:
+        root = os.path.abspath(args.keep) if args.keep else tmp
         datasets = Datasets(args, s, os.path.join(root, "sequences"))
         for key, name, recipe in case_list(s, wanted):
             dataset = (datasets.base(recipe) if recipe[0] == "data" else

@@ -46,6 +46,9 @@ absl::Status ValidateLoopClosureOptions(const LoopClosureOptions& o) {
                        o.loop_sigma_rad}) {
     if (!(sigma > 0.0)) return absl::InvalidArgumentError("loop closure sigmas must be > 0");
   }
+  if (!(o.confirm_residual >= 0.0)) {
+    return absl::InvalidArgumentError("loop closure's confirm_residual must be >= 0");
+  }
   if (!(o.sequential_sigma_per_m >= 0.0) || !(o.sequential_sigma_per_rad >= 0.0) ||
       !(o.min_correction_m >= 0.0) || !(o.min_correction_rad >= 0.0)) {
     return absl::InvalidArgumentError("loop closure's per-motion sigmas and corrections >= 0");
@@ -174,9 +177,18 @@ absl::StatusOr<LoopCorrection> CorrectKeyframes(const std::vector<SE3>& poses,
     }
   }
   const std::vector<PoseGraphEdge> edges = LoopClosureGraph(poses, loops, options);
+  const int first_loop = static_cast<int>(poses.size()) - 1;
+  const bool all_confirm = std::all_of(
+      edges.begin() + first_loop, edges.end(), [&](const PoseGraphEdge& loop) {
+        return PoseGraphEdgeResidual(poses, loop) <= options.confirm_residual;
+      });
+  if (all_confirm) {  // no loop, or none that says the poses are wrong: nothing to move
+    correction.confirmed = !loops.empty();
+    correction.poses = poses;
+    return correction;
+  }
   PLX_ASSIGN_OR_RETURN(PoseGraphResult solved,
                        OptimisePoseGraph(poses, edges, {0}, options.graph));
-  const int first_loop = static_cast<int>(poses.size()) - 1;
   for (int e : solved.rejected_edges) correction.rejected_loops.push_back(e - first_loop);
   for (size_t i = 0; i < poses.size(); ++i) {
     correction.max_shift_m = std::max(

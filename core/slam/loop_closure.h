@@ -63,6 +63,13 @@ struct LoopClosureOptions {
   double loop_sigma_m = 0.005;
   double loop_sigma_rad = 0.005;
   PoseGraphOptions graph;
+  // A loop whose edge already agrees with the keyframes' poses within this many of its own
+  // standard deviations (normalised residual norm over six components) confirms them. Tracking
+  // against the map ties a revisit to what the first pass fused, so the chain often agrees
+  // already: when every loop confirms, nothing is solved or moved, since a solve would only
+  // spread the loops' own measurement noise over the keyframes (and cost a rebuild). 3.5 is
+  // the 95 % point of the norm of six unit Gaussians (chi-square, 6 degrees of freedom, 12.6).
+  double confirm_residual = 3.5;
   // A solve that moves no keyframe more than this is no reason to rebuild the map
   // (SlamCoordinator); its loops stay in the graph for the next solve.
   double min_correction_m = 0.01;
@@ -118,9 +125,13 @@ struct LoopCorrection {
   int iterations = 0;
   // The shift is large enough to rebuild the map at the new poses (min_correction_*).
   bool significant = false;
+  // Every loop agreed with the poses within confirm_residual: nothing was solved, `poses` are
+  // the poses given.
+  bool confirmed = false;
 };
 
-// Solves LoopClosureGraph with keyframe 0 fixed (step 4).
+// Solves LoopClosureGraph with keyframe 0 fixed (step 4), unless every loop confirms the poses
+// (confirm_residual).
 absl::StatusOr<LoopCorrection> CorrectKeyframes(const std::vector<SE3>& poses,
                                                 const std::vector<LoopEdge>& loops,
                                                 const LoopClosureOptions& options);

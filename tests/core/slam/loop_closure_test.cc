@@ -159,6 +159,36 @@ TEST_F(LoopClosureTest, AWrongLoopAmongRightOnesIsRejectedAndTheRightOnesCorrect
   EXPECT_LT(alone->max_shift_m, 1e-9);
 }
 
+TEST_F(LoopClosureTest, LoopsThatAgreeWithThePosesWithinTheirNoiseMoveNothing) {
+  // Tracking against the map already put the second lap where the first one was: the loops
+  // (measured to within a few millimetres) confirm the poses, and a solve would only move
+  // keyframes by their noise.
+  const std::vector<SE3> tracked = DriftedPoses(0.0, 0.0);
+  std::vector<LoopEdge> loops;
+  const SE3 noise(Eigen::Quaterniond(Eigen::AngleAxisd(0.004, Eigen::Vector3d::UnitY())),
+                  Eigen::Vector3d(0.006, -0.004, 0.003));  // about 2 sigma of the loop edge
+  for (int q : {30, 40, 50}) {
+    loops.push_back({q - 30, q, Truth(q - 30).Inverse() * Truth(q) * noise});
+  }
+  absl::StatusOr<LoopCorrection> c = CorrectKeyframes(tracked, loops, LoopClosureOptions{});
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_TRUE(c->confirmed);
+  EXPECT_FALSE(c->significant);
+  EXPECT_TRUE(c->rejected_loops.empty());
+  EXPECT_EQ(c->max_shift_m, 0.0);
+  for (size_t i = 0; i < tracked.size(); ++i) {
+    EXPECT_EQ(c->poses[i].translation(), tracked[i].translation()) << i;
+  }
+  // Three times that noise is beyond what the loop edge's own sigma explains: solved.
+  const SE3 more(Eigen::Quaterniond(Eigen::AngleAxisd(0.012, Eigen::Vector3d::UnitY())),
+                 Eigen::Vector3d(0.018, -0.012, 0.009));
+  loops.back().from_T_to = Truth(20).Inverse() * Truth(50) * more;
+  absl::StatusOr<LoopCorrection> solved = CorrectKeyframes(tracked, loops, {});
+  ASSERT_TRUE(solved.ok()) << solved.status();
+  EXPECT_FALSE(solved->confirmed);
+  EXPECT_GT(solved->max_shift_m, 0.0);
+}
+
 TEST_F(LoopClosureTest, TheCoordinatorClosesTheLoopAndPublishesTheCorrectedMap) {
   SlamOptions o = DefaultSlamOptions();
   o.deterministic = true;
