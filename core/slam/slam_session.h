@@ -7,9 +7,10 @@
 //   - SlamMapper (core/slam/slam_mapper.h): the keyframes' MappingSession with its local window,
 //     keyframe pose refinement, published versions.
 // By default mapping runs on its own thread with its own backend (optionally at a lower CPU
-// priority, mapping_nice); a frame never waits for mapping: while a keyframe waits for
+// priority, mapping_nice); a frame does not wait for mapping: while a keyframe waits for
 // integration the tracker defers the next one (max_pending_keyframes), and the optimisation is
-// never waited for. Deterministic mode runs mapping in
+// never waited for. Only a keyframe deferred for SlamTrackerOptions::max_deferred_frames is
+// taken anyway, and its frame waits until mapping is back within the bound. Deterministic mode runs mapping in
 // lock-step on the caller's thread after each keyframe instead (bit-identical results run to
 // run, for tests). The daemon wires the same halves to its workers instead (server/).
 //

@@ -83,6 +83,10 @@ absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& o) {
     return absl::InvalidArgumentError(absl::StrCat(
         "max_seconds_without_map must be >= 0, got ", o.max_seconds_without_map));
   }
+  if (o.max_deferred_frames < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("max_deferred_frames must be >= 0, got ", o.max_deferred_frames));
+  }
   if (o.segment_join_interval < 1) {
     return absl::InvalidArgumentError(
         absl::StrCat("segment_join_interval must be >= 1, got ", o.segment_join_interval));
@@ -689,9 +693,13 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
             : 1.0 - static_cast<double>(result->valid_rays) / result->rays;
     const KeyframeDecision decision = DecideKeyframe(options_.keyframes, view.accepted_keyframes,
                                                      out.pose, frame.timestamp, unmapped);
-    const bool defer = decision.keyframe && options_.max_pending_keyframes > 0 &&
-                       view.pending_keyframes >= options_.max_pending_keyframes;
-    if (defer) {
+    const bool behind = decision.keyframe && options_.max_pending_keyframes > 0 &&
+                        view.pending_keyframes >= options_.max_pending_keyframes;
+    const bool overdue =
+        behind && options_.max_deferred_frames > 0 &&
+        deferred_frames_ >= options_.max_deferred_frames;
+    deferred_frames_ = behind && !overdue ? deferred_frames_ + 1 : 0;
+    if (behind && !overdue) {
       const std::string deferred =
           absl::StrFormat("keyframe deferred (%s): %d keyframes wait for mapping",
                           decision.reason, view.pending_keyframes);
@@ -699,7 +707,9 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
     } else if (decision.keyframe) {
       out.keyframe = true;
       out.keyframes += 1;
-      out.reason = decision.reason;
+      out.reason = overdue ? absl::StrFormat("%s (deferred on %d frames: waits for mapping)",
+                                             decision.reason, options_.max_deferred_frames)
+                           : decision.reason;
       stage = Clock::now();
       PLX_ASSIGN_OR_RETURN(out.features, FeaturesOf(frame, k));
       out.timings.features_ms += MillisecondsSince(stage);

@@ -122,6 +122,12 @@ struct SlamTrackerOptions {
   // keyframe is taken, and the caller waits for its integration (lock-step, or a caller that
   // wants the map to have each keyframe before the next frame).
   int max_pending_keyframes = 0;
+  // A keyframe deferred on this many frames in a row is taken anyway, and the caller then
+  // waits for mapping (the keyframes waiting exceed max_pending_keyframes by it). Without the
+  // bound, a camera replayed faster than a starved mapper (a loaded CPU; mapping runs at lower
+  // priority) tracks on the odometry into space no keyframe maps for as long as it outruns
+  // mapping, which can be the whole run. 30 is a second at 30 frames/s. 0: no bound.
+  int max_deferred_frames = 30;
   // The share of tracker.iterations the map tracker runs from the odometry's pose (when the
   // odometry tracked OK): that start is within millimetres of the map's optimum where the
   // motion model's can be centimetres off, so half the coarse-to-fine schedule converges
@@ -368,6 +374,7 @@ class SlamTracker {
   int relocalisation_cursor_ = 0;  // the next attempt near the last good pose
   int lost_with_depth_ = 0;  // LOST frames in a row that had depth to start a segment
   int checks_to_skip_ = 0;  // skip_checks_after_failed_check, counting down
+  int deferred_frames_ = 0;  // frames in a row that deferred a keyframe (max_deferred_frames)
   int frames_in_segment_ = 0;  // frames tracked since the camera started its segment
   double carry_start_ = 0.0;  // keyframe 0's timestamp (of the map or the camera's segment)
   SE3 carry_origin_;          // and its pose

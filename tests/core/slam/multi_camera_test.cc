@@ -379,5 +379,57 @@ TEST(SlamMultiCameraTest, AKeyframeWaitingForMappingDefersTheNextOneInsteadOfSta
   EXPECT_TRUE(next.keyframe) << next.reason;
 }
 
+TEST(SlamMultiCameraTest, AKeyframeDeferredTooLongIsTakenAndTheCameraWaitsForMapping) {
+  // A mapper that never catches up (a starved thread): without a bound the camera would go on
+  // deferring for the whole run, tracking on the odometry into space nothing maps.
+  std::unique_ptr<InMemoryDataset> room = testing::MakeSyntheticRoom(160, 120, 90);
+  ASSERT_NE(room, nullptr);
+  const PinholeIntrinsics k = room->calibration().pinhole;
+  std::unique_ptr<Backend> tracking = MakeCpuBackend(2);
+  std::unique_ptr<Backend> mapping = MakeCpuBackend(1);
+  SlamOptions options = TestOptions();
+  options.deterministic = false;
+  options.max_pending_keyframes = 1;
+  const SlamSplitOptions split = SplitSlamOptions(options);
+  const int bound = split.tracker.max_deferred_frames;
+  ASSERT_GT(bound, 0);
+  SlamCoordinator map(split.mapper, split.gate);
+  ASSERT_TRUE(map.StartMapper(mapping.get()).ok());
+  SlamTrackerOptions tracker_options = split.tracker;
+  tracker_options.initial_pose = *room->ground_truth(0);
+  SlamTracker camera(tracker_options, tracking.get());
+
+  // Keyframe 0 mapped, then nothing is integrated again.
+  int keyframes = 0, deferred_in_a_row = 0;
+  std::optional<int> forced_at;
+  for (int i = 0; i < static_cast<int>(room->frames().size()) && !forced_at; ++i) {
+    absl::StatusOr<SlamFrameResult> r =
+        camera.Track(room->frames()[i], k, std::nullopt, map.View());
+    ASSERT_TRUE(r.ok()) << r.status();
+    const bool deferred = r->reason.find("keyframe deferred") != std::string::npos;
+    if (r->keyframe) {
+      ASSERT_TRUE(map.AddKeyframe(room->frames()[i], r->pose, k, r->features).ok());
+      if (++keyframes == 1) RunOut(map, SlamStepMode::kMap);
+      if (keyframes > 2) forced_at = i;
+    }
+    if (keyframes == 2 && !r->keyframe) {
+      ASSERT_TRUE(deferred || deferred_in_a_row == 0) << "frame " << i << ": " << r->reason;
+    }
+    deferred_in_a_row = deferred ? deferred_in_a_row + 1 : 0;
+    if (forced_at) {
+      EXPECT_EQ(deferred_in_a_row, 0);
+      EXPECT_NE(r->reason.find("waits for mapping"), std::string::npos) << r->reason;
+    } else {
+      EXPECT_LE(deferred_in_a_row, bound) << "frame " << i;
+    }
+  }
+  ASSERT_TRUE(forced_at.has_value()) << "the room's frames never outran the bound";
+  // Two keyframes wait now: over the gate's bound, so the caller holds the camera.
+  EXPECT_EQ(map.progress().pending_keyframes, 2);
+  EXPECT_FALSE(map.MayCameraProceed());
+  RunOut(map, SlamStepMode::kMap);
+  EXPECT_TRUE(map.MayCameraProceed());
+}
+
 }  // namespace
 }  // namespace plx
