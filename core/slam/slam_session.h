@@ -10,9 +10,10 @@
 // priority, mapping_nice); a frame does not wait for mapping: while a keyframe waits for
 // integration the tracker defers the next one (max_pending_keyframes), and the optimisation is
 // never waited for. Only a keyframe deferred for SlamTrackerOptions::max_deferred_frames is
-// taken anyway, and its frame waits until mapping is back within the bound. Deterministic mode runs mapping in
-// lock-step on the caller's thread after each keyframe instead (bit-identical results run to
-// run, for tests). The daemon wires the same halves to its workers instead (server/).
+// taken anyway, and its frame waits until mapping is back within the bound. Deterministic mode
+// runs mapping in lock-step on the caller's thread after each keyframe instead (bit-identical
+// results run to run, for tests). The daemon wires the same halves to its workers instead
+// (server/).
 //
 // Memory grows with the number of keyframes (their images and rays: ~16 B per pixel plus 8 B
 // per pixel with valid depth, 7.4 MB for a 640x480 keyframe) and with the mapped volume (the
