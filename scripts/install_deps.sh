@@ -13,6 +13,10 @@ packages=(cmake ninja-build g++ pkg-config ccache
           # The daemon (gRPC + Protobuf, health/reflection protos) and the Python client.
           libgrpc++-dev libgrpc-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
           grpc-proto python3-grpcio python3-grpc-tools python3-protobuf python3-numpy
+          # The Python client as a package: pip builds and installs it offline
+          # (--no-build-isolation: setuptools and wheel from here) into venvs that see the
+          # packages above.
+          python3-pip python3-setuptools python3-wheel python3-venv
           # The daemon's metrics HTTP server; OpenSSL to check TLS files before serving.
           libssl-dev
           # Loop closure: the pose graph is solved with Ceres (core/slam/pose_graph.h).

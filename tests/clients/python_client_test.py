@@ -1,17 +1,22 @@
-#!/usr/bin/python3
-"""End-to-end test of clients/python (plenoxd_client) against real plenoxd processes.
+#!/usr/bin/env python3
+"""End-to-end test of the installed plenoxd_client package against real plenoxd processes.
 
-    PYTHONPATH=<build>/clients/python/gen:<repo>/clients/python \\
-      /usr/bin/python3 tests/clients/python_client_test.py --plenoxd <plenoxd> --plenox <plenox>
+    <venv>/bin/python tests/clients/python_client_test.py --plenoxd <plenoxd> \\
+      --plenox <plenox> [--installed-in <venv>]
 
+<venv>: a venv the package was pip-installed into (the ctest test python_package makes it,
+clients/python/README.md says how); --installed-in makes sure the copy imported is that one.
 Runs `plenox synth` for a small sequence, starts plenoxd on a free port with a temporary data
-directory, and checks health, maps, Integrate, lock-step and streaming Track (ATE < 1 cm), online
-SLAM (lock-step, streaming, realtime; ATE < 1 cm), Render, Export, save/load, error codes, the
-example scripts, bearer-token authentication (a second daemon) and a clean exit on SIGTERM. Exits 0 when everything passed, 1 with a list of failures otherwise, 77 (skip) when
-this interpreter has no grpc/numpy.
+directory, and checks health, maps, Integrate, the plenoxd-client entry point, lock-step and
+streaming Track (ATE < 1 cm), online SLAM (lock-step, streaming, realtime; ATE < 1 cm), Render,
+Export, save/load, error codes, the example scripts, bearer-token authentication (a second
+daemon) and a clean exit on SIGTERM. The daemon is of the same build, so a version warning is
+an error here. Exits 0 when everything passed, 1 with a list of failures otherwise, 77 (skip)
+when this interpreter has no grpc/numpy.
 """
 
 import argparse
+import json
 import os
 import queue
 import re
@@ -23,6 +28,7 @@ import tempfile
 import threading
 import time
 import traceback
+import warnings
 
 try:
     import grpc  # noqa: F401
@@ -32,8 +38,9 @@ except ImportError as missing:
           "install Debian's python3-grpcio and python3-numpy")
     sys.exit(77)
 
-from plenoxd_client import (Client, PlenoxdError, TumDataset, convert, correct_pose, pb,
-                            slam_pose, slam_state_name, state_name)
+import plenoxd_client
+from plenoxd_client import (API_VERSION, Client, PlenoxdError, PlenoxdVersionWarning, TumDataset,
+                            convert, correct_pose, pb, slam_pose, slam_state_name, state_name)
 
 FRAMES, WIDTH, HEIGHT, EVERY = 30, 96, 72, 10
 VOXEL_SIZE = 0.04         # what the plenox CLI end-to-end test maps this sequence with
@@ -132,6 +139,61 @@ def ate_rmse(estimates, groundtruth):
     return float(np.sqrt(np.mean(np.square(errors)))), len(errors)
 
 
+def cli_checks(failures, cli, target, sequence_dir, work):
+    """The plenoxd-client entry point against the open daemon, whose map "room" holds 3
+    keyframes: each command's output and exit code."""
+    def check(result, condition, what):
+        return failures.check(condition, what + (
+            "" if condition else f" (exit {result.returncode}: {result.stdout.strip()[-300:]}"
+            f" {result.stderr.strip()[-300:]})"))
+
+    r = cli(target, "health")
+    check(r, r.returncode == 0 and r.stdout.strip() == "SERVING", "health: SERVING, exit 0")
+    r = cli("127.0.0.1:1", "health")  # nothing listens on port 1
+    check(r, r.returncode == 1 and "UNAVAILABLE" in r.stderr,
+          "health of no daemon: exit 1 naming UNAVAILABLE")
+    r = cli(target, "info")
+    check(r, r.returncode == 0 and r.stdout.startswith(
+        f"plenoxd {API_VERSION} at {target} (this client: API version {API_VERSION})")
+        and "warning" not in r.stderr, "info names both versions, no version warning")
+    r = cli(target, "maps")
+    rows = [line.split() for line in r.stdout.splitlines()]
+    check(r, r.returncode == 0 and rows[0][:3] == ["name", "voxel_size", "keyframes"]
+          and ["room", f"{VOXEL_SIZE:g}", "3"] in [row[:3] for row in rows[1:]],
+          "maps: a table with room, its voxel size and 3 keyframes")
+    r = cli(target, "maps", "--json")
+    listed = json.loads(r.stdout) if r.returncode == 0 else []
+    room = [m for m in listed if m["name"] == "room"]
+    check(r, len(room) == 1 and room[0]["keyframes"] == 3 and room[0]["bricks"] > 0
+          and room[0]["voxel_size"] == VOXEL_SIZE, "maps --json: numbers as JSON numbers")
+    r = cli(target, "maps", "create", "cli_map", "--voxel-size", "0.05")
+    check(r, r.returncode == 0 and r.stdout.splitlines()[-1].split()[:2] == ["cli_map", "0.05"],
+          "maps create NAME --voxel-size")
+    r = cli(target, "maps", "delete", "cli_map")
+    gone = cli(target, "maps", "get", "cli_map")
+    check(gone, r.returncode == 0 and gone.returncode == 1 and "NOT_FOUND" in gone.stderr,
+          "maps delete NAME; then maps get NAME exits 1 naming NOT_FOUND")
+    trajectory = os.path.join(work, "cli_slam.txt")
+    r = cli(target, "--json", "slam", "cli_slam", "--dataset", sequence_dir, "--voxel-size",
+            str(VOXEL_SIZE), "--deterministic", "--max-frames", "5", "--out", trajectory)
+    summary = json.loads(r.stdout) if r.returncode == 0 else {}
+    rows = [line for line in open(trajectory, encoding="utf-8") if not line.startswith("#")] \
+        if os.path.exists(trajectory) else []
+    # 5 frames keep it short: --deterministic maps each keyframe before the next frame (3.3 s
+    # here; 10 frames took 7.5 s).
+    check(r, summary.get("updates") == 5 and summary.get("states") == {"OK": 5}
+          and (summary.get("ate_rmse_m") or 1.0) < 0.01 and len(rows) == 5,
+          f"slam: 5 frames OK, ATE {100 * (summary.get('ate_rmse_m') or 0):.2f} cm < 1 cm, "
+          "a 5-line trajectory")
+    ply = os.path.join(work, "cli_room.ply")
+    r = cli(target, "export", "room", "--out", ply)
+    head = b""
+    if os.path.exists(ply):
+        with open(ply, "rb") as f:
+            head = f.read(4)
+    check(r, r.returncode == 0 and head == b"ply\n", "export MAP --out F writes a PLY")
+
+
 def run_step(failures, name, fn):
     print(f"- {name}", flush=True)
     start = time.monotonic()
@@ -147,7 +209,23 @@ def main():
     parser.add_argument("--plenoxd", required=True)
     parser.add_argument("--plenox", required=True)
     parser.add_argument("--keep", action="store_true", help="keep the temporary folder")
+    parser.add_argument("--installed-in", help="the venv plenoxd_client must be imported from")
     args = parser.parse_args()
+
+    where = os.path.realpath(plenoxd_client.__file__)
+    if args.installed_in and not where.startswith(os.path.realpath(args.installed_in) + os.sep):
+        print(f"FAIL: plenoxd_client was imported from {where}, not from the package installed "
+              f"in {args.installed_in}")
+        return 1
+    print(f"plenoxd_client {plenoxd_client.__version__} from {where}")
+    # Every daemon here is of this build: a version warning would be a bug.
+    warnings.simplefilter("error", PlenoxdVersionWarning)
+    entry_point = os.path.join(os.path.dirname(sys.executable), "plenoxd-client")
+
+    def plenoxd_client_cli(server, *argv):
+        """The installed plenoxd-client command against `server`."""
+        return subprocess.run([entry_point, "--server", server, *argv], capture_output=True,
+                              text=True, timeout=300)
 
     failures = Failures()
     work = tempfile.mkdtemp(prefix="plenoxd_py_client_")
@@ -516,6 +594,9 @@ def main():
 
         run_step(failures, "health and map lifecycle", health_and_maps)
         run_step(failures, "integrate every 10th frame", integrate)
+        run_step(failures, "the plenoxd-client command",
+                 lambda: cli_checks(failures, plenoxd_client_cli, daemon.target, sequence_dir,
+                                    work))
         run_step(failures, "track lock-step", track_lockstep)
         run_step(failures, "track streaming (latest wins)", track_streaming)
         run_step(failures, "track with uniform pixels", track_uniform_pixels)
@@ -552,6 +633,13 @@ def main():
                 failures.check(info.name == "room" and [m.name for m in right.list_maps()]
                                == ["room"], "auth: the right token works")
                 failures.check(right.health() is True, "auth: health with a token")
+            listed = plenoxd_client_cli(secured.target, "--token-file", token_file, "maps")
+            failures.check(listed.returncode == 0 and "room" in listed.stdout,
+                           "auth: plenoxd-client --token-file F maps" + (
+                               "" if listed.returncode == 0 else f" ({listed.stderr.strip()})"))
+            refused = plenoxd_client_cli(secured.target, "maps")
+            failures.check(refused.returncode == 1 and "UNAUTHENTICATED" in refused.stderr,
+                           "auth: plenoxd-client maps without a token exits 1, UNAUTHENTICATED")
 
         run_step(failures, "bearer-token authentication", auth)
 

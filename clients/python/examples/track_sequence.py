@@ -1,8 +1,7 @@
-#!/usr/bin/python3
+#!/usr/bin/env python3
 """Map and track a TUM-layout RGB-D sequence with a running plenoxd.
 
-    PYTHONPATH=<build>/clients/python/gen:<repo>/clients/python \\
-      /usr/bin/python3 clients/python/examples/track_sequence.py \\
+    <venv>/bin/python clients/python/examples/track_sequence.py \\
         --server 127.0.0.1:50051 --dataset ../shared/data/tum_fr3_teddy --map teddy
 
 Starts nothing: it talks to the daemon at --server. It creates the map if needed, integrates

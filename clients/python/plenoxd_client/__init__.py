@@ -1,32 +1,29 @@
-"""Python client for plenoxd, the Plenoxel RGB-D mapping and tracking daemon.
+"""Python client for plenoxd, the Plenoxel RGB-D mapping, tracking and SLAM daemon.
 
-Needs Debian's python3-grpcio (grpcio 1.51, protobuf 4.21) and python3-numpy, and the stubs the
-build generates into <build>/clients/python/gen (both folders on PYTHONPATH):
-
-    PYTHONPATH=<build>/clients/python/gen:<repo>/clients/python /usr/bin/python3 ...
+Installed with pip (clients/python/README.md); its gRPC stubs were generated when the package
+was built:
 
     from plenoxd_client import Client, TumDataset
+    with Client("127.0.0.1:50051") as c:
+        print(c.health(), c.server_info().version)
+
+__version__ is plenoxd's version, the daemon API version this package speaks (API_VERSION).
 """
 
-try:
-    from plenoxd.v1 import plenoxd_pb2 as _probe  # noqa: F401 -- generated at build time
-    import health_pb2 as _health_probe  # noqa: F401
-except ImportError as _e:  # pragma: no cover - depends on the environment
-    raise ImportError(
-        "plenoxd_client needs the generated gRPC stubs (plenoxd/v1/plenoxd_pb2.py, "
-        "health_pb2.py): build the project (target plx_python_stubs) and put "
-        "<build>/clients/python/gen on PYTHONPATH") from _e
-
-from . import convert, dataset, trajectory
-from .client import (DEFAULT_MAX_MESSAGE_BYTES, Client, MeshExport, PlenoxdError, Rendering,
-                     SlamStream, TrackStream, as_dict, correct_pose, estimate_pose, slam_pose,
+from . import convert, dataset, trajectory, types
+from ._proto import plenoxd_pb2 as pb
+from .client import (DEFAULT_MAX_MESSAGE_BYTES, Client, MeshExport, Rendering, SlamStream,
+                     TrackStream, as_dict, correct_pose, estimate_pose, slam_pose,
                      slam_state_name, state_name)
-from .convert import pb
 from .dataset import Frame, Intrinsics, TumDataset
+from .errors import PlenoxdError, PlenoxdVersionError, PlenoxdVersionWarning
+from .version import API_VERSION
+
+__version__ = API_VERSION
 
 __all__ = [
-    "Client", "PlenoxdError", "TrackStream", "SlamStream", "Rendering", "MeshExport",
-    "DEFAULT_MAX_MESSAGE_BYTES", "as_dict", "correct_pose", "estimate_pose", "state_name", "slam_pose",
-    "slam_state_name", "convert", "dataset", "trajectory", "pb", "Frame", "Intrinsics", "TumDataset",
+    "Client", "PlenoxdError", "PlenoxdVersionError", "PlenoxdVersionWarning", "TrackStream",
+    "SlamStream", "Rendering", "MeshExport", "DEFAULT_MAX_MESSAGE_BYTES", "API_VERSION",
+    "as_dict", "correct_pose", "estimate_pose", "state_name", "slam_pose", "slam_state_name",
+    "convert", "dataset", "trajectory", "types", "pb", "Frame", "Intrinsics", "TumDataset",
 ]
-__version__ = "0.1.0"

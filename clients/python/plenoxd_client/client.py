@@ -11,65 +11,61 @@
             print(slam_state_name(update), slam_pose(update), update.keyframe)
         color, depth = c.render("room", pose, intrinsics)
 
-Every failed call raises PlenoxdError with the gRPC status code and the server's message.
+Every failed call raises PlenoxdError with the gRPC status code and the server's message. Before
+its first call to the daemon's API a Client compares the daemon's version with this package's
+(version.py): a difference warns (PlenoxdVersionWarning), or raises PlenoxdVersionError with
+Client(..., version_check="error").
 """
+
+from __future__ import annotations
 
 import os
 import queue
 import threading
-from collections import namedtuple
+from typing import (Any, Callable, Dict, Generic, Iterable, Iterator, List, Literal, Mapping,
+                    NamedTuple, Optional, Tuple, TypeVar, Union, overload)
 
 import grpc
 import numpy as np
 
-import health_pb2
-import health_pb2_grpc
-from plenoxd.v1 import plenoxd_pb2 as pb
-from plenoxd.v1 import plenoxd_pb2_grpc as pb_grpc
-
 from . import convert
+from ._proto import health_pb2, health_pb2_grpc
+from ._proto import plenoxd_pb2 as pb
+from ._proto import plenoxd_pb2_grpc as pb_grpc
+from .errors import PlenoxdError, PlenoxdVersionError
+from .types import FrameLike, IntrinsicsLike, Pose, PoseLike
+from .version import API_VERSION, VERSION_CHECKS, check_server_version, version_mismatch
 
-__all__ = ["Client", "PlenoxdError", "TrackStream", "SlamStream", "Rendering",
+__all__ = ["Client", "PlenoxdError", "TrackStream", "SlamStream", "Rendering", "MeshExport",
            "DEFAULT_MAX_MESSAGE_BYTES", "estimate_pose", "state_name", "slam_pose",
-           "slam_state_name", "as_dict"]
+           "slam_state_name", "correct_pose", "as_dict"]
 
 DEFAULT_MAX_MESSAGE_BYTES = 64 << 20
 _END = object()
+_Reply = TypeVar("_Reply")
+
+TrackOptionsLike = Union[pb.TrackOptions, Mapping[str, Any]]
+SlamOptionsLike = Union[pb.SlamOptions, Mapping[str, Any]]
+IntegrateOptionsLike = Union[pb.IntegrateOptions, Mapping[str, Any]]
 
 
-class PlenoxdError(Exception):
-    """A call failed. code: grpc.StatusCode (e.g. grpc.StatusCode.NOT_FOUND); message: the
-    server's explanation (INVALID_ARGUMENT names the field, e.g. "frame.color: ...");
-    method: the RPC."""
-
-    def __init__(self, code, message, method=""):
-        self.code = code
-        self.message = message or ""
-        self.method = method
-        name = code.name if isinstance(code, grpc.StatusCode) else str(code)
-        prefix = f"{method} failed: " if method else ""
-        super().__init__(f"{prefix}{name}: {self.message}")
-
-    @property
-    def code_name(self):
-        return self.code.name if isinstance(self.code, grpc.StatusCode) else str(self.code)
-
-    @classmethod
-    def from_rpc_error(cls, error, method):
-        code = error.code() if hasattr(error, "code") else grpc.StatusCode.UNKNOWN
-        details = error.details() if hasattr(error, "details") else str(error)
-        return cls(code, details, method)
+class MeshExport(NamedTuple):
+    """What Client.export_mesh wrote: vertex and face counts, file size."""
+    vertices: int
+    faces: int
+    bytes: int
 
 
-MeshExport = namedtuple("MeshExport", "vertices faces bytes")
-MeshExport.__doc__ = """What Client.export_mesh wrote: vertex and face counts, file size."""
+class Rendering(NamedTuple):
+    """color: HxWx3 uint8 RGB; depth: HxW float32 z-depth in metres (0 = nothing rendered);
+    coverage: fraction of pixels the map renders; map_version: the version rendered."""
+    color: np.ndarray
+    depth: np.ndarray
+    coverage: float
+    map_version: int
 
-Rendering = namedtuple("Rendering", "color depth coverage map_version")
-Rendering.__doc__ = """color: HxWx3 uint8 RGB; depth: HxW float32 z-depth in metres (0 = nothing
-rendered); coverage: fraction of pixels the map renders; map_version: the version rendered."""
 
-
-def _drain(outbox):
+def _drain(outbox: queue.Queue) -> Iterator[Any]:
     """Items of a queue until the _END marker (compared by identity, not ==)."""
     while True:
         item = outbox.get()
@@ -82,11 +78,11 @@ class _RequestFeed:
     """The request iterator of a streaming call. It records an exception raised while making a
     request (gRPC would otherwise only cancel the call), so the caller can re-raise it."""
 
-    def __init__(self, requests):
+    def __init__(self, requests: Iterable[Any]):
         self._requests = requests
-        self.error = None
+        self.error: Optional[Exception] = None
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[Any]:
         try:
             for r in self._requests:
                 yield r
@@ -95,21 +91,23 @@ class _RequestFeed:
             raise
 
 
-class _FrameStream:
+class _FrameStream(Generic[_Reply]):
     """One bidirectional frames-in call (Track, Slam) as an iterator of its per-frame replies,
     in lock-step or streamed from a sender thread. Subclasses name the call, its request
     message and options conversion, and count the replies; `sent` and `received` count frames
     and per-frame replies."""
 
     _method = ""
-    _request_type = None      # the request message: map, options, frame, initial_pose
+    _request_type: Callable[..., Any]  # the request message: map, options, frame, initial_pose
 
     @staticmethod
-    def _options_to_proto(options):
+    def _options_to_proto(options: Any) -> Any:
         """options (a message or a dict) as the request's options message."""
         raise NotImplementedError
 
-    def __init__(self, client, map_name, frames, initial_pose, lockstep, options, priors, fps):
+    def __init__(self, client: Client, map_name: str, frames: Iterable[FrameLike],
+                 initial_pose: Optional[PoseLike], lockstep: bool, options: Any, priors: bool,
+                 fps: Optional[float]):
         self.sent = 0
         self.received = 0
         self._client = client
@@ -120,16 +118,17 @@ class _FrameStream:
         self._options = options
         self._priors = priors
         self._fps = fps
-        self._call = None
+        self._call: Any = None
         self._stop = threading.Event()
         self._started = False
 
-    def cancel(self):
+    def cancel(self) -> None:
+        """Ends the call early; the iteration then stops."""
         self._stop.set()
         if self._call is not None:
             self._call.cancel()
 
-    def _request(self, frame, first):
+    def _request(self, frame: FrameLike, first: bool) -> Any:
         request = self._request_type(frame=convert.frame_to_proto(frame, with_pose=self._priors))
         if first:
             request.map = self._map
@@ -139,19 +138,20 @@ class _FrameStream:
                 convert.pose_to_proto(self._initial_pose, request.initial_pose)
         return request
 
-    def _accept(self, reply):
+    def _accept(self, reply: Any) -> bool:
         """Counts a reply; True when it is a frame's (and is yielded)."""
         raise NotImplementedError
 
-    def _ended(self):
+    def _ended(self) -> None:
         """Called when the server ended the call without an error."""
 
-    def _open(self, feed):
+    def _open(self, feed: _RequestFeed) -> Any:
+        self._client._check_version()
         self._call = getattr(self._client._stub, self._method)(
             iter(feed), metadata=self._client.metadata_for(self._map))
         return self._call
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[_Reply]:
         if self._started:
             raise RuntimeError(f"a {type(self).__name__} can be iterated once")
         self._started = True
@@ -159,14 +159,14 @@ class _FrameStream:
             return self._run_lockstep()
         return self._run_streaming()
 
-    def _run_lockstep(self):
+    def _run_lockstep(self) -> Iterator[_Reply]:
         # One frame out, its reply back, then the next frame. The feed blocks on a queue the
         # response loop fills, so the server never has more than one frame waiting.
-        outbox = queue.Queue()
+        outbox: queue.Queue = queue.Queue()
         frames = iter(self._frames)
         feed = _RequestFeed(_drain(outbox))
 
-        def send_next(first):
+        def send_next(first: bool) -> bool:
             try:
                 frame = next(frames)
             except StopIteration:
@@ -200,16 +200,16 @@ class _FrameStream:
             if self._call is not None and self._call.running():
                 self._call.cancel()
 
-    def _run_streaming(self):
+    def _run_streaming(self) -> Iterator[_Reply]:
         # A sender thread pushes frames as they come (paced to fps when given) into a queue that
         # gRPC drains as fast as the network takes them; how the server treats frames that wait
         # is the call's (Track, realtime Slam: latest wins; Slam: backpressure).
-        outbox = queue.Queue()
+        outbox: queue.Queue = queue.Queue()
         feed = _RequestFeed(_drain(outbox))
         period = 1.0 / self._fps if self._fps else 0.0
-        sender_error = []
+        sender_error: List[Exception] = []
 
-        def sender():
+        def sender() -> None:
             try:
                 first = True
                 for frame in self._frames:
@@ -258,7 +258,7 @@ class _FrameStream:
             raise sender_error[0]
 
 
-class TrackStream(_FrameStream):
+class TrackStream(_FrameStream[pb.PoseEstimate]):
     """The estimates of one Track call, as an iterator of plenoxd.v1.PoseEstimate.
 
     Counters while and after iterating: sent (frames sent), received (estimates), dropped
@@ -268,17 +268,17 @@ class TrackStream(_FrameStream):
     _method = "Track"
     _request_type = pb.TrackRequest
 
-    def __init__(self, *args):
+    def __init__(self, *args: Any):
         super().__init__(*args)
         self.dropped = 0
         self.lost = 0
         self.degraded = 0
 
     @staticmethod
-    def _options_to_proto(options):
+    def _options_to_proto(options: Any) -> pb.TrackOptions:
         return _track_options(options)
 
-    def _accept(self, estimate):
+    def _accept(self, estimate: pb.PoseEstimate) -> bool:
         self.received += 1
         self.dropped += estimate.dropped
         if estimate.state == pb.TRACKING_STATE_LOST:
@@ -288,7 +288,7 @@ class TrackStream(_FrameStream):
         return True
 
 
-class SlamStream(_FrameStream):
+class SlamStream(_FrameStream[pb.SlamUpdate]):
     """The updates of one Slam call, as an iterator of plenoxd.v1.SlamUpdate, one per frame the
     server processed. The call's last message (done=True, no frame) is not yielded: it is kept
     as `done`, and the iteration ends only once it came, which for the last stream on a map is
@@ -307,7 +307,7 @@ class SlamStream(_FrameStream):
     _method = "Slam"
     _request_type = pb.SlamRequest
 
-    def __init__(self, *args):
+    def __init__(self, *args: Any):
         super().__init__(*args)
         self.dropped = 0
         self.keyframes = 0
@@ -315,15 +315,15 @@ class SlamStream(_FrameStream):
         self.degraded = 0
         self.relocalised = 0
         self.waiting = 0
-        self.mapping = None
-        self.done = None
-        self.corrections = []
+        self.mapping: Optional[pb.SlamMapping] = None
+        self.done: Optional[pb.SlamUpdate] = None
+        self.corrections: List[pb.SlamCorrection] = []
 
     @staticmethod
-    def _options_to_proto(options):
+    def _options_to_proto(options: Any) -> pb.SlamOptions:
         return _slam_options(options)
 
-    def _accept(self, update):
+    def _accept(self, update: pb.SlamUpdate) -> bool:
         self.mapping = update.mapping
         if update.done:
             self.done = update
@@ -343,20 +343,21 @@ class SlamStream(_FrameStream):
             self.waiting += 1
         return True
 
-    def _ended(self):
+    def _ended(self) -> None:
         if self.done is None:
             raise PlenoxdError(grpc.StatusCode.INTERNAL,
                                "the server ended the stream without its done message", "Slam")
 
 
-def _track_options(options):
+def _track_options(options: TrackOptionsLike) -> pb.TrackOptions:
     if isinstance(options, pb.TrackOptions):
         return options
     o = pb.TrackOptions()
     mode = options.get("mode")
     if isinstance(mode, str):
-        o.mode = {"gauss_newton": pb.TrackOptions.MODE_GAUSS_NEWTON, "gn":
-                  pb.TrackOptions.MODE_GAUSS_NEWTON, "adam": pb.TrackOptions.MODE_ADAM}[mode.lower()]
+        o.mode = {"gauss_newton": pb.TrackOptions.MODE_GAUSS_NEWTON,
+                  "gn": pb.TrackOptions.MODE_GAUSS_NEWTON,
+                  "adam": pb.TrackOptions.MODE_ADAM}[mode.lower()]
     elif mode is not None:
         o.mode = int(mode)
     o.rays = int(options.get("rays", 0))
@@ -378,7 +379,7 @@ _SLAM_INT_OPTIONS = ("iterations_per_keyframe", "rays_per_iteration")
 _SLAM_BOOL_OPTIONS = ("realtime", "deterministic")
 
 
-def _slam_options(options):
+def _slam_options(options: SlamOptionsLike) -> pb.SlamOptions:
     """SlamOptions from a SlamOptions or a dict of its fields (0 / absent = the server's
     default); "tracking" is a TrackOptions or a dict as track() takes (mode, rays,
     iterations)."""
@@ -405,7 +406,7 @@ def _slam_options(options):
     return o
 
 
-def _integrate_options(options):
+def _integrate_options(options: IntegrateOptionsLike) -> pb.IntegrateOptions:
     if isinstance(options, pb.IntegrateOptions):
         return options
     return pb.IntegrateOptions(
@@ -422,12 +423,26 @@ class Client:
     file) of the CA that signed the daemon's --tls-cert; TLS is used when given.
     max_message_bytes: the largest message sent or received (the daemon's default is 64 MiB).
     timeout: seconds for unary calls (None = no deadline).
+    version_check: what to do when the daemon's version (ServerInfo.version, asked once before
+    the first call to its API) is not this package's API_VERSION: "warn" (a
+    PlenoxdVersionWarning naming both), "error" (every API call raises PlenoxdVersionError) or
+    "off". health() and server_info() are never refused: they are how one looks at a daemon.
     """
 
-    def __init__(self, target, token=None, root_certificates=None,
-                 max_message_bytes=DEFAULT_MAX_MESSAGE_BYTES, timeout=None):
+    def __init__(self, target: str, token: Optional[str] = None,
+                 root_certificates: Union[bytes, str, None] = None,
+                 max_message_bytes: int = DEFAULT_MAX_MESSAGE_BYTES,
+                 timeout: Optional[float] = None, version_check: str = "warn"):
+        if version_check not in VERSION_CHECKS:
+            raise ValueError(f"version_check: expected one of {VERSION_CHECKS}, got "
+                             f"{version_check!r}")
         self.target = target
         self.timeout = timeout
+        self.version_check = version_check
+        # The daemon's ServerInfo.version once it was asked (None before).
+        self.server_version: Optional[str] = None
+        self._version_error: Optional[PlenoxdVersionError] = None
+        self._version_lock = threading.Lock()
         options = [("grpc.max_send_message_length", int(max_message_bytes)),
                    ("grpc.max_receive_message_length", int(max_message_bytes))]
         if root_certificates is not None:
@@ -438,29 +453,33 @@ class Client:
             self._channel = grpc.secure_channel(target, credentials, options=options)
         else:
             self._channel = grpc.insecure_channel(target, options=options)
-        self._metadata = (("authorization", f"Bearer {token}"),) if token else ()
+        self._metadata: Tuple[Tuple[str, str], ...] = (
+            (("authorization", f"Bearer {token}"),) if token else ())
         self._stub = pb_grpc.PlenoxdStub(self._channel)
         self._health = health_pb2_grpc.HealthStub(self._channel)
 
     # --- plumbing ---
 
-    def close(self):
+    def close(self) -> None:
         self._channel.close()
 
-    def __enter__(self):
+    def __enter__(self) -> Client:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: Any) -> None:
         self.close()
 
-    def metadata_for(self, map_name=None):
+    def metadata_for(self, map_name: Optional[str] = None) -> Tuple[Tuple[str, str], ...]:
         """Call metadata: the bearer token, and the map's name as "x-plenoxd-map" (a proxy in
         front of several daemons routes on it, deploy/k8s/envoy.yaml)."""
         if not map_name:
             return self._metadata
         return self._metadata + (("x-plenoxd-map", map_name),)
 
-    def _unary(self, method, request, timeout=None):
+    def _unary(self, method: str, request: Any, timeout: Optional[float] = None,
+               check_version: bool = True) -> Any:
+        if check_version:
+            self._check_version()
         map_name = getattr(request, "map", None) or getattr(request, "name", None)
         try:
             return getattr(self._stub, method)(
@@ -469,18 +488,68 @@ class Client:
         except grpc.RpcError as e:
             raise PlenoxdError.from_rpc_error(e, method) from None
 
-    def wait_ready(self, timeout=10.0):
-        """Blocks until the channel connects; raises PlenoxdError(UNAVAILABLE) on timeout."""
+    def wait_ready(self, timeout: float = 10.0) -> None:
+        """Blocks until the channel connects, then checks the daemon's version as before a
+        first call (version_check); raises PlenoxdError(UNAVAILABLE) on timeout."""
         try:
             grpc.channel_ready_future(self._channel).result(timeout=timeout)
         except grpc.FutureTimeoutError:
             raise PlenoxdError(grpc.StatusCode.UNAVAILABLE,
                                f"no connection to {self.target} within {timeout} s",
                                "connect") from None
+        self._check_version()
+
+    # --- the daemon's version ---
+
+    def _record_server_version(self, version: str) -> None:
+        """Applies version_check to the daemon's version, the first time it is known."""
+        with self._version_lock:
+            if self.server_version is not None:
+                return
+            self.server_version = version
+            try:
+                check_server_version(version, self.target, self.version_check)
+            except PlenoxdVersionError as e:
+                self._version_error = e
+
+    def _check_version(self) -> None:
+        """Before a call to the daemon's API. A daemon that could not be asked (unreachable, or
+        GetServerInfo refused for want of a token) is asked again before the next call; the
+        call itself then says why it fails."""
+        if self.version_check == "off":
+            return
+        if self.server_version is None:
+            try:
+                info = self._unary("GetServerInfo", pb.GetServerInfoRequest(),
+                                   check_version=False)
+            except PlenoxdError:
+                return
+            self._record_server_version(info.version)
+        error = self._version_error
+        if error is not None:  # a new exception each time: one raised again grows its traceback
+            raise PlenoxdVersionError(error.message, error.client_version, error.server_version)
+
+    def check_version(self) -> str:
+        """Asks the daemon for its version and returns it; raises PlenoxdVersionError naming
+        both versions when it is not this package's API_VERSION, whatever version_check says
+        (PlenoxdError when the daemon cannot be asked)."""
+        version = self._unary("GetServerInfo", pb.GetServerInfoRequest(),
+                              check_version=False).version
+        message = version_mismatch(version, self.target)
+        if message is None:
+            self._record_server_version(version)
+            return version
+        error = PlenoxdVersionError(message, API_VERSION, version)
+        with self._version_lock:  # raised here: the first check, but no warning besides
+            if self.server_version is None:
+                self.server_version = version
+                if self.version_check == "error":
+                    self._version_error = error
+        raise error
 
     # --- health ---
 
-    def health(self, service="", timeout=5.0):
+    def health(self, service: str = "", timeout: float = 5.0) -> bool:
         """True when the daemon reports SERVING (the standard grpc.health.v1 service; it answers
         without a token)."""
         try:
@@ -490,45 +559,52 @@ class Client:
             raise PlenoxdError.from_rpc_error(e, "Health.Check") from None
         return response.status == health_pb2.HealthCheckResponse.SERVING
 
-    def server_info(self):
-        """ServerInfo: version, backend, compute devices (id, kind, name, queue, streams), maps."""
-        return self._unary("GetServerInfo", pb.GetServerInfoRequest())
+    def server_info(self) -> pb.ServerInfo:
+        """ServerInfo: version, backend, compute devices (id, kind, name, queue, streams), maps.
+        Its version is checked as before any call (a warning when it differs), but this call is
+        never refused for it."""
+        info = self._unary("GetServerInfo", pb.GetServerInfoRequest(), check_version=False)
+        if self.version_check != "off":
+            self._record_server_version(info.version)
+        return info
 
     # --- maps ---
 
-    def create_map(self, name, voxel_size=0.0):
+    def create_map(self, name: str, voxel_size: float = 0.0) -> pb.MapInfo:
         """MapInfo of a new, empty map (voxel_size metres; 0 = the server default, 0.02)."""
         return self._unary("CreateMap", pb.CreateMapRequest(name=name, voxel_size=voxel_size))
 
-    def get_map(self, name):
+    def get_map(self, name: str) -> pb.MapInfo:
         return self._unary("GetMap", pb.GetMapRequest(name=name))
 
-    def list_maps(self):
+    def list_maps(self) -> List[pb.MapInfo]:
         """[MapInfo] of every map the daemon holds."""
         return list(self._unary("ListMaps", pb.ListMapsRequest()).maps)
 
-    def delete_map(self, name):
+    def delete_map(self, name: str) -> None:
         self._unary("DeleteMap", pb.DeleteMapRequest(name=name))
 
-    def save_map(self, name):
+    def save_map(self, name: str) -> pb.MapInfo:
         """Writes the map to the daemon's data directory; returns its MapInfo."""
         return self._unary("SaveMap", pb.SaveMapRequest(name=name))
 
-    def load_map(self, name):
+    def load_map(self, name: str) -> pb.MapInfo:
         """Reads <data-dir>/<name>.plx back into the daemon; returns its MapInfo."""
         return self._unary("LoadMap", pb.LoadMapRequest(name=name))
 
     # --- mapping ---
 
-    def integrate(self, map_name, frames, options=None):
+    def integrate(self, map_name: str, frames: Iterable[FrameLike],
+                  options: Optional[IntegrateOptionsLike] = None) -> Iterator[pb.MappingProgress]:
         """Streams posed keyframes into map_name; yields plenoxd.v1.MappingProgress messages,
         the last with done=True once the frames are all sent and the optimisation budget is
         spent. frames: dataset.Frame objects (with .pose), Frame messages (with pose), or
         dicts. options: IntegrateOptions or a dict of its fields."""
-        def requests():
-            first = pb.IntegrateRequest(map=map_name)
+        def requests() -> Iterator[pb.IntegrateRequest]:
+            head = pb.IntegrateRequest(map=map_name)
             if options is not None:
-                first.options.CopyFrom(_integrate_options(options))
+                head.options.CopyFrom(_integrate_options(options))
+            first: Optional[pb.IntegrateRequest] = head
             for frame in frames:
                 # A frame without a pose is the server's to reject ("frame[i].pose: required").
                 message = convert.frame_to_proto(frame, with_pose=True)
@@ -541,6 +617,7 @@ class Client:
             if first is not None:  # no frames: still open the stream (the map is unchanged)
                 yield first
 
+        self._check_version()
         feed = _RequestFeed(requests())
         call = None
         try:
@@ -555,15 +632,18 @@ class Client:
             if call is not None and call.running():
                 call.cancel()
 
-    def integrate_all(self, map_name, frames, options=None):
+    def integrate_all(self, map_name: str, frames: Iterable[FrameLike],
+                      options: Optional[IntegrateOptionsLike] = None
+                      ) -> Optional[pb.MappingProgress]:
         """integrate() run to the end; returns the final MappingProgress (done=True)."""
         last = None
         for last in self.integrate(map_name, frames, options):
             pass
         return last
 
-    def watch_job(self, job_id):
+    def watch_job(self, job_id: str) -> Iterator[pb.JobStatus]:
         """Yields plenoxd.v1.JobStatus until the job ends."""
+        self._check_version()
         call = None
         try:
             call = self._stub.WatchJob(pb.WatchJobRequest(job_id=job_id), metadata=self._metadata)
@@ -577,8 +657,10 @@ class Client:
 
     # --- tracking ---
 
-    def track(self, map_name, frames, initial_pose=None, lockstep=True, options=None,
-              priors=False, fps=None):
+    def track(self, map_name: str, frames: Iterable[FrameLike],
+              initial_pose: Optional[PoseLike] = None, lockstep: bool = True,
+              options: Optional[TrackOptionsLike] = None, priors: bool = False,
+              fps: Optional[float] = None) -> TrackStream:
         """Tracks frames against map_name; returns a TrackStream yielding one
         plenoxd.v1.PoseEstimate per frame served (see convert.pose_from_proto).
 
@@ -595,8 +677,10 @@ class Client:
 
     # --- SLAM ---
 
-    def slam(self, map_name, frames, initial_pose=None, options=None, lockstep=True,
-             priors=False, fps=None):
+    def slam(self, map_name: str, frames: Iterable[FrameLike],
+             initial_pose: Optional[PoseLike] = None, options: Optional[SlamOptionsLike] = None,
+             lockstep: bool = True, priors: bool = False,
+             fps: Optional[float] = None) -> SlamStream:
         """Online SLAM into map_name (created when it does not exist, bootstrapped when empty,
         extended when it has content): unposed frames in; returns a SlamStream yielding one
         plenoxd.v1.SlamUpdate per frame the server processed (slam_pose(u) for its pose), and
@@ -621,7 +705,18 @@ class Client:
 
     # --- views ---
 
-    def render(self, map_name, pose, intrinsics, with_info=False, timeout=None):
+    @overload
+    def render(self, map_name: str, pose: PoseLike, intrinsics: IntrinsicsLike,
+               with_info: Literal[False] = ..., timeout: Optional[float] = ...
+               ) -> Tuple[np.ndarray, np.ndarray]: ...
+
+    @overload
+    def render(self, map_name: str, pose: PoseLike, intrinsics: IntrinsicsLike,
+               with_info: Literal[True], timeout: Optional[float] = ...) -> Rendering: ...
+
+    def render(self, map_name: str, pose: PoseLike, intrinsics: IntrinsicsLike,
+               with_info: bool = False, timeout: Optional[float] = None
+               ) -> Union[Tuple[np.ndarray, np.ndarray], Rendering]:
         """Renders the map from pose (world_T_camera) with the intrinsics' size. Returns
         (color HxWx3 uint8, depth HxW float32 metres, 0 = nothing rendered), or a Rendering
         (color, depth, coverage, map_version) when with_info=True."""
@@ -637,12 +732,13 @@ class Client:
             return Rendering(color, depth, response.coverage, response.map_version)
         return color, depth
 
-    def export(self, map_name, min_density=0.0):
+    def export(self, map_name: str, min_density: float = 0.0) -> bytes:
         """The map's surface points as binary little-endian PLY bytes."""
         return self._export(pb.ExportRequest(map=map_name, min_density=min_density))
 
-    def export_mesh(self, map_name, path, iso_level=0.0, min_component_triangles=0,
-                    max_triangles=0, keep_unobserved=False, color="dc"):
+    def export_mesh(self, map_name: str, path: str, iso_level: float = 0.0,
+                    min_component_triangles: int = 0, max_triangles: int = 0,
+                    keep_unobserved: bool = False, color: str = "dc") -> MeshExport:
         """Writes the map's triangle mesh (marching cubes on the daemon's device) to `path` as
         binary little-endian PLY (vertex x y z nx ny nz red green blue, face vertex_indices),
         which Open3D, MeshLab and Blender read; the file appears only once complete. Returns
@@ -670,8 +766,9 @@ class Client:
         os.replace(temp, path)
         return MeshExport(int(counts.get("vertex", 0)), int(counts.get("face", 0)), len(data))
 
-    def _export(self, request):
+    def _export(self, request: pb.ExportRequest) -> bytes:
         """Every chunk of an Export call, joined."""
+        self._check_version()
         map_name = request.map
         parts, offset = [], 0
         call = None
@@ -694,17 +791,17 @@ class Client:
         return b"".join(parts)
 
 
-def estimate_pose(estimate):
+def estimate_pose(estimate: pb.PoseEstimate) -> Pose:
     """(t, q) of a PoseEstimate; convert.pose_to_matrix(*estimate_pose(e)) for a 4x4."""
     return convert.pose_from_proto(estimate.pose)
 
 
-def state_name(estimate):
+def state_name(estimate: pb.PoseEstimate) -> str:
     """"OK", "DEGRADED", "LOST" (or "UNSPECIFIED") of a PoseEstimate."""
     return pb.TrackingState.Name(estimate.state).replace("TRACKING_STATE_", "")
 
 
-def slam_pose(update):
+def slam_pose(update: pb.SlamUpdate) -> Pose:
     """(t, q) of a SlamUpdate's frame (for LOST: the prediction); convert.pose_to_matrix(*...)
     for a 4x4. A done message has no frame: ValueError."""
     if update.done:
@@ -717,7 +814,7 @@ def slam_pose(update):
 _RECENT_KEYFRAME_MARGIN = 0.3
 
 
-def correct_pose(correction, pose):
+def correct_pose(correction: pb.SlamCorrection, pose: PoseLike) -> Pose:
     """`pose` (any form convert.as_pose() reads) held in the frame before a SlamCorrection, as
     (t, q) in the corrected frame: moved with the keyframe it is anchored to, as the daemon
     moves its cameras and keyframes. A correction without keyframes leaves it as it is."""
@@ -739,12 +836,12 @@ def correct_pose(correction, pose):
     return convert.matrix_to_pose(after @ np.linalg.inv(before) @ m)
 
 
-def slam_state_name(update):
+def slam_state_name(update: pb.SlamUpdate) -> str:
     """"OK", "DEGRADED", "LOST", "RELOCALISED", "WAITING" (or "UNSPECIFIED") of a SlamUpdate."""
     return pb.SlamState.Name(update.state).replace("SLAM_STATE_", "")
 
 
-def as_dict(message):
+def as_dict(message: Any) -> Dict[str, Any]:
     """A protobuf message as a plain dict (field names as in the .proto, defaults included)."""
     from google.protobuf.json_format import MessageToDict  # noqa: PLC0415
     return MessageToDict(message, preserving_proto_field_name=True,

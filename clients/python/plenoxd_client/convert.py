@@ -6,11 +6,16 @@ a pair ``(t, q)`` -- translation ``(x, y, z)`` and Hamilton quaternion ``(x, y, 
 ``depth_scale`` units per metre, in numpy they are ``uint16`` in those units or float metres.
 """
 
+from __future__ import annotations
+
+from typing import Any, Callable, Optional, Union
+
 import numpy as np
+from numpy.typing import ArrayLike
 
-from plenoxd.v1 import plenoxd_pb2 as pb
-
+from ._proto import plenoxd_pb2 as pb
 from .timestamps import slerp
+from .types import FrameLike, IntrinsicsLike, Pose, PoseLike
 
 __all__ = [
     "pb",
@@ -32,7 +37,7 @@ __all__ = [
 
 # --- rotations ---------------------------------------------------------------------------------
 
-def quat_to_matrix(q):
+def quat_to_matrix(q: ArrayLike) -> np.ndarray:
     """3x3 rotation of the quaternion (x, y, z, w); normalised first."""
     x, y, z, w = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
     return np.array([
@@ -42,7 +47,7 @@ def quat_to_matrix(q):
     ])
 
 
-def matrix_to_quat(r):
+def matrix_to_quat(r: ArrayLike) -> np.ndarray:
     """Quaternion (x, y, z, w) with w >= 0 of a 3x3 rotation matrix (Shepperd's method)."""
     r = np.asarray(r, dtype=np.float64)
     trace = r[0, 0] + r[1, 1] + r[2, 2]
@@ -58,14 +63,13 @@ def matrix_to_quat(r):
     else:
         s = 2.0 * np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
         q = [(r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s, (r[1, 0] - r[0, 1]) / s]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    return -q if q[3] < 0 else q
+    unit = np.array(q) / np.linalg.norm(q)
+    return -unit if unit[3] < 0 else unit
 
 
 # --- poses -------------------------------------------------------------------------------------
 
-def pose_to_matrix(t, q):
+def pose_to_matrix(t: ArrayLike, q: ArrayLike) -> np.ndarray:
     """4x4 world_T_camera of translation t and quaternion q (x, y, z, w)."""
     m = np.eye(4)
     m[:3, :3] = quat_to_matrix(q)
@@ -73,13 +77,13 @@ def pose_to_matrix(t, q):
     return m
 
 
-def matrix_to_pose(m):
+def matrix_to_pose(m: ArrayLike) -> Pose:
     """(t, q) of a 4x4 (or 3x4) rigid transform."""
     m = np.asarray(m, dtype=np.float64)
     return m[:3, 3].copy(), matrix_to_quat(m[:3, :3])
 
 
-def as_pose(pose):
+def as_pose(pose: PoseLike) -> Pose:
     """Normalises any pose form -- (t, q), a 4x4/3x4 matrix, a dict with t/q, or a Pose message --
     to (t ndarray(3), q ndarray(4) x y z w)."""
     if isinstance(pose, pb.Pose):
@@ -103,7 +107,7 @@ def as_pose(pose):
                      "use (t_xyz, q_xyzw), a 4x4 matrix or a Pose message")
 
 
-def pose_to_proto(pose, out=None):
+def pose_to_proto(pose: PoseLike, out: Optional[pb.Pose] = None) -> pb.Pose:
     """A plenoxd.v1.Pose from any pose form accepted by as_pose(), with the wire's convention
     (as the C++ proto/pose_codec.h): a unit quaternion with qw >= 0."""
     t, q = as_pose(pose)
@@ -121,7 +125,7 @@ def pose_to_proto(pose, out=None):
     return out
 
 
-def pose_from_proto(p):
+def pose_from_proto(p: pb.Pose) -> Pose:
     """(t ndarray(3), q ndarray(4) x y z w) of a plenoxd.v1.Pose."""
     return (np.array([p.tx, p.ty, p.tz], dtype=np.float64),
             np.array([p.qx, p.qy, p.qz, p.qw], dtype=np.float64))
@@ -132,7 +136,8 @@ def pose_from_proto(p):
 _INTRINSICS_FIELDS = ("fx", "fy", "cx", "cy", "width", "height", "depth_scale")
 
 
-def intrinsics_to_proto(k, out=None):
+def intrinsics_to_proto(k: IntrinsicsLike,
+                        out: Optional[pb.Intrinsics] = None) -> pb.Intrinsics:
     """A plenoxd.v1.Intrinsics from a message, a dict, or an object with fx fy cx cy width
     height [depth_scale] attributes (e.g. dataset.Intrinsics)."""
     out = pb.Intrinsics() if out is None else out
@@ -160,7 +165,7 @@ _DEPTH_ENCODINGS = {"png16": pb.DEPTH_ENCODING_PNG16, "png": pb.DEPTH_ENCODING_P
                     "raw_u16": pb.DEPTH_ENCODING_RAW_U16}
 
 
-def _color_encoding(value):
+def _color_encoding(value: Union[str, int]) -> int:
     if isinstance(value, str):
         try:
             return _COLOR_ENCODINGS[value.lower()]
@@ -169,7 +174,7 @@ def _color_encoding(value):
     return int(value)
 
 
-def _depth_encoding(value):
+def _depth_encoding(value: Union[str, int]) -> int:
     if isinstance(value, str):
         try:
             return _DEPTH_ENCODINGS[value.lower()]
@@ -178,8 +183,9 @@ def _depth_encoding(value):
     return int(value)
 
 
-def frame_from_arrays(color, depth, intrinsics, timestamp=0.0, pose=None, camera_id="",
-                      depth_scale=None):
+def frame_from_arrays(color: ArrayLike, depth: ArrayLike, intrinsics: IntrinsicsLike,
+                      timestamp: float = 0.0, pose: Optional[PoseLike] = None,
+                      camera_id: str = "", depth_scale: Optional[float] = None) -> pb.Frame:
     """A raw plenoxd.v1.Frame (RAW_RGB8 + RAW_U16) from numpy images, for live cameras.
 
     color: HxWx3 uint8 RGB (HxW grey is expanded). depth: HxW uint16 in depth_scale units per
@@ -223,14 +229,14 @@ def frame_from_arrays(color, depth, intrinsics, timestamp=0.0, pose=None, camera
     return frame
 
 
-def frame_to_proto(frame, with_pose=True):
+def frame_to_proto(frame: FrameLike, with_pose: bool = True) -> pb.Frame:
     """A plenoxd.v1.Frame from a Frame message (returned as is), a dataset.Frame, or a dict with
     the same keys (timestamp, intrinsics, color, color_encoding, depth, depth_encoding, pose,
     camera_id). with_pose=False leaves a dataset frame's ground-truth pose out (Track treats a
     frame's pose as a prior, so replaying a dataset must not send it)."""
     if isinstance(frame, pb.Frame):
         return frame
-    get = frame.get if isinstance(frame, dict) else (
+    get: Callable[..., Any] = frame.get if isinstance(frame, dict) else (
         lambda name, default=None: getattr(frame, name, default))
     color, depth = get("color"), get("depth")
     for name, value in (("color", color), ("depth", depth), ("intrinsics", get("intrinsics"))):
@@ -252,7 +258,7 @@ def frame_to_proto(frame, with_pose=True):
 
 # --- images coming back ------------------------------------------------------------------------
 
-def _cv2():
+def _cv2() -> Any:
     try:
         import cv2  # noqa: PLC0415 (optional: only PNG/JPEG decoding needs it)
     except ImportError as e:
@@ -261,7 +267,8 @@ def _cv2():
     return cv2
 
 
-def decode_color(data, encoding, width, height):
+def decode_color(data: bytes, encoding: Union[str, int], width: int,
+                 height: int) -> np.ndarray:
     """HxWx3 uint8 RGB from the bytes of a RenderResponse (or Frame) colour image."""
     encoding = _color_encoding(encoding)
     if encoding == pb.COLOR_ENCODING_RAW_RGB8:
@@ -278,7 +285,8 @@ def decode_color(data, encoding, width, height):
     raise ValueError(f"unknown colour encoding {encoding}")
 
 
-def decode_depth(data, encoding, width, height, depth_scale=1000.0):
+def decode_depth(data: bytes, encoding: Union[str, int], width: int, height: int,
+                 depth_scale: float = 1000.0) -> np.ndarray:
     """HxW float32 metres (0 = nothing) from depth bytes; rendered depth is in millimetres
     (depth_scale 1000)."""
     encoding = _depth_encoding(encoding)

@@ -12,15 +12,22 @@ max_time_difference (20 ms) of a frame are interpolated (linear translation, sle
 or the single one in range is used.
 """
 
+from __future__ import annotations
+
 import bisect
 import os
 from dataclasses import dataclass, field
-from typing import Optional, Tuple
+from typing import Dict, Iterator, List, Optional, Sequence, Tuple, Union, overload
 
 import numpy as np
 
 from . import convert
+from ._proto import plenoxd_pb2 as pb
 from .timestamps import associate
+from .types import Pose
+
+# A ground-truth sample: (timestamp, t ndarray(3), q ndarray(4) x y z w).
+GroundTruthSample = Tuple[float, np.ndarray, np.ndarray]
 
 __all__ = ["Intrinsics", "Frame", "TumDataset", "read_intrinsics", "read_groundtruth",
            "pose_at_time", "associate"]
@@ -38,7 +45,7 @@ class Intrinsics:
     # k1 k2 p1 p2 k3 (OpenCV order). plenoxd's API has no distortion: images must be undistorted.
     distortion: Tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
 
-    def to_proto(self):
+    def to_proto(self) -> pb.Intrinsics:
         return convert.intrinsics_to_proto(self)
 
 
@@ -52,12 +59,12 @@ class Frame:
     depth: bytes
     color_encoding: str = "png"       # "png" or "jpeg"
     depth_encoding: str = "png16"
-    pose: Optional[Tuple[np.ndarray, np.ndarray]] = None  # ground truth (t, q xyzw), if known
+    pose: Optional[Pose] = None       # ground truth (t, q xyzw), if known
     color_path: str = ""
     depth_path: str = ""
     camera_id: str = ""
 
-    def to_proto(self, with_pose=True):
+    def to_proto(self, with_pose: bool = True) -> pb.Frame:
         return convert.frame_to_proto(self, with_pose=with_pose)
 
 
@@ -66,7 +73,7 @@ class _FrameFiles:
     timestamp: float
     color_path: str
     depth_path: str
-    pose: Optional[Tuple[np.ndarray, np.ndarray]] = field(default=None)
+    pose: Optional[Pose] = field(default=None)
 
 
 def _rows(path):
@@ -85,7 +92,7 @@ def _floats(path, number, fields):
         raise ValueError(f"{path}:{number}: expected numbers, got {' '.join(fields)!r}") from None
 
 
-def read_intrinsics(path):
+def read_intrinsics(path: str) -> Intrinsics:
     """The calibration line of intrinsics.txt (7 or 12 numbers)."""
     for number, fields in _rows(path):
         if len(fields) not in (7, 12):
@@ -102,7 +109,7 @@ def read_intrinsics(path):
                      "k1 k2 p1 p2 k3\"")
 
 
-def read_groundtruth(path):
+def read_groundtruth(path: str) -> List[GroundTruthSample]:
     """Sorted list of (timestamp, t ndarray(3), q ndarray(4) xyzw)."""
     samples = []
     for number, fields in _rows(path):
@@ -119,7 +126,8 @@ def read_groundtruth(path):
     return samples
 
 
-def pose_at_time(samples, time, max_difference=0.02):
+def pose_at_time(samples: Sequence[GroundTruthSample], time: float,
+                 max_difference: float = 0.02) -> Optional[Pose]:
     """The ground-truth pose (t, q) at `time`, interpolated between the samples either side
     when both are within max_difference, else the one that is; None when neither is."""
     times = [s[0] for s in samples]
@@ -147,7 +155,8 @@ class TumDataset:
         seq[0].to_proto(with_pose=False)
     """
 
-    def __init__(self, directory, max_time_difference=0.02, intrinsics=None):
+    def __init__(self, directory: str, max_time_difference: float = 0.02,
+                 intrinsics: Optional[Intrinsics] = None):
         if not os.path.isdir(directory):
             raise FileNotFoundError(f"{directory}: not a directory")
         self.directory = directory
@@ -168,10 +177,10 @@ class TumDataset:
             for f in self._files:
                 f.pose = pose_at_time(samples, f.timestamp, max_time_difference)
 
-    def _path(self, name):
+    def _path(self, name: str) -> str:
         return os.path.join(self.directory, name)
 
-    def _read_lists(self, max_time_difference):
+    def _read_lists(self, max_time_difference: float) -> List[_FrameFiles]:
         assoc = self._path("associations.txt")
         if os.path.exists(assoc):
             files = []
@@ -203,10 +212,16 @@ class TumDataset:
                              f"{max_time_difference} s between rgb.txt and depth.txt")
         return [_FrameFiles(rgb[i][0], rgb[i][1], depth[j][1]) for i, j in pairs]
 
-    def __len__(self):
+    def __len__(self) -> int:
         return len(self._files)
 
-    def __getitem__(self, index):
+    @overload
+    def __getitem__(self, index: int) -> Frame: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> List[Frame]: ...
+
+    def __getitem__(self, index: Union[int, slice]) -> Union[Frame, List[Frame]]:
         if isinstance(index, slice):
             return [self[i] for i in range(*index.indices(len(self)))]
         if index < 0:
@@ -225,14 +240,14 @@ class TumDataset:
                      depth=depth, color_encoding=encoding, pose=pose, color_path=f.color_path,
                      depth_path=f.depth_path)
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[Frame]:
         for i in range(len(self)):
             yield self[i]
 
     @property
-    def timestamps(self):
+    def timestamps(self) -> List[float]:
         return [f.timestamp for f in self._files]
 
-    def groundtruth(self):
+    def groundtruth(self) -> Dict[float, Pose]:
         """{timestamp: (t, q)} of the frames that have a ground-truth pose."""
         return {f.timestamp: f.pose for f in self._files if f.pose is not None}

@@ -6,14 +6,19 @@ file by its path (the one Python copy of these; the C++ one is core/datasets/tum
 dataset.associate and convert.slerp are these functions.
 """
 
+from __future__ import annotations
+
 import bisect
+from typing import List, Sequence, Tuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = ["associate", "slerp"]
 
 
-def associate(first, second, max_difference=0.02):
+def associate(first: Sequence[float], second: Sequence[float],
+              max_difference: float = 0.02) -> List[Tuple[int, int]]:
     """Pairs (i, j) of timestamps first[i], second[j] at most max_difference apart, closest
     first, each index used once (TUM's associate.py); sorted by first[i]."""
     order = sorted(range(len(second)), key=lambda j: second[j])
@@ -37,7 +42,7 @@ def associate(first, second, max_difference=0.02):
     return pairs
 
 
-def slerp(q0, q1, alpha):
+def slerp(q0: ArrayLike, q1: ArrayLike, alpha: float) -> np.ndarray:
     """Spherical interpolation between quaternions (x, y, z, w), the shorter way round."""
     q0 = np.asarray(q0, dtype=np.float64) / np.linalg.norm(q0)
     q1 = np.asarray(q1, dtype=np.float64) / np.linalg.norm(q1)
