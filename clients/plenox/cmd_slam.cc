@@ -86,13 +86,14 @@ absl::Status WriteFramesCsv(const std::string& path, const std::vector<SlamFrame
   std::ofstream out(path);
   if (!out) return absl::UnavailableError(absl::StrCat("cannot write ", path));
   out << "frame,timestamp,state,ms,keyframe,segment,odometry_ms,map_ms,relocalisation_ms,"
-         "features_ms,reason\n";
+         "features_ms,rebuilding,reason\n";
   for (const SlamFrameResult& r : results) {
     const SlamFrameTimings& t = r.timings;
-    out << absl::StrFormat("%d,%.6f,%s,%.3f,%d,%d,%.3f,%.3f,%.3f,%.3f,%s\n", r.frame,
+    out << absl::StrFormat("%d,%.6f,%s,%.3f,%d,%d,%.3f,%.3f,%.3f,%.3f,%d,%s\n", r.frame,
                            r.timestamp, SlamStateName(r.state), r.milliseconds,
                            r.keyframe ? 1 : 0, r.segment, t.odometry_ms, t.map_ms,
-                           t.relocalisation_ms, t.features_ms, CsvQuoted(r.reason));
+                           t.relocalisation_ms, t.features_ms, r.map_rebuilding ? 1 : 0,
+                           CsvQuoted(r.reason));
   }
   out.close();
   if (!out) return absl::UnavailableError(absl::StrCat("failed writing ", path));

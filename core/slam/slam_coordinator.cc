@@ -544,6 +544,7 @@ SlamMapView SlamCoordinator::ViewLocked(int segment) const {
     view.keyframe_features = s.features;
   }
   view.pending_keyframes = s.progress.pending_keyframes;
+  view.map_rebuilding = s.rebuild != nullptr || s.rebuild_collecting;
   if (segment == 0) view.correction = s.correction;
   return view;
 }

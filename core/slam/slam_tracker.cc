@@ -455,6 +455,7 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   out.timestamp = frame.timestamp;
   out.keyframes = static_cast<int>(view.accepted_keyframes.size());
   out.map_version = view.version;
+  out.map_rebuilding = view.map_rebuilding;
   if (!BootstrapCandidate(view) && view.map == nullptr && !CarriesWithoutMap()) {
     // Checked before anything changes, so the caller can hand the same frame in again later.
     return absl::FailedPreconditionError(

@@ -173,6 +173,9 @@ struct SlamMapView {
   // The keyframes' features, in the same order as keyframe_poses (null: none were extracted).
   std::vector<std::shared_ptr<const FrameFeatures>> keyframe_features;
   int pending_keyframes = 0;  // accepted, not integrated yet
+  // A loop-closure rebuild of the main map runs beside its mapping (SlamCoordinator): what a
+  // frame's time is measured against when the benchmarks ask what a correction costs tracking.
+  bool map_rebuilding = false;
   // The map's latest loop-closure correction (null: none yet): a camera whose poses are in an
   // earlier frame moves with it before it tracks (SlamTracker::Track). The main map's only.
   std::shared_ptr<const SlamCorrection> correction;
@@ -213,6 +216,7 @@ struct SlamFrameResult {
   // in the main map. The segment's earlier poses map into the main map by it.
   std::optional<SE3> main_T_segment;
   int64_t map_version = 0;      // the published version the frame was tracked against
+  bool map_rebuilding = false;  // the view's: a loop-closure rebuild ran meanwhile
   // The main map's frame `pose` is in: the loop-closure corrections the camera has followed
   // (SlamCorrection::generation; 0 before any).
   int correction_generation = 0;

@@ -207,10 +207,12 @@ TEST_F(LoopClosureTest, TheCoordinatorClosesTheLoopAndPublishesTheCorrectedMap) 
   // The camera's frame: the drifting odometry's, moved by every correction it has seen.
   SE3 camera_change;
   int generation = 0;
+  bool seen_rebuilding = false;  // a camera's view said a rebuild runs
   auto step_until_out_of_work = [&](SlamStepMode mode) {
     for (int steps = 0; steps < 100000; ++steps) {
       absl::StatusOr<SlamStepResult> r = coordinator.Step(mode);
       ASSERT_TRUE(r.ok()) << r.status();
+      seen_rebuilding = seen_rebuilding || coordinator.View().map_rebuilding;
       if (r->out_of_work) return;
     }
     FAIL() << "the coordinator never ran out of work";
@@ -244,6 +246,8 @@ TEST_F(LoopClosureTest, TheCoordinatorClosesTheLoopAndPublishesTheCorrectedMap) 
   EXPECT_EQ(coordinator.latest().version, p.map_version);
   EXPECT_GE(coordinator.latest().version, correction->map_version);
   EXPECT_EQ(coordinator.View().correction, correction);
+  EXPECT_TRUE(seen_rebuilding);
+  EXPECT_FALSE(coordinator.View().map_rebuilding);
 
   std::vector<SE3> corrected;
   for (const StampedPose& kf : coordinator.keyframe_poses()) corrected.push_back(kf.pose);
