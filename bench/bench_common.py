@@ -21,6 +21,7 @@ import math
 import os
 import platform
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -314,6 +315,101 @@ def run_json(label, cmd, timeout, env=None):
                            "--- stderr tail ---\n%s"
                            % (label, lines[-1][-300:] if lines else "(no output)", tail))
     return obj
+
+
+def free_port():
+    """A free TCP port on 127.0.0.1 (servers in benchmarks listen on loopback only)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class DaemonProcess:
+    """plenoxd on a free loopback port with `args` after --listen, its output in `log_path`.
+    Returns once `plenox maps` answers and `ready(its stdout)` holds (60 s at most, else
+    CommandError). stop() drains it with SIGTERM and returns the exit status; kill() is
+    kill -9."""
+
+    def __init__(self, plenoxd, plenox, args, log_path, ready=lambda listing: True):
+        self.address = "127.0.0.1:%d" % free_port()
+        self.plenox = plenox
+        self.log = open(log_path, "w")
+        cmd = [plenoxd, "--listen", self.address] + list(args)
+        log("plenoxd: %s" % " ".join(cmd))
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=self.log,
+                                     stderr=subprocess.STDOUT, start_new_session=True)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise CommandError("plenoxd exited with status %d at start (log: %s)"
+                                   % (self.proc.returncode, log_path))
+            probe = subprocess.run([plenox, "--server", self.address, "maps"],
+                                   capture_output=True, text=True)
+            if probe.returncode == 0 and ready(probe.stdout):
+                return
+            time.sleep(0.3)
+        self.kill()
+        raise CommandError("plenoxd was not ready within 60 s (log: %s)" % log_path)
+
+    def stop(self, timeout_s=120):
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            code = self.proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            self.kill()
+            return "killed after %d s" % timeout_s
+        self.log.close()
+        return code
+
+    def kill(self):
+        self.proc.send_signal(signal.SIGKILL)
+        self.proc.wait()
+        self.log.close()
+
+
+class CommandLoop:
+    """Runs a command again and again in a thread until stop() (a client that keeps the daemon
+    busy while a benchmark measures something else). `command(n)` gives the n-th run's argv
+    (1, 2, ...). `jobs` counts the runs that exited 0; the first failing run ends the loop and
+    its stderr's end is in `failures`. stop() sends the running command SIGINT (a client
+    leaving; the daemon cancels its job) and waits for the thread."""
+
+    def __init__(self, command, join_timeout_s=120):
+        self.command = command
+        self.join_timeout_s = join_timeout_s
+        self.stopping = threading.Event()
+        self.proc = None
+        self.jobs = 0
+        self.failures = []
+        self.lock = threading.Lock()
+        self.thread = threading.Thread(target=self._loop, daemon=True)
+        self.thread.start()
+
+    def _loop(self):
+        n = 0
+        while not self.stopping.is_set():
+            n += 1
+            with self.lock:
+                if self.stopping.is_set():
+                    return
+                self.proc = subprocess.Popen(self.command(n), stdin=subprocess.DEVNULL,
+                                             stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                             start_new_session=True)
+            _, err = self.proc.communicate()
+            if self.stopping.is_set():
+                return
+            if self.proc.returncode == 0:
+                self.jobs += 1
+            else:
+                self.failures.append(err.decode("utf-8", "replace")[-400:])
+                return
+
+    def stop(self):
+        with self.lock:
+            self.stopping.set()
+            if self.proc is not None and self.proc.poll() is None:
+                self.proc.send_signal(signal.SIGINT)
+        self.thread.join(timeout=self.join_timeout_s)
 
 
 def peer_env():

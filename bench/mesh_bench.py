@@ -8,7 +8,10 @@ For one TUM-layout sequence (default ../shared/data/replica_room0):
     Open3D ScalableTSDFVolume(voxel_length=V, sdf_trunc=4 V) of the same keyframes (ground-truth
     poses), extract_triangle_mesh()
 
-and scores both meshes against the ground truth: the measured depth of the held-out frames
+and, with --lod-fraction F (default 0.1; 0 = off), also the same map's level of detail at F
+of the full mesh's triangles (`plenox export --mesh --lod-triangles N`, written as PLY for
+Open3D to read; the GLB of it is written too and its size reported), and scores every mesh
+against the ground truth: the measured depth of the held-out frames
 (i % K == K // 2) back-projected with their ground-truth poses. Each mesh is sampled uniformly
 (fixed seed); samples are kept where a held-out view sees them (inside its image, in front of or
 within 5 cm behind its measured depth), as the NICE-SLAM-style evaluations cull, so both
@@ -23,6 +26,9 @@ Prints a markdown table with the machine and commit; run it with /usr/bin/python
 (Debian's python3-open3d, python3-opencv).
 
     /usr/bin/python3 bench/mesh_bench.py --every 4 --voxel-size 0.02
+
+The goal of issue 23 (part 3): the 10 % level of detail's F-score within 0.05 of the full
+mesh's; the notes under the table give the difference.
 """
 
 import argparse
@@ -134,6 +140,39 @@ def open3d_mesh(frames, keys, gt, intr, voxel):
     return volume.extract_triangle_mesh()
 
 
+def score_lod(args, name, map_path, work, exported, truth, views, intr):
+    """The level of detail at args.lod_fraction of the full mesh's triangles: exported as PLY
+    (scored) and as GLB (sized), and the full mesh's GLB for comparison."""
+    budget = max(1, int(round(args.lod_fraction * exported["faces"])))
+    base = [args.plenox, "export", "--map", map_path, "--mesh", "--iso-level",
+            repr(args.iso_level), "--json"]
+    paths = {k: os.path.join(work, k) for k in ("lod.ply", "lod.glb", "full.glb")}
+    began = time.monotonic()
+    lod = run_json("%s plenox export LOD" % name,
+                   base + ["--out", paths["lod.ply"], "--lod-triangles", str(budget)],
+                   args.timeout)
+    seconds = time.monotonic() - began
+    lod_glb = run_json("%s plenox export LOD glb" % name,
+                       base + ["--out", paths["lod.glb"], "--lod-triangles", str(budget)],
+                       args.timeout)
+    full_glb = run_json("%s plenox export glb" % name, base + ["--out", paths["full.glb"]],
+                        args.timeout)
+    if lod["faces"] > budget or lod_glb["faces"] != lod["faces"]:
+        sys.exit("the level of detail has %d (PLY) / %d (GLB) triangles for a budget of %d"
+                 % (lod["faces"], lod_glb["faces"], budget))
+    mesh = o3d.io.read_triangle_mesh(paths["lod.ply"])
+    if len(mesh.triangles) != lod["faces"]:
+        sys.exit("Open3D read %d triangles, plenox wrote %d" % (len(mesh.triangles), lod["faces"]))
+    s = score(mesh, truth, views, intr)
+    s["seconds"] = seconds
+    s["lod_error_m"] = lod["lod_error_m"]
+    s["glb_bytes"] = lod_glb["bytes"]
+    s["full_glb_bytes"] = full_glb["bytes"]
+    s["notes"] = "--lod-triangles %d: extract + simplify, error %.1f mm" % (
+        budget, 1000 * lod["lod_error_m"])
+    return s
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--dataset", default=os.path.join(REPO, "..", "shared", "data",
@@ -145,6 +184,10 @@ def main():
     p.add_argument("--time-budget", type=float, default=None,
                    help="plenox map --time-budget (seconds)")
     p.add_argument("--iso-level", type=float, default=0.0, help="0 = plenox's default")
+    p.add_argument("--lod-fraction", type=float, default=0.1,
+                   help="also score the level of detail at this fraction of the triangles "
+                        "(0 = off)")
+    p.add_argument("--no-peer", action="store_true", help="skip the Open3D TSDF mesh")
     p.add_argument("--timeout", type=float, default=1800)
     p.add_argument("--out", help="also write the report here")
     args = p.parse_args()
@@ -193,14 +236,19 @@ def main():
                                                     mapped.get("iterations", 0))
         rows.append(("plenox (ours)", s))
         log("ours: %s" % s)
+        if args.lod_fraction > 0:
+            rows.append(("plenox LOD %g %%" % (100 * args.lod_fraction),
+                         score_lod(args, name, map_path, work, exported, truth, views, intr)))
+            log("lod: %s" % rows[-1][1])
 
-    began = time.monotonic()
-    peer = open3d_mesh(frames, keys, gt, intr, args.voxel_size)
-    s = score(peer, truth, views, intr)
-    s["seconds"] = time.monotonic() - began
-    s["notes"] = "integrate + extract"
-    rows.append(("Open3D ScalableTSDFVolume", s))
-    log("open3d: %s" % s)
+    if not args.no_peer:
+        began = time.monotonic()
+        peer = open3d_mesh(frames, keys, gt, intr, args.voxel_size)
+        s = score(peer, truth, views, intr)
+        s["seconds"] = time.monotonic() - began
+        s["notes"] = "integrate + extract"
+        rows.append(("Open3D ScalableTSDFVolume", s))
+        log("open3d: %s" % s)
 
     cols = ["system", "triangles", "accuracy (cm)", "completeness (cm)", "Chamfer (cm)",
             "precision @2 cm", "recall @2 cm", "F-score @2 cm", "precision, unculled",
@@ -216,9 +264,22 @@ def main():
               "%s, commit %s, %s" % (machine_line(), git_commit() or "?",
                                      datetime.datetime.now(datetime.timezone.utc)
                                      .strftime("%Y-%m-%d %H:%M UTC"))]
-    notes = ["mesh samples seen by a held-out view: ours %.2f, Open3D %.2f of %d; 'precision, "
-             "unculled' counts every sample (surfaces no held-out view shows count as errors)"
-             % (rows[0][1]["seen_fraction"], rows[1][1]["seen_fraction"], SAMPLES)]
+    notes = ["mesh samples seen by a held-out view: %s of %d; 'precision, unculled' counts "
+             "every sample (surfaces no held-out view shows count as errors)"
+             % (", ".join("%s %.2f" % (system, r["seen_fraction"]) for system, r in rows),
+                SAMPLES)]
+    lod = [r for system, r in rows if system.startswith("plenox LOD")]
+    if lod:
+        full = rows[0][1]
+        notes.append("level of detail: %d of %d triangles (%.1f %%), simplification error %.1f mm "
+                     "(reported by plenox), GLB %.2f MB against %.2f MB for the full mesh's GLB; "
+                     "F-score @2 cm %.3f against %.3f (difference %+.3f), Chamfer %+.2f cm"
+                     % (lod[0]["triangles"], full["triangles"],
+                        100.0 * lod[0]["triangles"] / full["triangles"],
+                        1000 * lod[0]["lod_error_m"], lod[0]["glb_bytes"] / 1e6,
+                        lod[0]["full_glb_bytes"] / 1e6, lod[0]["fscore"], full["fscore"],
+                        lod[0]["fscore"] - full["fscore"],
+                        lod[0]["chamfer_cm"] - full["chamfer_cm"]))
     write_report(render_table(cols, body, header, notes), args.out)
 
 

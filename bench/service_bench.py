@@ -25,26 +25,18 @@ import datetime
 import json
 import os
 import shutil
-import signal
-import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 
-from bench_common import (REPO, CommandError, git_commit, log, machine_line, make_synthetic,
-                          percentile, render_table, run_json, set_log_prefix, write_report)
+from bench_common import (REPO, CommandError, CommandLoop, DaemonProcess, git_commit, log,
+                          machine_line, make_synthetic, percentile, render_table, run_json,
+                          set_log_prefix, write_report)
 
 MAP_NAME = "bench"
 DEFAULT_SCENARIOS = "1:off:raw,1:off:png,4:off:raw,1:on:raw,4:on:raw,slam,slam+live,slam+other"
 SLAM_SCENARIOS = ("slam", "slam+live", "slam+other")
-
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def read_timings(path):
@@ -60,84 +52,19 @@ def read_timings(path):
     return roundtrip, daemon
 
 
-class Daemon:
-    """plenoxd on a free loopback port with `data_dir`; stop() drains it with SIGTERM."""
-
-    def __init__(self, plenoxd, plenox, data_dir, log_path, extra_args=()):
-        self.address = "127.0.0.1:%d" % free_port()
-        self.plenox = plenox
-        self.log = open(log_path, "w")
-        cmd = [plenoxd, "--listen", self.address, "--data-dir", data_dir] + list(extra_args)
-        log("plenoxd: %s" % " ".join(cmd))
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=self.log,
-                                     stderr=subprocess.STDOUT, start_new_session=True)
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            if self.proc.poll() is not None:
-                raise CommandError("plenoxd exited with status %d at start (log: %s)"
-                                   % (self.proc.returncode, log_path))
-            probe = subprocess.run([plenox, "--server", self.address, "maps"],
-                                   capture_output=True, text=True)
-            if probe.returncode == 0 and MAP_NAME in probe.stdout:
-                return
-            time.sleep(0.5)
-        self.proc.kill()
-        raise CommandError("plenoxd did not list map %s within 60 s (log: %s)"
-                           % (MAP_NAME, log_path))
-
-    def stop(self):
-        self.proc.send_signal(signal.SIGTERM)
-        try:
-            code = self.proc.wait(timeout=60)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            code = "killed after 60 s"
-        self.log.close()
-        return code
+def start_daemon(plenoxd, plenox, data_dir, log_path, extra_args=()):
+    """plenoxd with `data_dir`, once it lists MAP_NAME (loaded from the data dir)."""
+    return DaemonProcess(plenoxd, plenox, ["--data-dir", data_dir] + list(extra_args), log_path,
+                         ready=lambda listing: MAP_NAME in listing)
 
 
-class MappingLoad:
+def mapping_load(args, daemon, dataset):
     """Keeps a mapping job running on the daemon (a fresh map per job, the same keyframes)
-    until stop(); records how much of the window a job was running."""
-
-    def __init__(self, args, daemon, dataset, workdir):
-        self.cmd_base = [args.plenox, "--server", daemon.address, "map", "--dataset", dataset,
-                         "--every", str(args.every), "--quiet", "--json"]
-        self.workdir = workdir
-        self.stopping = threading.Event()
-        self.proc = None
-        self.jobs_finished = 0
-        self.failures = []
-        self.lock = threading.Lock()
-        self.thread = threading.Thread(target=self._loop, daemon=True)
-        self.thread.start()
-
-    def _loop(self):
-        n = 0
-        while not self.stopping.is_set():
-            n += 1
-            cmd = self.cmd_base + ["--name", "load%d_%d" % (os.getpid(), n)]
-            with self.lock:
-                if self.stopping.is_set():
-                    return
-                self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL,
-                                             stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                             start_new_session=True)
-            out, err = self.proc.communicate()
-            if self.stopping.is_set():
-                return
-            if self.proc.returncode == 0:
-                self.jobs_finished += 1
-            else:
-                self.failures.append(err.decode("utf-8", "replace")[-400:])
-                return
-
-    def stop(self):
-        with self.lock:
-            self.stopping.set()
-            if self.proc is not None and self.proc.poll() is None:
-                self.proc.send_signal(signal.SIGINT)  # the client leaves; the daemon cancels
-        self.thread.join(timeout=60)
+    until stop()."""
+    base = [args.plenox, "--server", daemon.address, "map", "--dataset", dataset,
+            "--every", str(args.every), "--quiet", "--json"]
+    return CommandLoop(lambda n: base + ["--name", "load%d_%d" % (os.getpid(), n)],
+                       join_timeout_s=60)
 
 
 def start_trackers(args, daemon, dataset, workdir, tag, clients, encoding, map_name=MAP_NAME):
@@ -431,8 +358,8 @@ def main():
                                 [args.plenox, "slam", "--dataset", dataset, "--out",
                                  os.path.join(tmp, "inprocess_slam.txt"), "--json", "--quiet"]
                                 + slam_frame_flags(args), args.timeout)
-        daemon = Daemon(args.plenoxd, args.plenox, data_dir, os.path.join(tmp, "plenoxd.log"),
-                        args.plenoxd_args.split())
+        daemon = start_daemon(args.plenoxd, args.plenox, data_dir,
+                              os.path.join(tmp, "plenoxd.log"), args.plenoxd_args.split())
         rows = []
         slam_rows = []
         try:
@@ -444,7 +371,7 @@ def main():
                 tag = "s%d_%dc_%s_%s" % (i, clients, "map" if mapping else "idle", encoding)
                 load = None
                 if mapping:
-                    load = MappingLoad(args, daemon, dataset, tmp)
+                    load = mapping_load(args, daemon, dataset)
                     time.sleep(3.0)  # the first keyframes are on the daemon and the job runs
                 wall0 = time.monotonic()
                 try:
@@ -463,12 +390,12 @@ def main():
                     "lost": sum(r[0]["lost"] for r in results),
                     "ate": ate(args, results[0][1], dataset),
                     "wall": wall,
-                    "map_jobs": load.jobs_finished if load else None,
+                    "map_jobs": load.jobs if load else None,
                 })
                 rows.append(row)
                 if load is not None:
                     notes.append("%s: %d mapping jobs completed during the %.0f s window"
-                                 % (tag, load.jobs_finished, wall))
+                                 % (tag, load.jobs, wall))
                 log("%s: %.1f fps, round trip p50 %.1f ms p99 %.1f ms"
                     % (tag, rows[-1]["fps"], rows[-1]["rt_p50"], rows[-1]["rt_p99"]))
         finally:

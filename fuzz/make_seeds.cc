@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -21,6 +22,7 @@
 #include "core/datasets/dataset.h"
 #include "core/formats/calibration_file.h"
 #include "core/formats/map_file.h"
+#include "core/formats/map_keyframes_codec.h"
 #include "core/formats/pose_text.h"
 #include "core/formats/trajectory_file.h"
 #include "core/io/image_io.h"
@@ -145,6 +147,41 @@ void MapSeeds(const fs::path& dir, const fs::path& scratch) {
     const std::string file = saved(bricks);
     const size_t keep = 88 + std::string("fuzz seed").size() + 12 * bricks.size();
     Write(dir, name, std::string(1, '\1') + file.substr(0, keep));
+  }
+  // Format version 2, mode 1: header, brick table and the keyframe section (a keyframe with
+  // three keypoints and a 4x3 thumbnail, one without features); the harness pads the payload.
+  {
+    plx::PlenoxelMap map(0.02f);
+    map.source = "fuzz seed";
+    OrDie(map.grid.AllocateBricks({{0, 0, 0}}).status());
+    plx::MapFileState state;
+    state.map_version = 12;
+    auto features = std::make_shared<plx::FrameFeatures>();
+    for (int i = 0; i < 3; ++i) {
+      features->pixels.emplace_back(1.5f + i, 2.5f);
+      features->points.emplace_back(0.1f * i, 0.0f, 1.0f);
+      plx::OrbDescriptor d{};
+      d[0] = static_cast<uint8_t>(i);
+      features->descriptors.push_back(d);
+    }
+    features->thumbnail_width = 4;
+    features->thumbnail_height = 3;
+    features->thumbnail.assign(12, 0.25f);
+    plx::MapKeyframe k;
+    k.timestamp = 1.5;
+    k.pose = Pose(1.0);
+    k.intrinsics = {6.0, 6.0, 4.0, 3.0, kWidth, kHeight};
+    k.features = features;
+    state.keyframes.push_back(k);
+    k.features = nullptr;
+    state.keyframes.push_back(k);
+    const std::string path = (scratch / "seed_v2.plx").string();
+    OrDie(plx::SaveMap(map, state, path));
+    const std::string file = ReadAll(path);
+    const size_t section = plx::EncodedMapKeyframeBytes(state.keyframes[0]) +
+                           plx::EncodedMapKeyframeBytes(state.keyframes[1]);
+    const size_t keep = 108 + std::string("fuzz seed").size() + 12 + section;
+    Write(dir, "keyframes_v2", std::string(1, '\1') + file.substr(0, keep));
   }
 }
 

@@ -10,7 +10,8 @@
 //     when the header's brick count N is small, a short file is padded with zero payload to the
 //     size N bricks need, and the correct CRC-64 trailer is appended. The seeds of this mode are
 //     SaveMap output with the payload and trailer cut off (fuzz/make_seeds.cc), a few hundred
-//     bytes instead of 57 KB per brick.
+//     bytes instead of 57 KB per brick; in format version 2 the keyframe section comes before
+//     the payload, so those seeds keep it and the fuzzer reaches its decoder.
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
@@ -25,9 +26,12 @@
 
 namespace {
 
-// The version-1 layout of map_file.h, restated here only to find the brick count.
+// The layout of map_file.h, restated here only to find the brick count and where the table
+// and the payload start.
+constexpr size_t kVersionOffset = 8;
 constexpr size_t kSourceLengthOffset = 76;
 constexpr size_t kHeaderBytesWithoutSource = 88;
+constexpr size_t kVersion2ExtraBytes = 20;  // map version, keyframe count, section size
 constexpr size_t kBytesPerBrick = 12 + 4 * 512 * (1 + 27);
 // Padding is written to disk on every run; more bricks would only slow the fuzzer down.
 constexpr uint64_t kMaxPaddedBricks = 8;
@@ -50,6 +54,13 @@ int32_t LoadI32(const std::string& bytes, size_t offset) {
   return static_cast<int32_t>(static_cast<uint32_t>(LoadLe(bytes, offset, 4)));
 }
 
+// The header's size as the version field and source length say (0 when too short to say).
+size_t HeaderBytes(const std::string& file) {
+  if (file.size() < kHeaderBytesWithoutSource) return 0;
+  const size_t extra = LoadLe(file, kVersionOffset, 4) >= 2 ? kVersion2ExtraBytes : 0;
+  return kHeaderBytesWithoutSource + LoadLe(file, kSourceLengthOffset, 4) + extra;
+}
+
 // An upper bound of the index entries LoadMap would allocate for `file` (0 when the header is
 // too short to say): the box of the header's index bounds and every brick of the table that
 // is present, plus the grid's growth margin.
@@ -63,7 +74,7 @@ int64_t IndexEntriesAfterLoading(const std::string& file) {
     hi[a] = lo[a] + dims - 1;
     empty = empty || dims <= 0;
   }
-  const size_t table = kHeaderBytesWithoutSource + LoadLe(file, kSourceLengthOffset, 4);
+  const size_t table = HeaderBytes(file);
   for (size_t at = table; at + 12 <= file.size() && at < table + 12 * kMaxPaddedBricks; at += 12) {
     for (int a = 0; a < 3; ++a) {
       const int64_t c = LoadI32(file, at + 4 * a);
@@ -85,11 +96,18 @@ int64_t IndexEntriesAfterLoading(const std::string& file) {
 std::string CompleteFile(std::string file) {
   if (file.size() >= kHeaderBytesWithoutSource) {
     const size_t source_bytes = LoadLe(file, kSourceLengthOffset, 4);
-    const size_t header_bytes = kHeaderBytesWithoutSource + source_bytes;
+    const size_t header_bytes = HeaderBytes(file);
     if (source_bytes <= plx::kMaxMapSourceBytes && file.size() >= header_bytes) {
-      const uint64_t bricks = LoadLe(file, header_bytes - 8, 8);
-      const size_t needed = header_bytes + bricks * kBytesPerBrick;
-      if (bricks <= kMaxPaddedBricks && file.size() < needed) file.resize(needed, '\0');
+      const size_t count_at = kHeaderBytesWithoutSource + source_bytes - 8;
+      const uint64_t bricks = LoadLe(file, count_at, 8);
+      // Version 2: the keyframe section (before the payload) is the input's own.
+      const uint64_t section =
+          header_bytes > kHeaderBytesWithoutSource + source_bytes ? LoadLe(file, count_at + 20, 8)
+                                                                  : 0;
+      if (bricks <= kMaxPaddedBricks && section <= file.size()) {
+        const size_t needed = header_bytes + bricks * kBytesPerBrick + section;
+        if (file.size() < needed) file.resize(needed, '\0');
+      }
     }
   }
   const uint64_t crc = plx::Crc64Of(file.data(), file.size());
@@ -109,22 +127,34 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   plx::fuzz::WriteFileOrDie(path, file);
 
   const absl::StatusOr<plx::MapFileInfo> info = plx::ReadMapInfo(path);
-  absl::StatusOr<std::unique_ptr<plx::PlenoxelMap>> map = plx::LoadMap(path);
+  absl::StatusOr<plx::LoadedMapFile> map = plx::LoadMapFile(path);
   if (!map.ok()) return 0;
-  // LoadMap validates everything ReadMapInfo does, and more.
-  PLX_FUZZ_CHECK(info.ok(), "LoadMap accepted a file ReadMapInfo refused");
-  PLX_FUZZ_CHECK((*map)->grid.num_bricks() == info->bricks, "brick count");
+  // LoadMapFile validates everything ReadMapInfo does, and more.
+  PLX_FUZZ_CHECK(info.ok(), "LoadMapFile accepted a file ReadMapInfo refused");
+  PLX_FUZZ_CHECK(map->map->grid.num_bricks() == info->bricks, "brick count");
+  PLX_FUZZ_CHECK(static_cast<int64_t>(map->state.keyframes.size()) == info->keyframes,
+                 "keyframe count");
 
   // A map that loads must save, and load again the same (the daemon saves what it loaded; a
   // save it cannot read back would lose the map at the next restart).
   const std::string again = plx::fuzz::ScratchPath("again.plx");
-  const absl::Status saved = plx::SaveMap(**map, again);
+  const absl::Status saved = plx::SaveMap(*map->map, map->state, again);
   PLX_FUZZ_CHECK(saved.ok(), saved.ToString());
-  // Only the brick table is kept, so two grids are never held at once.
-  const std::vector<plx::BrickCoord> bricks = (*map)->grid.brick_coords();
-  map->reset();
-  absl::StatusOr<std::unique_ptr<plx::PlenoxelMap>> reloaded = plx::LoadMap(again);
+  // Only the brick table and the state are kept, so two grids are never held at once.
+  const std::vector<plx::BrickCoord> bricks = map->map->grid.brick_coords();
+  const plx::MapFileState state = std::move(map->state);
+  map->map.reset();
+  absl::StatusOr<plx::LoadedMapFile> reloaded = plx::LoadMapFile(again);
   PLX_FUZZ_CHECK(reloaded.ok(), reloaded.status().ToString());
-  PLX_FUZZ_CHECK((*reloaded)->grid.brick_coords() == bricks, "brick table after a round trip");
+  PLX_FUZZ_CHECK(reloaded->map->grid.brick_coords() == bricks, "brick table after a round trip");
+  PLX_FUZZ_CHECK(reloaded->state.map_version == state.map_version, "map version");
+  PLX_FUZZ_CHECK(reloaded->state.keyframes.size() == state.keyframes.size(), "keyframes");
+  for (size_t i = 0; i < state.keyframes.size(); ++i) {
+    const plx::MapKeyframe& a = state.keyframes[i];
+    const plx::MapKeyframe& b = reloaded->state.keyframes[i];
+    PLX_FUZZ_CHECK((a.features == nullptr) == (b.features == nullptr), "features flag");
+    PLX_FUZZ_CHECK(a.features == nullptr || a.features->descriptors == b.features->descriptors,
+                   "descriptors after a round trip");
+  }
   return 0;
 }

@@ -15,6 +15,7 @@ const char* MeshFieldSetOnPoints(const pb::ExportRequest& request) {
   if (request.max_triangles() != 0) return "max_triangles";
   if (request.keep_unobserved()) return "keep_unobserved";
   if (request.mesh_color() != 0) return "mesh_color";
+  if (request.lod_triangles() != 0) return "lod_triangles";
   return nullptr;
 }
 
@@ -31,6 +32,11 @@ absl::StatusOr<MeshOptions> MeshOptionsFromProto(const pb::ExportRequest& reques
     return absl::InvalidArgumentError(absl::StrCat("max_triangles: at most ",
                                                    kDefaultMaxMeshTriangles, " (0 = that), got ",
                                                    request.max_triangles()));
+  }
+  if (request.lod_triangles() > static_cast<uint64_t>(kMaxLodTriangles)) {
+    return absl::InvalidArgumentError(absl::StrCat("lod_triangles: at most ", kMaxLodTriangles,
+                                                   " (0 = the full mesh), got ",
+                                                   request.lod_triangles()));
   }
   // Above the triangle limit the filter could not keep anything anyway.
   if (request.min_component_triangles() > static_cast<uint64_t>(kDefaultMaxMeshTriangles)) {
@@ -55,7 +61,7 @@ absl::StatusOr<MeshOptions> MeshOptionsFromProto(const pb::ExportRequest& reques
 absl::StatusOr<ExportSpec> ExportSpecFromProto(const pb::ExportRequest& request) {
   if (!pb::ExportFormat_IsValid(request.format())) {
     return absl::InvalidArgumentError(
-        absl::StrCat("format: unknown value ", request.format(), " (POINTS or MESH)"));
+        absl::StrCat("format: unknown value ", request.format(), " (POINTS, MESH or MESH_GLB)"));
   }
   // Exactly 0 means the default; a negative or non-finite value is a client's mistake, not a
   // request for the default.
@@ -70,15 +76,19 @@ absl::StatusOr<ExportSpec> ExportSpecFromProto(const pb::ExportRequest& request)
                      "), got ", request.iso_level()));
   }
   ExportSpec spec;
-  spec.mesh = request.format() == pb::EXPORT_FORMAT_MESH;
+  spec.mesh = request.format() != pb::EXPORT_FORMAT_POINTS;
   if (spec.mesh) {
     absl::StatusOr<MeshOptions> mesh_options = MeshOptionsFromProto(request);
     if (!mesh_options.ok()) return mesh_options.status();
     spec.mesh_options = *mesh_options;
+    spec.mesh_format = request.format() == pb::EXPORT_FORMAT_MESH_GLB ? MeshFileFormat::kGlb
+                                                                       : MeshFileFormat::kPly;
+    spec.lod_triangles = static_cast<int64_t>(request.lod_triangles());
     return spec;
   }
   if (const char* mesh_field = MeshFieldSetOnPoints(request); mesh_field != nullptr) {
-    return absl::InvalidArgumentError(absl::StrCat(mesh_field, ": applies to format MESH only"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(mesh_field, ": applies to formats MESH and MESH_GLB only"));
   }
   if (request.min_density() > 0) spec.min_density = request.min_density();
   return spec;
@@ -92,7 +102,8 @@ pb::ExportRequest ExportSpecToProto(const ExportSpec& spec) {
     return request;
   }
   const MeshOptions& o = spec.mesh_options;
-  request.set_format(pb::EXPORT_FORMAT_MESH);
+  request.set_format(spec.mesh_format == MeshFileFormat::kGlb ? pb::EXPORT_FORMAT_MESH_GLB
+                                                              : pb::EXPORT_FORMAT_MESH);
   request.set_iso_level(o.iso_level);
   request.set_min_component_triangles(static_cast<uint64_t>(o.min_component_triangles));
   request.set_max_triangles(static_cast<uint64_t>(o.max_triangles));
@@ -100,6 +111,7 @@ pb::ExportRequest ExportSpecToProto(const ExportSpec& spec) {
   request.set_mesh_color(o.color_mode == MeshColorMode::kViewAlongNormal
                              ? pb::MESH_COLOR_ALONG_NORMAL
                              : pb::MESH_COLOR_DC);
+  request.set_lod_triangles(static_cast<uint64_t>(spec.lod_triangles));
   return request;
 }
 

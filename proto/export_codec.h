@@ -1,5 +1,6 @@
-// plenoxd.v1 ExportRequest <-> core/export's ExportSpec: which PLY file of a map a client asks
-// for (points or mesh, and their options). The daemon reads it, the CLI writes it.
+// plenoxd.v1 ExportRequest <-> core/export's ExportSpec: which file of a map a client asks for
+// (PLY points, or a mesh as PLY or binary glTF, its options and level of detail). The daemon
+// reads it, the CLI writes it.
 #pragma once
 
 #include "absl/status/statusor.h"
@@ -12,8 +13,10 @@ namespace plx {
 // max_triangles means kDefaultExportMinDensity, kDefaultMeshIsoLevel or kDefaultMaxMeshTriangles.
 // INVALID_ARGUMENT naming the field: an unknown format or mesh_color (proto3 enums are open, an
 // unknown number must not become the default), a min_density or iso_level that is negative or
-// not finite, a field of the other format set, max_triangles or min_component_triangles over
-// kDefaultMaxMeshTriangles, or mesh options that ValidateMeshOptions refuses. The map name is
+// not finite, a field of the other format set (a mesh field, lod_triangles included, on
+// POINTS; min_density on a mesh), max_triangles or min_component_triangles over
+// kDefaultMaxMeshTriangles, lod_triangles over kMaxLodTriangles, or mesh options that
+// ValidateMeshOptions refuses. The map name is
 // not read here (the caller checks it).
 absl::StatusOr<ExportSpec> ExportSpecFromProto(const pb::ExportRequest& request);
 

@@ -21,6 +21,10 @@ packages=(cmake ninja-build g++ pkg-config ccache
           libssl-dev
           # Loop closure: the pose graph is solved with Ceres (core/slam/pose_graph.h).
           libceres-dev
+          # Meshes as binary glTF (tinygltf; nlohmann's JSON reads a GLB's JSON chunk back) and
+          # their levels of detail (meshoptimizer): core/formats/glb_mesh.h,
+          # core/mesh/mesh_simplify.h.
+          libtinygltf-dev nlohmann-json3-dev libmeshoptimizer-dev
           # The web viewer (plenoxd --viewer, plenox view) runs on Debian's three.js; its
           # browser test loads the page in headless Chromium (WebGL on SwiftShader).
           libjs-three chromium)

@@ -192,6 +192,16 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   d->state_.config.backend = BackendKindText(options.backend);
   d->state_.config.cuda_built = BuiltWithCuda();
   d->service_ = std::make_unique<PlenoxdService>(&d->state_);
+  if (options.snapshot_interval > absl::ZeroDuration() && !options.data_dir.empty()) {
+    // Background work by nature: its thread yields the CPU to tracking like the mapping
+    // worker's (nice is best effort, as there).
+    d->snapshot_worker_ = std::make_unique<DeviceWorker>(
+        nullptr, DeviceDescription{"snapshot", "io", "snapshot", WorkerRole::kAll,
+                                   std::clamp(options.mapping_nice, 0, 19)});
+    d->snapshots_ = std::make_unique<SnapshotScheduler>(
+        d->maps_.get(), d->snapshot_worker_.get(), d->metrics_registry_.get(),
+        options.snapshot_interval);
+  }
 
   grpc::EnableDefaultHealthCheckService(true);
   std::shared_ptr<grpc::ServerCredentials> credentials;
@@ -248,7 +258,10 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
             {"auth", options.auth_token.empty() ? "off" : "bearer"},
             {"tls", options.tls_cert_pem.empty() ? "off" : "on"},
             {"metrics_port", std::to_string(d->metrics_port())},
-            {"viewer", options.viewer ? "on" : "off"}});
+            {"viewer", options.viewer ? "on" : "off"},
+            {"snapshot_s", d->snapshots_ != nullptr
+                               ? absl::StrCat(absl::ToDoubleSeconds(options.snapshot_interval))
+                               : "off"}});
   return d;
 }
 
@@ -259,6 +272,10 @@ std::string Daemon::RenderMetrics() const {
   g.queue_depth = workers_->total_queue_depth();
   g.jobs_running = jobs_->running();
   g.serving = !state_.draining.load();
+  g.unsaved_maps = static_cast<int64_t>(maps_->DirtyNames().size());
+  const absl::Time oldest = maps_->OldestUnsavedChange();
+  g.unsaved_s =
+      oldest == absl::InfiniteFuture() ? 0.0 : absl::ToDoubleSeconds(absl::Now() - oldest);
   for (const std::shared_ptr<SlamJob>& job : slam_jobs_->Running()) {
     const SlamJobStatus s = job->Status();
     ++g.slam_jobs;
@@ -282,6 +299,9 @@ absl::Status Daemon::Drain(absl::Duration grace) {
   if (drained_) return absl::OkStatus();
   drained_ = true;
   LogEvent("info", "draining", {{"grace_s", absl::StrCat(absl::ToDoubleSeconds(grace))}});
+  // No new snapshots: the drain saves every dirty map itself (below). One being written goes
+  // on; the snapshot worker is stopped (and waited for) before that save.
+  if (snapshots_ != nullptr) snapshots_->Stop();
   // Running calls get `grace` to finish; then gRPC cancels them, and they say so
   // (CancelledCallStatus).
   const absl::Time deadline = absl::Now() + grace;
@@ -303,6 +323,7 @@ absl::Status Daemon::Drain(absl::Duration grace) {
   }
   workers_->StopAll();
   io_->Stop();
+  if (snapshot_worker_ != nullptr) snapshot_worker_->Stop();
   // Every dirty map is tried; each one that could not be saved gets its own line.
   const std::vector<UnsavedMap> unsaved = maps_->SaveDirty();
   std::vector<std::string> names;

@@ -13,10 +13,12 @@
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
 #include "app/make_backend.h"
+#include "core/formats/snapshot_policy.h"
 #include "server/daemon_state.h"
 #include "server/metrics.h"
 #include "server/plenoxd_service.h"
 #include "server/slam_job.h"
+#include "server/snapshot_scheduler.h"
 #include "web/three_js.h"
 
 // The HTTP side (web/): defined in daemon.cc's includes, so the daemon's users do not compile
@@ -32,6 +34,10 @@ namespace plx::server {
 struct DaemonOptions {
   std::string listen = "127.0.0.1:50051";  // host:port; port 0 picks a free one
   std::string data_dir;                    // maps are loaded from and saved to here
+  // Maps with unsaved changes are saved in the background once their oldest unsaved change is
+  // this old (server/snapshot_scheduler.h; needs data_dir). Zero: only SaveMap and the drain
+  // save.
+  absl::Duration snapshot_interval = absl::Seconds(kDefaultSnapshotSeconds);
   std::string auth_token;                  // empty: no authentication
   std::string tls_cert_pem, tls_key_pem;   // both empty: plaintext
   int metrics_port = -1;                   // < 0: off; 0: a free port
@@ -97,6 +103,10 @@ class Daemon {
   std::unique_ptr<DeviceWorker> io_;  // file I/O: a DeviceWorker without a backend
   std::unique_ptr<JobRegistry> jobs_;
   std::unique_ptr<Metrics> metrics_registry_;
+  // Snapshots: their worker (one save at a time, at --mapping-nice), and the timer that posts
+  // to it, destroyed first.
+  std::unique_ptr<DeviceWorker> snapshot_worker_;
+  std::unique_ptr<SnapshotScheduler> snapshots_;
   DaemonState state_;
   // Destroyed before the state and the workers it uses (a job detaches from its worker).
   std::unique_ptr<SlamJobs> slam_jobs_;

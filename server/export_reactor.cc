@@ -40,14 +40,15 @@ ExportReactor::ExportReactor(DaemonState* state, grpc::CallbackServerContext* co
                 Done(queued);
                 return;
               }
-              // A call cancelled while exporting stops within a few bricks.
-              absl::StatusOr<MapPly> ply = ExportMapPly(spec, *map.map, *backend,
-                                                        [this] { return context_->IsCancelled(); });
-              if (!ply.ok()) {
-                Done(ply.status());
+              // A call cancelled while exporting stops within a few bricks (or after the
+              // simplification step that runs).
+              absl::StatusOr<MapExport> file = ExportMap(
+                  spec, *map.map, *backend, [this] { return context_->IsCancelled(); });
+              if (!file.ok()) {
+                Done(file.status());
                 return;
               }
-              bytes_ = std::move(ply->bytes);
+              bytes_ = std::move(file->bytes);
               WriteNext();
             });
 }

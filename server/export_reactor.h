@@ -1,5 +1,6 @@
-// The Export stream (server-streaming): the PLY a map's published version makes (points, or a
-// mesh by marching cubes), built on a device worker at background priority from the version
+// The Export stream (server-streaming): the file a map's published version makes (PLY points,
+// or a mesh by marching cubes as PLY or binary glTF, at a level of detail when asked;
+// core/export/map_export.h), built on a device worker at background priority from the version
 // that was newest when the call came, then written in chunks of kChunkBytes. Each chunk says
 // its offset and whether it is the last, so a client can tell a complete file from a cut one.
 #pragma once

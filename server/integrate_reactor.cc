@@ -8,6 +8,7 @@
 #include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
 #include "core/geometry/world_pose.h"
+#include "core/mapping/map_keyframes_of.h"
 #include "proto/integrate_codec.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
@@ -93,6 +94,7 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
     if (!session_) {
       PLX_ASSIGN_OR_RETURN(const MapVersion latest, state_->maps->Latest(map_name_));
       PLX_ASSIGN_OR_RETURN(session_, MappingSession::Create(options_, backend, latest.map));
+      base_keyframes_ = latest.keyframes;
     }
     for (CheckedFrame& f : frames) {
       absl::StatusOr<DecodedFrame> decoded = DecodeCheckedFrame(std::move(f));
@@ -108,7 +110,8 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
     state_->metrics->keyframes_integrated += step.keyframes_integrated;
     if (step.published) {
       PLX_ASSIGN_OR_RETURN(version_, state_->maps->Publish(map_name_, step.published,
-                                                           step.keyframes_in_published));
+                                                           step.keyframes_in_published,
+                                                           PublishedKeyframes()));
     }
     return absl::OkStatus();
   });
@@ -153,6 +156,15 @@ void IntegrateReactor::RunTask(Backend* backend, bool cancelled) {
                          absl::StrFormat("%d keyframes integrated", integrated_));
   }
   if (!queue_.empty() || !open() || (session_ && session_->has_work())) ScheduleLocked();
+}
+
+std::shared_ptr<const MapKeyframes> IntegrateReactor::PublishedKeyframes() const {
+  auto keyframes = std::make_shared<MapKeyframes>();
+  if (base_keyframes_ != nullptr) *keyframes = *base_keyframes_;
+  MapKeyframes integrated = MapKeyframesOf(session_->keyframes());
+  keyframes->insert(keyframes->end(), std::make_move_iterator(integrated.begin()),
+                    std::make_move_iterator(integrated.end()));
+  return keyframes;
 }
 
 void IntegrateReactor::OnFailedLocked(const absl::Status& status) {

@@ -16,6 +16,7 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "core/formats/map_keyframe.h"
 #include "core/mapping/mapping_session.h"
 #include "plenoxd/v1/plenoxd.grpc.pb.h"
 #include "server/daemon_state.h"
@@ -46,6 +47,9 @@ class IntegrateReactor final
   absl::Status HandleFirstMessage();
   void ScheduleLocked();  // posts one mapping task if none is queued
   void RunTask(Backend* backend, bool cancelled);
+  // Every keyframe of the version being published, as its file keeps them: the map's before
+  // the stream, then the session's (mapping task).
+  std::shared_ptr<const MapKeyframes> PublishedKeyframes() const;
 
   // Guarded by mutex_.
   bool lease_ = false;
@@ -57,6 +61,7 @@ class IntegrateReactor final
   std::string job_id_;
   MappingSessionOptions options_;
   std::unique_ptr<MappingSession> session_;
+  std::shared_ptr<const MapKeyframes> base_keyframes_;  // the map's when the session started
   int integrated_ = 0;
   uint64_t version_ = 0;
   std::chrono::steady_clock::time_point start_;

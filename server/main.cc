@@ -37,11 +37,18 @@ int main(int argc, char** argv) {
                      "The plenoxd daemon: RGB-D maps as Plenoxel radiance fields over gRPC.\n"
                      "Clients: `plenox --server HOST:PORT ...`, clients/python. Stops cleanly on\n"
                      "SIGTERM (drains, saves dirty maps to --data-dir, exits 0; 1 when a map\n"
-                     "could not be saved, 3 when --drain-seconds + --stop-grace-seconds passed).\n"
-                     "Limits and their defaults: docs/LIMITS.md.");
+                     "could not be saved, 3 when --drain-seconds + --stop-grace-seconds passed);\n"
+                     "between, maps with unsaved changes are saved in the background\n"
+                     "(--snapshot-seconds). Limits and their defaults: docs/LIMITS.md.");
   flags.Add("listen", "HOST:PORT", "address to serve on (0.0.0.0:PORT for all interfaces)",
             "127.0.0.1:50051")
       .Add("data-dir", "DIR", "maps are loaded from and saved to DIR/<name>.plx")
+      .Add("snapshot-seconds", "S",
+           "save a map with unsaved changes in the background once its oldest unsaved change "
+           "is S seconds old (a published version, copy-on-write, written atomically; with "
+           "--data-dir): kill -9 loses at most about S seconds of mapping; 0 = only SaveMap "
+           "and SIGTERM save",
+           "30")
       .Add("auth-token-file", "F",
            "require 'authorization: Bearer <token>' with the token in F (printable ASCII, no "
            "spaces; ends trimmed; keep F private, a readable F is logged)")
@@ -58,8 +65,8 @@ int main(int argc, char** argv) {
                  "(maps, SLAM cameras, renders; with --auth-token-file open "
                  "/viewer/#token=<token>)")
       .Add("viewer-three-dir", "DIR",
-           "where three.js is (Debian's libjs-three: three.min.js and "
-           "examples/js/controls/OrbitControls.js)",
+           "where three.js is (Debian's libjs-three: three.min.js, "
+           "examples/js/controls/OrbitControls.js and examples/js/loaders/GLTFLoader.js)",
            plx::web::kDefaultThreeJsDir)
       .Add("max-maps", "N", "maps held at once", "16")
       .Add("max-map-mb", "MB",
@@ -122,15 +129,17 @@ int main(int argc, char** argv) {
   auto threads = flags.GetInt("threads", 0, 4096);
   auto mapping_nice = flags.GetInt("mapping-nice", 0, 19);
   auto drain = flags.GetDouble("drain-seconds", 0.0, 3600.0);
+  auto snapshot = flags.GetDouble("snapshot-seconds", 0.0, 86400.0);
   auto stop_grace = flags.GetDouble("stop-grace-seconds", 0.0, 86400.0);
   for (const absl::Status& s : {metrics_port.status(), max_maps.status(), max_map_mb.status(),
                                 max_streams.status(), max_message_mb.status(),
                                 max_frame_pixels.status(), max_render_pixels.status(),
                                 threads.status(), mapping_nice.status(), drain.status(),
-                                stop_grace.status()}) {
+                                stop_grace.status(), snapshot.status()}) {
     if (!s.ok()) return Usage(s);
   }
   options.metrics_port = *metrics_port;
+  options.snapshot_interval = absl::Seconds(*snapshot);
   if (options.viewer && options.metrics_port < 0) {
     return Usage(absl::InvalidArgumentError(
         "--viewer is served on the HTTP port: give --metrics-port too (0 = a free port)"));

@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <filesystem>
 
@@ -46,8 +47,8 @@ absl::StatusOr<const MapStore::Entry*> MapStore::Find(const std::string& name) c
 MapStatus MapStore::StatusOf(const std::string& name, const Entry& e) const {
   MapStatus s = MapStatusOf(name, *e.map);
   s.version = e.version;
-  s.keyframes = e.keyframes;
-  s.dirty = e.dirty;
+  s.keyframes = e.keyframe_count;
+  s.dirty = e.save.dirty();
   s.mapping = e.mapping;
   return s;
 }
@@ -94,6 +95,7 @@ absl::StatusOr<MapStatus> MapStore::Create(const std::string& name, float voxel_
   auto empty = std::make_shared<PlenoxelMap>(voxel_size);
   empty->grid.set_occupancy_fresh();  // empty: nothing to refresh
   e.map = std::move(empty);
+  e.save.MarkClean(e.version);  // nothing worth saving yet
   auto [it, inserted] = maps_.emplace(name, std::move(e));
   return StatusOf(name, it->second);
 }
@@ -114,10 +116,26 @@ std::vector<MapStatus> MapStore::List() const {
 absl::StatusOr<MapVersion> MapStore::Latest(const std::string& name) const {
   std::lock_guard<std::mutex> lock(mutex_);
   PLX_ASSIGN_OR_RETURN(const Entry* e, Find(name));
-  return MapVersion{e->map, e->version};
+  return MapVersion{e->map, e->version, e->keyframes};
+}
+
+MapStore::FileTurn::FileTurn(MapStore* store, std::string name)
+    : store_(store), name_(std::move(name)) {
+  std::unique_lock<std::mutex> lock(store_->mutex_);
+  store_->file_free_.wait(lock, [&] { return store_->file_busy_.count(name_) == 0; });
+  store_->file_busy_.insert(name_);
+}
+
+MapStore::FileTurn::~FileTurn() {
+  std::lock_guard<std::mutex> lock(store_->mutex_);
+  store_->file_busy_.erase(name_);
+  store_->file_free_.notify_all();
 }
 
 absl::Status MapStore::Delete(const std::string& name) {
+  PLX_RETURN_IF_ERROR(Info(name).status());
+  // A save running now would rename its file into place after the unlink below.
+  const FileTurn turn(this, name);
   std::lock_guard<std::mutex> lock(mutex_);
   PLX_ASSIGN_OR_RETURN(Entry * e, Find(name));
   if (e->mapping) {
@@ -139,34 +157,113 @@ absl::Status MapStore::Delete(const std::string& name) {
   return absl::OkStatus();
 }
 
-absl::StatusOr<MapStatus> MapStore::Save(const std::string& name) {
+absl::StatusOr<SaveOutcome> MapStore::SaveNewest(const std::string& name, bool snapshot,
+                                                  absl::Duration retry_after) {
   if (options_.data_dir.empty()) {
     return absl::FailedPreconditionError("the daemon has no --data-dir to save maps to");
   }
-  std::shared_ptr<const PlenoxelMap> map;
-  uint64_t version = 0;
+  SaveOutcome out;
+  // A snapshot of a map deleted since it was claimed has nothing to do.
+  const auto gone = [&](const absl::Status& not_found) -> absl::StatusOr<SaveOutcome> {
+    if (!snapshot) return not_found;
+    out.skipped = true;
+    return out;
+  };
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    PLX_ASSIGN_OR_RETURN(Entry * e, Find(name));
-    map = e->map;
-    version = e->version;
+    absl::StatusOr<Entry*> e = Find(name);
+    if (!e.ok()) return gone(e.status());
+    if (snapshot) (*e)->snapshot_claimed = false;
   }
+  const FileTurn turn(this, name);
+  std::shared_ptr<const PlenoxelMap> map;
+  MapFileState state;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    absl::StatusOr<Entry*> e = Find(name);  // it may have gone while we waited
+    if (!e.ok()) return gone(e.status());
+    // A snapshot that a save (or another snapshot) made pointless writes nothing.
+    if (snapshot && !(*e)->save.dirty()) {
+      out.skipped = true;
+      return out;
+    }
+    // The newest version, taken now (not when the save was asked for): a version nobody
+    // writes, so the file is written while mapping and readers carry on.
+    map = (*e)->map;
+    state.map_version = (*e)->version;
+    state.keyframes = *(*e)->keyframes;  // shared features: copies of pointers and poses
+    (*e)->save.SaveStarted((*e)->version, absl::Now());
+  }
+  out.version = state.map_version;
+  out.keyframes = static_cast<int>(state.keyframes.size());
   if (options_.test_only_save_delay > absl::ZeroDuration()) {
     absl::SleepFor(options_.test_only_save_delay);
   }
-  // Written outside the lock: readers and the mapping job carry on.
+  const absl::Time start = absl::Now();
   const std::string path = PathOf(name);
-  PLX_RETURN_IF_ERROR(SaveMap(*map, path));
+  const absl::Status saved = SaveMap(*map, state, path);
+  out.took = absl::Now() - start;
+  if (saved.ok()) {
+    std::error_code ec;
+    out.bytes = static_cast<int64_t>(std::filesystem::file_size(path, ec));
+  }
   std::lock_guard<std::mutex> lock(mutex_);
   absl::StatusOr<Entry*> e = Find(name);
   if (!e.ok()) {
     // Deleted while it was written: the file must not bring it back at the next start.
-    ::unlink(path.c_str());
-    return e.status();
+    if (saved.ok()) ::unlink(path.c_str());
+    return gone(e.status());
   }
+  (*e)->save.SaveFinished(saved.ok(), absl::Now(), retry_after);
+  PLX_RETURN_IF_ERROR(saved);
   (*e)->file = path;
-  if ((*e)->version == version) (*e)->dirty = false;
-  return StatusOf(name, **e);
+  return out;
+}
+
+absl::StatusOr<MapStatus> MapStore::Save(const std::string& name) {
+  PLX_RETURN_IF_ERROR(SaveNewest(name, /*snapshot=*/false, absl::ZeroDuration()).status());
+  return Info(name);
+}
+
+absl::StatusOr<SaveOutcome> MapStore::Snapshot(const std::string& name,
+                                               absl::Duration retry_after) {
+  return SaveNewest(name, /*snapshot=*/true, retry_after);
+}
+
+void MapStore::ReleaseSnapshot(const std::string& name) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto it = maps_.find(name);
+  if (it != maps_.end()) it->second.snapshot_claimed = false;
+}
+
+std::vector<std::string> MapStore::ClaimDueSnapshots(absl::Duration interval, absl::Time now) {
+  std::vector<std::string> due;
+  if (options_.data_dir.empty()) return due;
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (auto& [name, e] : maps_) {
+    if (e.snapshot_claimed || file_busy_.count(name) != 0) continue;
+    if (!e.save.SnapshotDue(interval, now)) continue;
+    e.snapshot_claimed = true;
+    due.push_back(name);
+  }
+  return due;
+}
+
+absl::Time MapStore::NextSnapshotDue(absl::Duration interval) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  absl::Time next = absl::InfiniteFuture();
+  if (options_.data_dir.empty()) return next;
+  for (const auto& [name, e] : maps_) {
+    if (!e.snapshot_claimed) next = std::min(next, e.save.NextSnapshotDue(interval));
+  }
+  return next;
+}
+
+absl::Time MapStore::OldestUnsavedChange() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  absl::Time oldest = absl::InfiniteFuture();
+  for (const auto& [name, e] : maps_) oldest = std::min(oldest, e.save.unsaved_since());
+  return oldest;
 }
 
 absl::StatusOr<MapStatus> MapStore::Load(const std::string& name) {
@@ -186,12 +283,16 @@ absl::StatusOr<MapStatus> MapStore::Load(const std::string& name) {
           absl::StrCat("the daemon holds its maximum of ", options_.max_maps, " maps"));
     }
   }
+  // A save of this map running now would replace the file under the read.
+  const FileTurn turn(this, name);
   LoadMapOptions load;
   load.max_memory_bytes = options_.max_map_bytes;
-  PLX_ASSIGN_OR_RETURN(std::unique_ptr<PlenoxelMap> loaded, LoadMap(path, load));
+  PLX_ASSIGN_OR_RETURN(LoadedMapFile loaded, LoadMapFile(path, load));
   // Published maps are shared by concurrent readers, so they must not need a lazy refresh.
-  PLX_RETURN_IF_ERROR(RefreshOccupancyIfStale(*MakeCpuBackend(), *loaded));
-  std::shared_ptr<const PlenoxelMap> map(std::move(loaded));
+  PLX_RETURN_IF_ERROR(RefreshOccupancyIfStale(*MakeCpuBackend(), *loaded.map));
+  std::shared_ptr<const PlenoxelMap> map(std::move(loaded.map));
+  auto keyframes = std::make_shared<const MapKeyframes>(std::move(loaded.state.keyframes));
+  const uint64_t saved_version = loaded.state.map_version;
   std::lock_guard<std::mutex> lock(mutex_);
   auto it = maps_.find(name);
   if (it == maps_.end()) {
@@ -205,9 +306,15 @@ absl::StatusOr<MapStatus> MapStore::Load(const std::string& name) {
         absl::StrCat("map \"", name, "\" is being mapped; it cannot be replaced now"));
   }
   Entry& e = it->second;
+  const bool fresh = e.map == nullptr;
   e.map = std::move(map);
-  e.version += 1;
-  e.dirty = false;
+  // The number it was saved at, so a restarted daemon goes on counting from it; a map replaced
+  // in place still moves forward (readers compare numbers). Version-1 files have none.
+  e.version = fresh ? (saved_version > 0 ? saved_version : 2)
+                    : std::max(e.version + 1, saved_version);
+  e.keyframe_count = static_cast<int>(keyframes->size());
+  e.keyframes = std::move(keyframes);
+  e.save.MarkClean(e.version);
   e.file = path;
   return StatusOf(name, e);
 }
@@ -226,7 +333,7 @@ std::vector<std::string> MapStore::DirtyNames() const {
   std::lock_guard<std::mutex> lock(mutex_);
   std::vector<std::string> names;
   for (const auto& [name, e] : maps_) {
-    if (e.dirty) names.push_back(name);
+    if (e.save.dirty()) names.push_back(name);
   }
   return names;
 }
@@ -258,7 +365,8 @@ void MapStore::EndMapping(const std::string& name) {
 
 absl::StatusOr<uint64_t> MapStore::Publish(const std::string& name,
                                            std::shared_ptr<const PlenoxelMap> map,
-                                           int keyframes_added) {
+                                           int keyframes_added,
+                                           std::shared_ptr<const MapKeyframes> keyframes) {
   if (map->grid.occupancy_stale()) {
     return absl::InternalError("a map version was published with stale occupancy");
   }
@@ -272,8 +380,13 @@ absl::StatusOr<uint64_t> MapStore::Publish(const std::string& name,
   PLX_ASSIGN_OR_RETURN(Entry * e, Find(name));
   e->map = std::move(map);
   e->version += 1;
-  e->keyframes += keyframes_added;
-  e->dirty = true;
+  if (keyframes != nullptr) {
+    e->keyframe_count = static_cast<int>(keyframes->size());
+    e->keyframes = std::move(keyframes);
+  } else {
+    e->keyframe_count += keyframes_added;
+  }
+  e->save.Changed(e->version, absl::Now());
   return e->version;
 }
 

@@ -139,6 +139,19 @@ std::string Metrics::Render(const Gauges& g) const {
                 g.slam_last_solve_s);
   slam_latency_.Render("plenoxd_slam_latency_seconds",
                        "Time from receiving a Slam frame to its update.", &out);
+  // Persistence: what is not on disk yet, and the background saves that bound it.
+  gauge("plenoxd_unsaved_maps", "Maps with changes not saved to the data dir.", g.unsaved_maps);
+  seconds_gauge("plenoxd_unsaved_seconds",
+                "Age of the oldest change not saved to the data dir (0: every map is saved).",
+                g.unsaved_s);
+  counter("plenoxd_snapshots_total", "Maps saved in the background (--snapshot-seconds).",
+          snapshots.load());
+  counter("plenoxd_snapshot_bytes_total", "Bytes of map files written by snapshots.",
+          snapshot_bytes.load());
+  counter("plenoxd_snapshot_failures_total", "Snapshots that failed (logged; tried again).",
+          snapshot_failures.load());
+  snapshot_latency_.Render("plenoxd_snapshot_seconds", "Time a snapshot took to write its file.",
+                           &out);
   // The HTTP port's bounds at work: a rising refusal or timeout count is a client (or an
   // attacker) the port turned away.
   gauge("plenoxd_http_connections_open", "Open connections to the metrics/viewer port.",

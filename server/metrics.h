@@ -38,11 +38,17 @@ class Metrics {
   std::atomic<int64_t> active_streams{0};
   std::atomic<int64_t> slam_streams{0};    // Slam streams on a job
   std::atomic<int64_t> slam_keyframes{0};  // keyframes Slam streams handed to their jobs
+  // Background saves (server/snapshot_scheduler.h): maps written, bytes written, failures.
+  std::atomic<int64_t> snapshots{0};
+  std::atomic<int64_t> snapshot_bytes{0};
+  std::atomic<int64_t> snapshot_failures{0};
 
   void ObserveTrackLatency(double seconds) { track_latency_.Observe(seconds); }
   // A frame a Slam stream processed: `state` is its SlamState's index (OK, DEGRADED, LOST,
   // RELOCALISED, WAITING), `seconds` from receiving it to its update.
   void ObserveSlamFrame(int state, double seconds);
+  // How long a snapshot took to write its file.
+  void ObserveSnapshot(double seconds) { snapshot_latency_.Observe(seconds); }
 
   // Gauges supplied by the daemon at scrape time.
   struct Gauges {
@@ -62,6 +68,10 @@ class Metrics {
     int64_t slam_loops_rejected = 0;
     int64_t slam_corrections = 0;
     double slam_last_solve_s = 0.0;
+    // Maps with changes not on disk, and the age of the oldest such change: what a crash would
+    // lose now (bounded by --snapshot-seconds plus a save).
+    int64_t unsaved_maps = 0;
+    double unsaved_s = 0.0;
     // One per compute worker: plenoxd_device_info{device, kind, name} 1 and, per device, the
     // tasks queued or running and the streams bound to it.
     struct Device {
@@ -80,6 +90,7 @@ class Metrics {
  private:
   LatencyHistogram track_latency_;
   LatencyHistogram slam_latency_;
+  LatencyHistogram snapshot_latency_;
   std::array<std::atomic<int64_t>, 5> slam_frames_{};  // by state
 };
 

@@ -31,21 +31,35 @@ SlamJob::SlamJob(DaemonState* state, std::string map, std::string job_id,
   status_.job_id = job_id_;
   std::shared_ptr<const PlenoxelMap> base;
   int64_t base_version = 0;
+  std::shared_ptr<const MapKeyframes> saved;
   if (absl::StatusOr<MapVersion> latest = state_->maps->Latest(map_); latest.ok()) {
     base = latest->map;  // the coordinator extends it only when it has content
     base_version = static_cast<int64_t>(latest->version);
+    saved = latest->keyframes;
   }
+  const bool extends = base != nullptr && base->grid.num_bricks() > 0;
   // The store numbers the versions (the map's one counter): readers, the streams' updates and
-  // the trackers' views all see its numbers.
-  SlamPublisher publish_to_store = [state = state_, name = map_](
-                                       std::shared_ptr<const PlenoxelMap> version,
-                                       int new_keyframes) -> absl::StatusOr<int64_t> {
+  // the trackers' views all see its numbers. Each version goes with its keyframes, so a save
+  // of it (a snapshot, SaveMap, the drain) has what SLAM needs to continue the map.
+  SlamPublisher publish_to_store = [this](std::shared_ptr<const PlenoxelMap> version,
+                                          int new_keyframes) -> absl::StatusOr<int64_t> {
     PLX_ASSIGN_OR_RETURN(const uint64_t number,
-                         state->maps->Publish(name, std::move(version), new_keyframes));
+                         state_->maps->Publish(map_, std::move(version), new_keyframes,
+                                               coordinator_->published_keyframes()));
     return static_cast<int64_t>(number);
   };
   coordinator_ = std::make_unique<SlamCoordinator>(split.mapper, split.gate, std::move(base),
                                                    base_version, std::move(publish_to_store));
+  // The map's keyframes (its file's after a restart, or the previous job's): cameras
+  // relocalise against them and keyframe counts go on from them.
+  if (extends && saved != nullptr && !saved->empty()) {
+    if (absl::Status seeded = coordinator_->SeedSavedKeyframes(*saved); seeded.ok()) {
+      saved_keyframes_ = static_cast<int>(saved->size());
+    } else {
+      LogEvent("warning", "saved_keyframes_not_used",
+               {{"map", map_}, {"job", job_id_}, {"reason", std::string(seeded.message())}});
+    }
+  }
 }
 
 SlamJob::~SlamJob() {
@@ -258,7 +272,9 @@ absl::StatusOr<std::shared_ptr<SlamJob>> SlamJobs::Join(const std::string& map,
   auto job = std::make_shared<SlamJob>(state_, map, job_id, split, trajectory);
   job->Enter(std::move(listener));  // a new job has not ended
   jobs_[map] = job;
-  LogEvent("info", "slam_mapping_started", {{"map", map}, {"job", job_id}});
+  LogEvent("info", "slam_mapping_started",
+           {{"map", map}, {"job", job_id},
+            {"saved_keyframes", absl::StrCat(job->saved_keyframes())}});
   return job;
 }
 

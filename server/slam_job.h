@@ -92,6 +92,9 @@ class SlamJob : public std::enable_shared_from_this<SlamJob> {
     return coordinator_->MayCameraProceed(max_pending_keyframes, segment, needs_version);
   }
   SlamJobStatus Status() const;
+  // Keyframes the map had when the job started (its file's, or an earlier job's), seeded into
+  // the coordinator (SlamCoordinator::SeedSavedKeyframes).
+  int saved_keyframes() const { return saved_keyframes_; }
 
   // Stream membership (SlamJobs does the joining). A stream that leaves is still notified (it
   // may wait for the job's end); Leave is idempotent per listener. Enter refuses (false) a job
@@ -117,6 +120,7 @@ class SlamJob : public std::enable_shared_from_this<SlamJob> {
   // The map's rules; its base is the store's map when the job started (the map to extend,
   // when it has content) and its publisher the store. Stepped by the job's task only.
   std::unique_ptr<SlamCoordinator> coordinator_;
+  int saved_keyframes_ = 0;
 
   // Keyframes integrated, loop edges and corrections when trajectory_ last got the keyframes'
   // poses (task).

@@ -19,10 +19,12 @@
 
 namespace plx::web {
 
-// The newest `entries` results of a build per (map name, version); an older version of a map is
-// dropped when a newer one is built. Thread-safe; builds run one at a time (the mutex is held
-// while one runs, so a second page asking for the same version waits and then finds it). A
-// failed build is not kept: the next request tries again.
+// The newest `entries` results of a build per (map name, variant, version); the results for an
+// older version of a map (any variant) are dropped when a newer one is built. A variant tells
+// results of one version apart (the mesh's levels of detail: its triangle budget); most caches
+// have one (0). Thread-safe; builds run one at a time (the mutex is held while one runs, so a
+// second page asking for the same version waits and then finds it). A failed build is not kept:
+// the next request tries again.
 template <typename T>
 class MapVersionCache {
  public:
@@ -32,9 +34,14 @@ class MapVersionCache {
 
   absl::StatusOr<std::shared_ptr<const T>> Get(const std::string& name, uint64_t version,
                                                const Build& build) {
+    return Get(name, 0, version, build);
+  }
+
+  absl::StatusOr<std::shared_ptr<const T>> Get(const std::string& name, int64_t variant,
+                                               uint64_t version, const Build& build) {
     std::lock_guard<std::mutex> lock(mutex_);
     for (auto it = entries_.begin(); it != entries_.end(); ++it) {
-      if (it->name == name && it->version == version) {
+      if (it->name == name && it->variant == variant && it->version == version) {
         entries_.splice(entries_.begin(), entries_, it);
         return entries_.front().value;
       }
@@ -42,9 +49,9 @@ class MapVersionCache {
     absl::StatusOr<T> built = build();
     if (!built.ok()) return built.status();
     auto value = std::make_shared<const T>(std::move(*built));
-    // An older version of the same map is no use any more.
-    entries_.remove_if([&](const Entry& e) { return e.name == name; });
-    entries_.push_front(Entry{name, version, value});
+    // Another version of the same map is no use any more.
+    entries_.remove_if([&](const Entry& e) { return e.name == name && e.version != version; });
+    entries_.push_front(Entry{name, variant, version, value});
     while (entries_.size() > max_entries_) entries_.pop_back();
     return value;
   }
@@ -57,6 +64,7 @@ class MapVersionCache {
  private:
   struct Entry {
     std::string name;
+    int64_t variant = 0;
     uint64_t version = 0;
     std::shared_ptr<const T> value;
   };

@@ -19,7 +19,8 @@ absl::StatusOr<std::string> ReadSmallFile(const std::filesystem::path& path) {
     return absl::NotFoundError(absl::StrCat(
         "three.js not found: ", path.string(),
         " is missing (install Debian's libjs-three: apt-get install libjs-three; or give the "
-        "folder that holds three.min.js and examples/js/controls/OrbitControls.js)"));
+        "folder that holds three.min.js, examples/js/controls/OrbitControls.js and "
+        "examples/js/loaders/GLTFLoader.js)"));
   }
   const std::uintmax_t size = std::filesystem::file_size(path, ec);
   if (ec || size > kMaxFileBytes) {
@@ -44,8 +45,12 @@ absl::StatusOr<ThreeJsFiles> LoadThreeJs(const std::string& dir) {
   absl::StatusOr<std::string> controls =
       ReadSmallFile(root / "examples" / "js" / "controls" / "OrbitControls.js");
   if (!controls.ok()) return controls.status();
+  absl::StatusOr<std::string> gltf =
+      ReadSmallFile(root / "examples" / "js" / "loaders" / "GLTFLoader.js");
+  if (!gltf.ok()) return gltf.status();
   files.three = std::move(*three);
   files.orbit_controls = std::move(*controls);
+  files.gltf_loader = std::move(*gltf);
   return files;
 }
 

@@ -4,8 +4,10 @@
 
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
+#include "core/formats/glb_mesh.h"
 #include "core/formats/ply_mesh.h"
 #include "core/mesh/iso_surface.h"
+#include "core/mesh/mesh_simplify.h"
 
 namespace plx::web {
 
@@ -44,6 +46,35 @@ absl::StatusOr<ViewerMesh> BuildViewerMesh(ViewerSource& source, const ViewerMap
   out.ply = std::move(ply->bytes);
   out.vertices = ply->vertices;
   out.faces = ply->faces;
+  out.mesh = std::move(*mesh);
+  return out;
+}
+
+absl::StatusOr<ViewerGlb> BuildViewerGlb(const ViewerMesh& mesh, const std::string& source_text,
+                                         int64_t triangles) {
+  ViewerGlb out;
+  if (!mesh.too_large.empty()) {
+    out.too_large = mesh.too_large;
+    return out;
+  }
+  out.full_faces = mesh.mesh.num_triangles();
+  GlbMeshMetadata metadata;
+  metadata.source = source_text;
+  metadata.full_triangles = out.full_faces;
+  absl::StatusOr<GlbMesh> glb = absl::UnknownError("not written");
+  if (triangles <= 0 || triangles >= out.full_faces) {
+    glb = EncodeGlbMesh(mesh.mesh, metadata);
+  } else {
+    absl::StatusOr<SimplifiedMesh> lod = SimplifyMesh(mesh.mesh, triangles);
+    if (!lod.ok()) return lod.status();
+    out.lod_error_m = lod->error_m;
+    metadata.lod_error_m = lod->error_m;
+    glb = EncodeGlbMesh(lod->mesh, metadata);
+  }
+  if (!glb.ok()) return glb.status();
+  out.glb = std::move(glb->bytes);
+  out.vertices = glb->vertices;
+  out.faces = glb->faces;
   return out;
 }
 
@@ -52,6 +83,20 @@ absl::StatusOr<std::shared_ptr<const ViewerMesh>> MeshCache::Get(ViewerSource& s
                                                                  const ViewerMap& map) {
   return cache_.Get(name, map.version, [&] {
     return BuildViewerMesh(source, map, max_triangles_, timeout_);
+  });
+}
+
+absl::StatusOr<std::shared_ptr<const ViewerGlb>> MeshCache::GetGlb(ViewerSource& source,
+                                                                   const std::string& name,
+                                                                   const ViewerMap& map,
+                                                                   int64_t triangles) {
+  absl::StatusOr<std::shared_ptr<const ViewerMesh>> mesh = Get(source, name, map);
+  if (!mesh.ok()) return mesh.status();
+  // Every budget that keeps the whole mesh is the same file: one entry (variant 0).
+  const int64_t full = (*mesh)->mesh.num_triangles();
+  const int64_t variant = triangles <= 0 || triangles >= full ? 0 : triangles;
+  return glb_cache_.Get(name, variant, map.version, [&] {
+    return BuildViewerGlb(**mesh, map.map->source, variant);
   });
 }
 

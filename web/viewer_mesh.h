@@ -1,13 +1,15 @@
 // The viewer's meshes: marching cubes on a published map version (core/mesh/iso_surface.h, with
 // the Export RPC's defaults), run on the source's compute device, capped at a triangle count,
-// and cached per (map, version) like the point clouds (web/point_cloud_cache.h).
+// and cached per (map, version) like the point clouds (web/point_cloud_cache.h); and the same
+// mesh as binary glTF at a level of detail a client names (core/mesh/mesh_simplify.h,
+// core/formats/glb_mesh.h), cached per (map, version, triangle budget).
 //
-// The answer is the binary PLY mesh core/formats/ply_mesh.h writes (float x y z nx ny nz, uchar
-// red green blue; `list uchar int` faces): about 27 bytes a vertex and 13 a face, so within ~10%
-// of the smallest form that carries normals and colours, and it is the very file Export MESH
-// gives: the page's PLY reader already reads faces, a saved answer opens in MeshLab or Blender,
-// and tests check it with the same reader as the export's. A compact custom form would save a
-// little and add a second format to keep in step.
+// The PLY answer is the binary PLY mesh core/formats/ply_mesh.h writes (float x y z nx ny nz,
+// uchar red green blue; `list uchar int` faces): about 27 bytes a vertex and 13 a face, so
+// within ~10% of the smallest form that carries normals and colours, and it is the very file
+// Export MESH gives: a saved answer opens in MeshLab or Blender, and tests check it with the
+// same reader as the export's. The GLB answer is the file Export MESH_GLB gives with
+// lod_triangles: what the page loads through three.js's GLTFLoader, and what a headset fetches.
 #pragma once
 
 #include <cstdint>
@@ -16,6 +18,7 @@
 
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
+#include "core/geometry/triangle_mesh.h"
 #include "web/point_cloud_cache.h"
 #include "web/viewer_source.h"
 
@@ -25,9 +28,20 @@ struct ViewerMesh {
   std::string ply;        // empty when too_large
   int64_t vertices = 0;
   int64_t faces = 0;
+  TriangleMesh mesh;      // what `ply` holds: the source of the levels of detail
   // Set when the map's mesh has more triangles than the cap: the message the page shows (HTTP
   // 413). Kept in the cache like a mesh, so asking again for that version costs nothing.
   std::string too_large;
+};
+
+// A level of detail as binary glTF.
+struct ViewerGlb {
+  std::string glb;        // empty when too_large
+  int64_t vertices = 0;
+  int64_t faces = 0;
+  int64_t full_faces = 0;    // the full mesh's
+  double lod_error_m = 0.0;  // SimplifiedMesh::error_m; 0 for the full mesh
+  std::string too_large;     // the full mesh's refusal, as ViewerMesh's
 };
 
 // Builds `map`'s mesh on `source`'s device within `timeout`. A mesh over `max_triangles` is a
@@ -36,23 +50,40 @@ struct ViewerMesh {
 absl::StatusOr<ViewerMesh> BuildViewerMesh(ViewerSource& source, const ViewerMap& map,
                                            int64_t max_triangles, absl::Duration timeout);
 
+// `mesh` as GLB, simplified to at most `triangles` (0 or at least the mesh's count: the full
+// mesh). Runs on the calling thread (meshoptimizer on the CPU).
+absl::StatusOr<ViewerGlb> BuildViewerGlb(const ViewerMesh& mesh, const std::string& source_text,
+                                         int64_t triangles);
+
 class MeshCache {
  public:
   // Meshes kept: each is at most about max_triangles * 27 bytes of PLY (faces and, at most, half
-  // as many vertices), 27 MB at the viewer's default cap.
+  // as many vertices) and as much again for the mesh it was written from, 54 MB at the viewer's
+  // default cap.
   static constexpr size_t kEntries = 2;
+  // Levels of detail kept (a page and a headset asking for different budgets): each at most
+  // about max_triangles * 26 bytes of GLB.
+  static constexpr size_t kGlbEntries = 2;
 
   MeshCache(int64_t max_triangles, absl::Duration timeout)
-      : max_triangles_(max_triangles), timeout_(timeout), cache_(kEntries) {}
+      : max_triangles_(max_triangles), timeout_(timeout), cache_(kEntries),
+        glb_cache_(kGlbEntries) {}
 
   absl::StatusOr<std::shared_ptr<const ViewerMesh>> Get(ViewerSource& source,
                                                         const std::string& name,
                                                         const ViewerMap& map);
 
+  // The mesh of Get as GLB at `triangles` (0: the full mesh). Budgets at or above the mesh's
+  // count share one entry (the full mesh).
+  absl::StatusOr<std::shared_ptr<const ViewerGlb>> GetGlb(ViewerSource& source,
+                                                          const std::string& name,
+                                                          const ViewerMap& map, int64_t triangles);
+
  private:
   const int64_t max_triangles_;
   const absl::Duration timeout_;
   MapVersionCache<ViewerMesh> cache_;
+  MapVersionCache<ViewerGlb> glb_cache_;
 };
 
 }  // namespace plx::web

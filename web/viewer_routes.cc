@@ -1,9 +1,12 @@
 #include "web/viewer_routes.h"
 
+#include <algorithm>
 #include <utility>
 
 #include "absl/strings/match.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "core/formats/glb_mesh.h"
 #include "core/render/render_view.h"
 #include "web/json_writer.h"
 #include "web/viewer_assets.h"
@@ -120,6 +123,10 @@ HttpResponse Viewer::Handle(const HttpRequest& request) {
     return HttpResponse{200, "text/javascript; charset=utf-8", {}, {kRevalidate},
                         UnownedBody(three_.orbit_controls)};
   }
+  if (path == "/viewer/three/GLTFLoader.js") {
+    return HttpResponse{200, "text/javascript; charset=utf-8", {}, {kRevalidate},
+                        UnownedBody(three_.gltf_loader)};
+  }
   if (absl::StartsWith(path, "/viewer/api/")) return Api(request);
   return JsonError(404, absl::StrCat("no such page: ", path.substr(0, 128)));
 }
@@ -128,8 +135,8 @@ HttpResponse Viewer::Api(const HttpRequest& request) {
   if (absl::Status s = CheckToken(request); !s.ok()) return ErrorResponse(s);
   const std::string endpoint = request.path.substr(sizeof("/viewer/api/") - 1);
   if (endpoint == "maps") return Maps();
-  if (endpoint != "points" && endpoint != "mesh" && endpoint != "trajectory" &&
-      endpoint != "render") {
+  if (endpoint != "points" && endpoint != "mesh" && endpoint != "mesh.glb" &&
+      endpoint != "trajectory" && endpoint != "render") {
     return JsonError(404, absl::StrCat("no such endpoint: ", request.path.substr(0, 128)));
   }
   const std::string* map = request.Param("map");
@@ -137,6 +144,7 @@ HttpResponse Viewer::Api(const HttpRequest& request) {
   if (map->size() > kMaxMapNameBytes) return JsonError(400, "map: name too long");
   if (endpoint == "points") return Points(*map);
   if (endpoint == "mesh") return Mesh(*map);
+  if (endpoint == "mesh.glb") return MeshGlb(request, *map);
   if (endpoint == "trajectory") return Trajectory(*map);
   return Render(request, *map);
 }
@@ -199,6 +207,52 @@ HttpResponse Viewer::Mesh(const std::string& map) {
                        {"X-Vertices", absl::StrCat((*mesh)->vertices)},
                        {"X-Faces", absl::StrCat((*mesh)->faces)}},
                       std::shared_ptr<const std::string>(*mesh, &(*mesh)->ply)};
+}
+
+namespace {
+
+// The level of detail a mesh.glb request asks for: `triangles`, absent or 0 for the full mesh.
+absl::StatusOr<int64_t> ParseTriangleBudget(const HttpRequest& request, int64_t max_triangles) {
+  const std::string* value = request.Param("triangles");
+  if (value == nullptr || value->empty()) return 0;
+  int64_t triangles = -1;
+  // Digits only (no sign, space or exponent), and few enough that the value cannot overflow.
+  const bool digits =
+      value->size() <= 12 &&
+      std::all_of(value->begin(), value->end(), [](char c) { return c >= '0' && c <= '9'; });
+  if (!digits || !absl::SimpleAtoi(*value, &triangles) || triangles > max_triangles) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "triangles: expected a whole number from 0 to ", max_triangles,
+        " (the viewer's mesh limit; 0 = the full mesh), got \"", value->substr(0, 32), "\""));
+  }
+  return triangles;
+}
+
+}  // namespace
+
+HttpResponse Viewer::MeshGlb(const HttpRequest& request, const std::string& map) {
+  absl::StatusOr<int64_t> triangles = ParseTriangleBudget(request, options_.max_mesh_triangles);
+  if (!triangles.ok()) return ErrorResponse(triangles.status());
+  absl::StatusOr<ViewerMap> latest = source_->Latest(map);
+  if (!latest.ok()) return ErrorResponse(latest.status());
+  absl::StatusOr<std::shared_ptr<const ViewerGlb>> glb =
+      meshes_.GetGlb(*source_, map, *latest, *triangles);
+  if (!glb.ok()) return ErrorResponse(glb.status());
+  if (!(*glb)->too_large.empty()) {
+    HttpResponse r = JsonError(413, (*glb)->too_large);
+    r.headers.push_back({"X-Map-Version", absl::StrCat(latest->version)});
+    return r;
+  }
+  return HttpResponse{200,
+                      kGlbMediaType,
+                      {},
+                      {kNoStore,
+                       {"X-Map-Version", absl::StrCat(latest->version)},
+                       {"X-Vertices", absl::StrCat((*glb)->vertices)},
+                       {"X-Faces", absl::StrCat((*glb)->faces)},
+                       {"X-Full-Faces", absl::StrCat((*glb)->full_faces)},
+                       {"X-Lod-Error-M", absl::StrCat((*glb)->lod_error_m)}},
+                      std::shared_ptr<const std::string>(*glb, &(*glb)->glb)};
 }
 
 HttpResponse Viewer::Trajectory(const std::string& map) {

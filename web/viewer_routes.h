@@ -2,11 +2,17 @@
 //
 //   /viewer, /viewer/             the page (index.html); /viewer/viewer.js, /viewer/viewer.css
 //   /viewer/three/three.min.js    Debian's three.js (web/three_js.h), and
-//   /viewer/three/OrbitControls.js  its orbit controls
+//   /viewer/three/OrbitControls.js  its orbit controls, /viewer/three/GLTFLoader.js its glTF
+//                                 loader
 //   /viewer/api/maps              JSON: the title and the maps (name, version, bricks, ...)
 //   /viewer/api/points?map=M      PLY: M's coloured surface points (web/point_cloud_cache.h)
 //   /viewer/api/mesh?map=M        PLY: M's triangle mesh with normals and colours
 //                                 (web/viewer_mesh.h); 413 over max_mesh_triangles
+//   /viewer/api/mesh.glb?map=M[&triangles=N]
+//                                 binary glTF (model/gltf-binary): the same mesh simplified to
+//                                 at most N triangles (a level of detail; absent or 0: the full
+//                                 mesh); N is 0..max_mesh_triangles (else 400); headers
+//                                 X-Faces, X-Full-Faces, X-Lod-Error-M (metres)
 //   /viewer/api/trajectory?map=M  JSON: M's SLAM cameras (pose, path) and keyframes
 //   /viewer/api/render?map=M&...  PNG: M rendered from a pose (web/viewer_render.h)
 //
@@ -71,6 +77,7 @@ class Viewer {
   HttpResponse Maps();
   HttpResponse Points(const std::string& map);
   HttpResponse Mesh(const std::string& map);
+  HttpResponse MeshGlb(const HttpRequest& request, const std::string& map);
   HttpResponse Trajectory(const std::string& map);
   HttpResponse Render(const HttpRequest& request, const std::string& map);
   absl::Status CheckToken(const HttpRequest& request) const;

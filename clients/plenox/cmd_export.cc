@@ -1,10 +1,12 @@
-// plenox export (in-process): a map file as a PLY point cloud or, with --mesh, a triangle mesh.
+// plenox export (in-process): a map file as a PLY point cloud or, with --mesh, a triangle mesh
+// as PLY or binary glTF, optionally simplified to a triangle budget.
 #include <iostream>
 
 #include "absl/strings/str_format.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "clients/plenox/export_flags.h"
+#include "clients/plenox/export_output.h"
 #include "core/export/map_export.h"
 #include "core/io/atomic_write.h"
 
@@ -17,11 +19,13 @@ constexpr char kCommand[] = "export";
 
 int RunExport(const std::vector<std::string>& args) {
   FlagSet flags("plenox export",
-                "Writes a map as binary little-endian PLY: a coloured point cloud (one point per\n"
+                "Writes a map as a coloured point cloud (binary little-endian PLY, one point per\n"
                 "voxel vertex on the surface of the density field) or, with --mesh, a triangle\n"
-                "mesh (marching cubes on the density field; vertex x y z nx ny nz red green\n"
-                "blue, face vertex_indices) that MeshLab, Open3D and Blender open. With --server,\n"
-                "--map names a map on the daemon instead of a file.");
+                "mesh (marching cubes on the density field) with normals and vertex colours: as\n"
+                "PLY (MeshLab, Open3D, Blender) or, with --format glb or an --out ending in\n"
+                ".glb, as binary glTF 2.0 (headsets, three.js, Blender, game engines).\n"
+                "--lod-triangles N simplifies the mesh to at most N triangles (a level of\n"
+                "detail). With --server, --map names a map on the daemon instead of a file.");
   flags.Add("map", "MAP", "map file", std::nullopt, true);
   AddExportFlags(flags);
   AddBackendFlags(flags);
@@ -37,28 +41,28 @@ int RunExport(const std::vector<std::string>& args) {
   std::unique_ptr<PlenoxelMap> map = LoadMapOrReport(kCommand, flags, *backend, &exit_code);
   if (!map) return exit_code;
 
-  absl::StatusOr<MapPly> ply = ExportMapPly(*spec, *map, *backend);
-  if (!ply.ok()) return ReportError(kCommand, ply.status());
-  const std::string& bytes = ply->bytes;
-  if (absl::Status s = WriteFileAtomically(out, bytes, "export"); !s.ok()) {
+  absl::StatusOr<MapExport> file = ExportMap(*spec, *map, *backend);
+  if (!file.ok()) return ReportError(kCommand, file.status());
+  if (absl::Status s = WriteFileAtomically(out, file->bytes, "export"); !s.ok()) {
     return ReportError(kCommand, s);
   }
+  ExportSummary summary;
+  summary.mesh = spec->mesh;
+  summary.format = spec->mesh_format;
+  summary.vertices = file->vertices;
+  summary.faces = file->faces;
+  summary.full_faces = file->full_faces;
+  summary.lod_error_m = file->lod_error_m;
+  summary.bytes = file->bytes.size();
   if (flags.GetSwitch("json")) {
     JsonObject json;
     json.Add("map", flags.GetString("map")).Add("out", out);
-    if (spec->mesh) {
-      json.Add("vertices", ply->vertices).Add("faces", ply->faces);
-    } else {
-      json.Add("points", ply->vertices);
-    }
-    json.Add("bytes", static_cast<int64_t>(bytes.size())).Add("backend", backend->name());
+    AddExportSummaryJson(json, summary);
+    json.Add("backend", backend->name());
     std::cout << json.str() << "\n";
-  } else if (spec->mesh) {
-    std::cout << absl::StrFormat("wrote %s (%d vertices, %d triangles, %.1f MB)\n", out,
-                                 ply->vertices, ply->faces, bytes.size() / 1e6);
   } else {
-    std::cout << absl::StrFormat("wrote %s (%d points, %.1f MB)\n", out, ply->vertices,
-                                 bytes.size() / 1e6);
+    std::cout << absl::StrFormat("wrote %s (%s, %.1f MB)\n", out, ExportSummaryText(summary),
+                                 summary.bytes / 1e6);
   }
   return kExitOk;
 }

@@ -28,7 +28,7 @@ constexpr char kCommand[] = "slam";
 // map, the refined keyframe poses), and how this process maps.
 void AddInProcessSlamFlags(FlagSet& flags) {
   const SlamOptions d = DefaultSlamOptions();
-  flags.Add("map-out", "MAP.plx", "write the final map here", "")
+  flags.Add("map-out", "MAP.plx", "write the final map here, with its keyframes", "")
       .Add("keyframes-out", "F", "write the keyframes' (refined) poses here (TUM format)", "")
       .Add("loops-out", "F",
            "write the map's loop edges here, one per line: the two keyframes' timestamps, the "
@@ -208,7 +208,11 @@ int RunSlam(const std::vector<std::string>& args) {
     }
   }
   if (!flags.GetString("map-out").empty() && result->map != nullptr) {
-    if (absl::Status s = SaveMap(*result->map, flags.GetString("map-out")); !s.ok()) {
+    // With its keyframes: plenoxd loading the file continues the map (relocalisation by their
+    // features, keyframe counts); no version number (the in-process session's are its own).
+    MapFileState state;
+    if (result->map_keyframes != nullptr) state.keyframes = *result->map_keyframes;
+    if (absl::Status s = SaveMap(*result->map, state, flags.GetString("map-out")); !s.ok()) {
       return ReportError(kCommand, s);
     }
   }

@@ -90,7 +90,8 @@ int RunView(const std::vector<std::string>& raw_args) {
                          "authentication)", "127.0.0.1")
       .Add("port", "PORT", "port to serve on (0 = a free one, printed)", "0")
       .Add("viewer-three-dir", "DIR",
-           "where three.js is (three.min.js and examples/js/controls/OrbitControls.js)",
+           "where three.js is (three.min.js, examples/js/controls/OrbitControls.js and "
+           "examples/js/loaders/GLTFLoader.js)",
            web::kDefaultThreeJsDir);
   AddBackendFlags(flags);
   // `plenox view MAP.plx`: the map may come first, as a plain argument.

@@ -2,14 +2,60 @@
 
 #include <string>
 
+#include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "core/formats/ply_export.h"
 
 namespace plx::cli {
+namespace {
+
+// The format --out's extension names ("ply", "glb"), or "" for any other name.
+std::string FormatOfName(const std::string& out) {
+  const std::string lower = absl::AsciiStrToLower(out);
+  if (absl::EndsWith(lower, ".glb")) return "glb";
+  if (absl::EndsWith(lower, ".ply")) return "ply";
+  return "";
+}
+
+// The mesh's format: --format when given (ply or glb), else the one --out names, else ply.
+absl::StatusOr<MeshFileFormat> MeshFormatFromFlags(const FlagSet& flags, bool mesh) {
+  const std::string out = flags.GetString("out");
+  const std::string named = FormatOfName(out);
+  std::string format = named.empty() ? "ply" : named;
+  if (flags.IsSet("format")) {
+    format = flags.GetString("format");
+    if (format != "ply" && format != "glb") {
+      return absl::InvalidArgumentError(
+          absl::StrCat("--format: expected ply or glb, got \"", format, "\""));
+    }
+    if (!named.empty() && named != format) {
+      return absl::InvalidArgumentError(absl::StrCat("--format ", format, " but --out \"", out,
+                                                     "\" names a .", named, " file"));
+    }
+  }
+  if (!mesh && format == "glb") {
+    return absl::InvalidArgumentError(
+        flags.IsSet("format")
+            ? "--format glb applies to --mesh only (glTF holds the mesh, not points)"
+            : absl::StrCat("--out \"", out, "\" is a glTF file, which holds a mesh: add --mesh"));
+  }
+  return format == "glb" ? MeshFileFormat::kGlb : MeshFileFormat::kPly;
+}
+
+}  // namespace
 
 void AddExportFlags(FlagSet& flags) {
-  flags.Add("out", "FILE.ply", "PLY file to write", std::nullopt, true)
+  flags.Add("out", "FILE", "file to write: FILE.ply, or FILE.glb for a mesh as glTF",
+            std::nullopt, true)
       .AddSwitch("mesh", "write a triangle mesh (marching cubes) instead of points")
+      .Add("format", "ply|glb",
+           "mesh: binary PLY, or binary glTF 2.0 for headsets, three.js and Blender (default: "
+           "glb when --out ends in .glb, else ply)")
+      .Add("lod-triangles", "N",
+           absl::StrCat("mesh: a level of detail, simplified to at most N triangles (0 = the "
+                        "full mesh; at most ", kMaxLodTriangles, ")"),
+           "0")
       .Add("min-density", "D",
            absl::StrCat("points: where the density exceeds D (0 = the default, ",
                         kDefaultExportMinDensity, ")"),
@@ -20,7 +66,7 @@ void AddExportFlags(FlagSet& flags) {
            "0")
       .Add("min-component", "N", "mesh: drop connected pieces of fewer than N triangles", "0")
       .Add("max-triangles", "N",
-           absl::StrCat("mesh: fail rather than build more triangles (0 = ",
+           absl::StrCat("mesh: fail rather than build a full mesh of more triangles (0 = ",
                         kDefaultMaxMeshTriangles, ", also the most allowed)"),
            "0")
       .AddSwitch("keep-unobserved",
@@ -40,15 +86,20 @@ absl::StatusOr<ExportSpec> ExportSpecFromFlags(const FlagSet& flags) {
   if (!components.ok()) return components.status();
   absl::StatusOr<int> max_triangles = flags.GetInt("max-triangles", 0, kDefaultMaxMeshTriangles);
   if (!max_triangles.ok()) return max_triangles.status();
+  absl::StatusOr<int> lod_triangles = flags.GetInt("lod-triangles", 0, kMaxLodTriangles);
+  if (!lod_triangles.ok()) return lod_triangles.status();
   const std::string color = flags.GetString("mesh-color");
   if (color != "dc" && color != "normal") {
     return absl::InvalidArgumentError(
         absl::StrCat("--mesh-color: expected dc or normal, got \"", color, "\""));
   }
+  absl::StatusOr<MeshFileFormat> format = MeshFormatFromFlags(flags, spec.mesh);
+  if (!format.ok()) return format.status();
   if (!spec.mesh) {
     const char* mesh_flag = *iso != 0                    ? "--iso-level"
                             : *components != 0           ? "--min-component"
                             : *max_triangles != 0        ? "--max-triangles"
+                            : *lod_triangles != 0        ? "--lod-triangles"
                             : flags.GetSwitch("keep-unobserved") ? "--keep-unobserved"
                             : color != "dc"              ? "--mesh-color"
                                                          : nullptr;
@@ -67,6 +118,8 @@ absl::StatusOr<ExportSpec> ExportSpecFromFlags(const FlagSet& flags) {
   if (*max_triangles > 0) o.max_triangles = *max_triangles;
   o.keep_unobserved = flags.GetSwitch("keep-unobserved");
   o.color_mode = color == "normal" ? MeshColorMode::kViewAlongNormal : MeshColorMode::kDc;
+  spec.mesh_format = *format;
+  spec.lod_triangles = *lod_triangles;
   return spec;
 }
 

@@ -1,5 +1,6 @@
 // The flags of `plenox export`, shared by the in-process command (a map file) and the remote one
-// (a map on the daemon): point cloud by default, a triangle mesh with --mesh.
+// (a map on the daemon): point cloud by default, a triangle mesh with --mesh, as PLY or binary
+// glTF, optionally simplified to a triangle budget (a level of detail).
 #pragma once
 
 #include "absl/status/statusor.h"
@@ -8,12 +9,14 @@
 
 namespace plx::cli {
 
-// --out, --mesh, --min-density, --iso-level, --min-component, --max-triangles,
-// --keep-unobserved, --mesh-color.
+// --out, --mesh, --format, --lod-triangles, --min-density, --iso-level, --min-component,
+// --max-triangles, --keep-unobserved, --mesh-color.
 void AddExportFlags(FlagSet& flags);
 
-// The spec the flags ask for, a 0 (the flags' default) read as core's default.
-// InvalidArgument (a usage error) for a value out of range or a flag of the other format.
+// The spec the flags ask for, a 0 (the flags' default) read as core's default. The mesh's file
+// format is --format's, else glb when --out ends in .glb, else ply. InvalidArgument (a usage
+// error) for a value out of range, a flag of the other form (points or mesh), or a --format that
+// contradicts --out's .ply or .glb.
 absl::StatusOr<ExportSpec> ExportSpecFromFlags(const FlagSet& flags);
 
 }  // namespace plx::cli

@@ -1,5 +1,6 @@
-// plenox --server HOST:PORT export: a map on the daemon as a PLY point cloud or triangle mesh
-// (Export stream).
+// plenox --server HOST:PORT export: a map on the daemon as a PLY point cloud, or a triangle mesh
+// as PLY or binary glTF, optionally simplified to a triangle budget (Export stream).
+#include <functional>
 #include <iostream>
 #include <optional>
 
@@ -9,7 +10,9 @@
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "clients/plenox/export_flags.h"
+#include "clients/plenox/export_output.h"
 #include "clients/plenox/remote_client.h"
+#include "core/formats/glb_mesh.h"
 #include "core/io/atomic_write.h"
 #include "proto/export_codec.h"
 
@@ -33,26 +36,36 @@ int64_t ElementCount(const std::string& head, const std::string& element) {
 
 FlagSet RemoteExportFlags() {
   FlagSet flags("plenox export",
-                "With --server: writes map N on the daemon as binary little-endian PLY, a\n"
-                "coloured point cloud (one point per voxel vertex on the surface of the density\n"
-                "field) or, with --mesh, a triangle mesh built on the daemon's device. The file\n"
-                "appears only once it is complete.");
+                "With --server: writes map N on the daemon as a coloured point cloud (binary\n"
+                "little-endian PLY, one point per voxel vertex on the surface of the density\n"
+                "field) or, with --mesh, a triangle mesh built on the daemon's device, as PLY\n"
+                "or (--format glb, or an --out ending in .glb) binary glTF 2.0; --lod-triangles\n"
+                "N simplifies it to at most N triangles. The file appears only once it is\n"
+                "complete.");
   flags.Add("map", "N", "the map on the daemon", std::nullopt, true);
   AddExportFlags(flags);
   AddJsonAndQuietSwitches(flags);
   return flags;
 }
 
+// The most of a file's beginning kept for reading its counts: a PLY header or a GLB's header
+// and JSON chunk (about 2 kB plus the map's source text).
+constexpr size_t kHeadBytes = 64 * 1024;
+
 // What an Export stream delivered into `out`.
 struct ExportedFile {
-  std::string head;  // the first bytes, for the PLY header
+  std::string head;  // the first bytes, for the PLY header or the GLB's JSON chunk
   uint64_t bytes = 0;
 };
+
+// Checks a received file before it replaces `out` (counts what it holds into `summary`).
+using ExportCheck = std::function<absl::Status(const ExportedFile&)>;
 
 // Receives the chunks straight into a temporary next to `out` (large maps give hundreds of MB),
 // renamed over `out` only when the last chunk arrived and the call succeeded.
 absl::StatusOr<ExportedFile> ReceiveExport(RemoteClient& client, const pb::ExportRequest& request,
-                                           const std::string& out, ProgressLine& line) {
+                                           const std::string& out, const ExportCheck& check,
+                                           ProgressLine& line) {
   std::unique_ptr<grpc::ClientContext> context =
       client.NewContext(absl::InfiniteDuration(), request.map());
   std::unique_ptr<grpc::ClientReader<pb::ExportChunk>> stream =
@@ -79,8 +92,8 @@ absl::StatusOr<ExportedFile> ReceiveExport(RemoteClient& client, const pb::Expor
       context->TryCancel();
       continue;
     }
-    if (exported.head.size() < 4096) {
-      exported.head.append(chunk.data().substr(0, 4096 - exported.head.size()));
+    if (exported.head.size() < kHeadBytes) {
+      exported.head.append(chunk.data().substr(0, kHeadBytes - exported.head.size()));
     }
     exported.bytes += chunk.data().size();
     last = chunk.last();
@@ -92,6 +105,7 @@ absl::StatusOr<ExportedFile> ReceiveExport(RemoteClient& client, const pb::Expor
   if (problem.ok() && !last) {
     problem = absl::InternalError("the daemon ended the Export stream before the last chunk");
   }
+  if (problem.ok()) problem = check(exported);
   if (problem.ok()) problem = file->Finish();
   if (problem.ok()) problem = file->Commit();
   if (!problem.ok()) {
@@ -99,6 +113,40 @@ absl::StatusOr<ExportedFile> ReceiveExport(RemoteClient& client, const pb::Expor
     return problem;  // `file` removes its temporary
   }
   return exported;
+}
+
+// What the file holds, read from its beginning: the PLY header's counts, or the GLB's JSON
+// chunk (vertices, triangles, and what simplification did). A file of the wrong kind, or a
+// level of detail over its budget (a daemon older than lod_triangles sends the full mesh), is
+// refused before it replaces `out`.
+absl::Status CheckAndCount(const ExportSpec& spec, const ExportedFile& file,
+                           ExportSummary* summary) {
+  summary->bytes = file.bytes;
+  if (spec.mesh && spec.mesh_format == MeshFileFormat::kGlb) {
+    absl::StatusOr<GlbMeshInfo> info = ReadGlbMeshInfo(file.head);
+    if (!info.ok()) {
+      return absl::InternalError(absl::StrCat(
+          "the daemon's answer is not the glTF file asked for: ", info.status().message()));
+    }
+    summary->vertices = info->vertices;
+    summary->faces = info->triangles;
+    summary->full_faces = info->full_triangles > 0 ? info->full_triangles : info->triangles;
+    summary->lod_error_m = info->lod_error_m;
+  } else {
+    if (file.head.rfind("ply\n", 0) != 0) {
+      return absl::InternalError("the daemon's answer is not the PLY file asked for");
+    }
+    summary->vertices = ElementCount(file.head, "vertex");
+    summary->faces = spec.mesh ? ElementCount(file.head, "face") : 0;
+    summary->full_faces = summary->faces;  // a PLY does not say; the LOD check follows
+  }
+  if (spec.mesh && spec.lod_triangles > 0 && summary->faces > spec.lod_triangles) {
+    return absl::FailedPreconditionError(absl::StrFormat(
+        "the daemon sent %d triangles for a level of detail of at most %d: it does not know "
+        "lod_triangles (older than this client); nothing was written",
+        summary->faces, spec.lod_triangles));
+  }
+  return absl::OkStatus();
 }
 
 }  // namespace
@@ -118,13 +166,16 @@ int RunRemoteExport(const RemoteOptions& remote, const std::vector<std::string>&
   ProgressLine line(!flags.GetSwitch("quiet"));
   pb::ExportRequest request = ExportSpecToProto(*spec);
   request.set_map(map_name);
-  absl::StatusOr<ExportedFile> exported = ReceiveExport(*client, request, out, line);
+  ExportSummary summary;
+  summary.mesh = spec->mesh;
+  summary.format = spec->mesh_format;
+  const ExportCheck check = [&](const ExportedFile& file) {
+    return CheckAndCount(*spec, file, &summary);
+  };
+  absl::StatusOr<ExportedFile> exported = ReceiveExport(*client, request, out, check, line);
   if (!exported.ok()) return ReportError(kCommand, exported.status());
-  const int64_t points = ElementCount(exported->head, "vertex");
-  const int64_t faces = ElementCount(exported->head, "face");
   const double mb = exported->bytes / 1e6;
-  const std::string what = spec->mesh ? absl::StrFormat("%d vertices, %d triangles", points, faces)
-                                      : absl::StrFormat("%d points", points);
+  const std::string what = ExportSummaryText(summary);
   line.Finish(absl::StrFormat("exported \"%s\" from %s: %s, %.1f MB", map_name,
                               client->server(), what, mb));
   if (!flags.GetSwitch("json")) {
@@ -133,12 +184,7 @@ int RunRemoteExport(const RemoteOptions& remote, const std::vector<std::string>&
   }
   JsonObject json;
   json.Add("map", map_name).Add("server", client->server()).Add("out", out);
-  if (spec->mesh) {
-    json.Add("vertices", points).Add("faces", faces);
-  } else {
-    json.Add("points", points);
-  }
-  json.Add("bytes", static_cast<int64_t>(exported->bytes));
+  AddExportSummaryJson(json, summary);
   std::cout << json.str() << "\n";
   return kExitOk;
 }

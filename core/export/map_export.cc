@@ -2,22 +2,84 @@
 
 #include <utility>
 
+#include "absl/strings/str_cat.h"
+#include "core/formats/glb_mesh.h"
 #include "core/formats/ply_mesh.h"
+#include "core/mesh/mesh_simplify.h"
 
 namespace plx {
+namespace {
 
-absl::StatusOr<MapPly> ExportMapPly(const ExportSpec& spec, const PlenoxelMap& map,
+absl::StatusOr<MapExport> EncodeMesh(const ExportSpec& spec, const TriangleMesh& mesh,
+                                     const std::string& source, int64_t full_faces,
+                                     double lod_error_m) {
+  MapExport out;
+  out.full_faces = full_faces;
+  out.lod_error_m = lod_error_m;
+  if (spec.mesh_format == MeshFileFormat::kGlb) {
+    GlbMeshMetadata metadata;
+    metadata.source = source;
+    metadata.full_triangles = full_faces;
+    metadata.lod_error_m = lod_error_m;
+    absl::StatusOr<GlbMesh> glb = EncodeGlbMesh(mesh, metadata);
+    if (!glb.ok()) return glb.status();
+    out.bytes = std::move(glb->bytes);
+    out.vertices = glb->vertices;
+    out.faces = glb->faces;
+    return out;
+  }
+  absl::StatusOr<PlyMesh> ply = EncodePlyMesh(mesh, source);
+  if (!ply.ok()) return ply.status();
+  out.bytes = std::move(ply->bytes);
+  out.vertices = ply->vertices;
+  out.faces = ply->faces;
+  return out;
+}
+
+}  // namespace
+
+absl::Status ValidateExportSpec(const ExportSpec& spec) {
+  if (spec.lod_triangles < 0 || spec.lod_triangles > kMaxLodTriangles) {
+    return absl::InvalidArgumentError(absl::StrCat("lod_triangles: must be in [0, ",
+                                                   kMaxLodTriangles, "] (0 = the full mesh), got ",
+                                                   spec.lod_triangles));
+  }
+  if (spec.mesh_format != MeshFileFormat::kPly && spec.mesh_format != MeshFileFormat::kGlb) {
+    return absl::InvalidArgumentError("mesh_format: unknown");
+  }
+  if (!spec.mesh) {
+    if (spec.mesh_format != MeshFileFormat::kPly) {
+      return absl::InvalidArgumentError("mesh_format: glTF holds meshes only, not points");
+    }
+    if (spec.lod_triangles != 0) {
+      return absl::InvalidArgumentError("lod_triangles: applies to meshes only");
+    }
+    return absl::OkStatus();
+  }
+  return ValidateMeshOptions(spec.mesh_options);
+}
+
+absl::StatusOr<MapExport> ExportMap(const ExportSpec& spec, const PlenoxelMap& map,
                                     Backend& backend, const std::function<bool()>& cancelled) {
+  if (absl::Status s = ValidateExportSpec(spec); !s.ok()) return s;
   if (!spec.mesh) {
     absl::StatusOr<PlyExport> points = ExportSurfacePointsPly(map, spec.min_density, cancelled);
     if (!points.ok()) return points.status();
-    return MapPly{std::move(points->bytes), points->points, 0};
+    MapExport out;
+    out.bytes = std::move(points->bytes);
+    out.vertices = points->points;
+    return out;
   }
   absl::StatusOr<TriangleMesh> mesh = ExtractMesh(map.grid, backend, spec.mesh_options, cancelled);
   if (!mesh.ok()) return mesh.status();
-  absl::StatusOr<PlyMesh> ply = EncodePlyMesh(*mesh, map.source);
-  if (!ply.ok()) return ply.status();
-  return MapPly{std::move(ply->bytes), ply->vertices, ply->faces};
+  const int64_t full_faces = mesh->num_triangles();
+  if (spec.lod_triangles == 0 || full_faces <= spec.lod_triangles) {
+    return EncodeMesh(spec, *mesh, map.source, full_faces, 0.0);
+  }
+  absl::StatusOr<SimplifiedMesh> lod = SimplifyMesh(*mesh, spec.lod_triangles, cancelled);
+  if (!lod.ok()) return lod.status();
+  *mesh = TriangleMesh();  // the full mesh is no longer needed while the file is written
+  return EncodeMesh(spec, lod->mesh, map.source, full_faces, lod->error_m);
 }
 
 }  // namespace plx

@@ -1,13 +1,16 @@
-// A map as one PLY file in either form that `plenox export` and the daemon's Export offer: the
-// coloured points on the surface of the density field (core/formats/ply_export.h) or a triangle
-// mesh by marching cubes (core/mesh/iso_surface.h, core/formats/ply_mesh.h). Both callers build
-// it here, so the same spec gives the same file in-process and on the daemon.
+// A map as one file in the forms `plenox export` and the daemon's Export offer: the coloured
+// points on the surface of the density field as PLY (core/formats/ply_export.h), or a triangle
+// mesh by marching cubes (core/mesh/iso_surface.h) as PLY (core/formats/ply_mesh.h) or binary
+// glTF (core/formats/glb_mesh.h), optionally simplified to a triangle budget, a level of
+// detail (core/mesh/mesh_simplify.h). Both callers build it here, so the same spec gives the
+// same file in-process and on the daemon.
 #pragma once
 
 #include <cstdint>
 #include <functional>
 #include <string>
 
+#include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "core/formats/ply_export.h"
 #include "core/grid/plenoxel_map.h"
@@ -16,25 +19,47 @@
 
 namespace plx {
 
+// How a mesh is written.
+enum class MeshFileFormat {
+  kPly,  // binary little-endian PLY (MeshLab, Open3D, Blender)
+  kGlb,  // binary glTF 2.0 (headsets, three.js, Blender, game engines)
+};
+
+// The most triangles a level of detail may ask for: beyond the mesh limit it could only be the
+// full mesh.
+inline constexpr int64_t kMaxLodTriangles = kDefaultMaxMeshTriangles;
+
 // Which file to make. The defaults are core's: a point cloud above kDefaultExportMinDensity, or
-// a mesh with MeshOptions' defaults (kDefaultMeshIsoLevel, kDefaultMaxMeshTriangles).
+// a mesh with MeshOptions' defaults (kDefaultMeshIsoLevel, kDefaultMaxMeshTriangles) as PLY.
 struct ExportSpec {
   bool mesh = false;                             // false: points
   float min_density = kDefaultExportMinDensity;  // points only
   MeshOptions mesh_options;                      // mesh only
+  MeshFileFormat mesh_format = MeshFileFormat::kPly;  // mesh only
+  // Mesh only: simplify to at most this many triangles (SimplifyMesh); 0 = the full mesh.
+  int64_t lod_triangles = 0;
 };
 
-struct MapPly {
+// InvalidArgument naming the field: lod_triangles negative or over kMaxLodTriangles, a glTF
+// format or a level of detail asked of points, or mesh options ValidateMeshOptions refuses.
+absl::Status ValidateExportSpec(const ExportSpec& spec);
+
+struct MapExport {
   std::string bytes;
   int64_t vertices = 0;  // the points, or the mesh's vertices
   int64_t faces = 0;     // the mesh's triangles; 0 for points
+  // A mesh's triangles before simplification (== faces without a level of detail), and the
+  // simplification's error in metres (SimplifiedMesh::error_m).
+  int64_t full_faces = 0;
+  double lod_error_m = 0.0;
 };
 
-// The PLY file of `map` as `spec` asks. The mesh runs on `backend` (the points need none).
-// `cancelled` is asked as the work goes on; true stops it with CANCELLED. RESOURCE_EXHAUSTED out
-// of memory or over the mesh's triangle limit; INVALID_ARGUMENT for mesh options that
-// ValidateMeshOptions refuses.
-absl::StatusOr<MapPly> ExportMapPly(const ExportSpec& spec, const PlenoxelMap& map,
+// The file of `map` as `spec` asks. The mesh runs on `backend` (the points need none; the
+// simplification runs on the calling thread). `cancelled` is asked as the work goes on; true
+// stops it with CANCELLED. RESOURCE_EXHAUSTED out of memory or over the mesh's triangle limit
+// (checked on the full mesh, before simplification); INVALID_ARGUMENT for a spec that
+// ValidateExportSpec refuses.
+absl::StatusOr<MapExport> ExportMap(const ExportSpec& spec, const PlenoxelMap& map,
                                     Backend& backend,
                                     const std::function<bool()>& cancelled = nullptr);
 

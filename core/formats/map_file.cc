@@ -17,16 +17,19 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/allocation_guard.h"
 #include "core/common/status_macros.h"
+#include "core/formats/map_keyframes_codec.h"
 #include "core/io/atomic_write.h"
 #include "core/io/checksum.h"
 
 namespace plx {
 namespace {
 
-// Sizes of the version-1 layout documented in map_file.h.
+// Sizes of the layout documented in map_file.h.
 constexpr int64_t kMagicBytes = 8;
 constexpr int64_t kFixedHeaderBytes = 80;          // magic .. source length
-constexpr int64_t kHeaderBytesWithoutSource = 88;  // plus the brick count
+constexpr int64_t kHeaderBytesWithoutSource = 88;  // plus the brick count (version 1)
+// Version 2's header adds the map's version number, the keyframe count and the section's size.
+constexpr int64_t kVersion2HeaderExtraBytes = 8 + 4 + 8;
 constexpr int64_t kChecksumBytes = 8;
 constexpr int64_t kMinimalFileBytes = kHeaderBytesWithoutSource + kChecksumBytes;
 constexpr int64_t kTableBytesPerBrick = 3 * sizeof(int32_t);
@@ -179,7 +182,14 @@ std::string AtLeast(int64_t bytes) { return absl::StrCat("at least ", bytes, " b
 struct ParsedHeader {
   MapFileInfo info;
   int64_t header_bytes = 0;  // offset of the brick table
+  // Where the keyframe section and the density payload start.
+  int64_t keyframes_offset() const { return header_bytes + info.bricks * kTableBytesPerBrick; }
+  int64_t payload_offset() const { return keyframes_offset() + info.keyframe_bytes; }
 };
+
+int64_t HeaderBytes(uint32_t version, int64_t source_bytes) {
+  return kHeaderBytesWithoutSource + source_bytes + (version >= 2 ? kVersion2HeaderExtraBytes : 0);
+}
 
 // Validates everything the header claims against the file's real size, so nothing later
 // allocates from an unchecked count.
@@ -196,10 +206,10 @@ absl::StatusOr<ParsedHeader> ReadHeader(const OpenedFile& file, const std::strin
   if (size < 12) return TruncatedError(path, AtLeast(kMinimalFileBytes), size);
   // The version comes before any other field: a later version may lay out the rest differently.
   const uint32_t version = LoadU32(fixed + 8);
-  if (version != kMapFileVersion) {
-    return absl::UnimplementedError(
-        absl::StrCat(path, ": map format version ", version,
-                     " is not supported; this build reads version ", kMapFileVersion));
+  if (version < kOldestMapFileVersion || version > kMapFileVersion) {
+    return absl::UnimplementedError(absl::StrCat(
+        path, ": map format version ", version, " is not supported; this build reads versions ",
+        kOldestMapFileVersion, " to ", kMapFileVersion));
   }
   if (size < kFixedHeaderBytes) return TruncatedError(path, AtLeast(kMinimalFileBytes), size);
 
@@ -237,22 +247,41 @@ absl::StatusOr<ParsedHeader> ReadHeader(const OpenedFile& file, const std::strin
                                             " exceeds the limit of ", kMaxMapSourceBytes,
                                             " bytes; the header is corrupt"));
   }
-  h.header_bytes = kHeaderBytesWithoutSource + source_bytes;
+  h.header_bytes = HeaderBytes(version, source_bytes);
   if (header_size_field != h.header_bytes) {
     return absl::DataLossError(absl::StrCat(
-        path, ": header size field says ", header_size_field, " bytes but a version-",
-        kMapFileVersion, " header with ", source_bytes, " bytes of source text has ",
-        h.header_bytes, "; the header is corrupt"));
+        path, ": header size field says ", header_size_field, " bytes but a version-", version,
+        " header with ", source_bytes, " bytes of source text has ", h.header_bytes,
+        "; the header is corrupt"));
   }
   if (size < h.header_bytes + kChecksumBytes) {
     return TruncatedError(path, AtLeast(h.header_bytes + kChecksumBytes), size);
   }
 
-  std::vector<uint8_t> rest(source_bytes + sizeof(uint64_t));
+  std::vector<uint8_t> rest(static_cast<size_t>(h.header_bytes - kFixedHeaderBytes));
   PLX_RETURN_IF_ERROR(
       ReadExactAt(file.fd.get(), kFixedHeaderBytes, rest.data(), rest.size(), path));
   info.source.assign(reinterpret_cast<const char*>(rest.data()), source_bytes);
-  const uint64_t bricks = LoadLe(rest.data() + source_bytes, 8);
+  const uint8_t* after_source = rest.data() + source_bytes;
+  const uint64_t bricks = LoadLe(after_source, 8);
+  uint64_t keyframe_bytes = 0;
+  if (version >= 2) {
+    info.map_version = LoadLe(after_source + 8, 8);
+    info.keyframes = LoadU32(after_source + 16);
+    keyframe_bytes = LoadLe(after_source + 20, 8);
+    // Checked before it is added to anything: a flipped high bit must not wrap a size.
+    if (keyframe_bytes > static_cast<uint64_t>(size)) {
+      return TruncatedError(
+          path, absl::StrCat("at least ", keyframe_bytes, " bytes for its keyframe section"),
+          size);
+    }
+    info.keyframe_bytes = static_cast<int64_t>(keyframe_bytes);
+    if (info.keyframes > info.keyframe_bytes / kMapKeyframeFixedBytes) {
+      return absl::DataLossError(
+          absl::StrCat(path, ": ", info.keyframes, " keyframes cannot fit in a section of ",
+                       info.keyframe_bytes, " bytes; the header is corrupt"));
+    }
+  }
 
   // Checked before anything is sized from it: a flipped high bit must not become a huge vector.
   if (bricks > static_cast<uint64_t>(kMaxBricks)) {
@@ -262,15 +291,19 @@ absl::StatusOr<ParsedHeader> ReadHeader(const OpenedFile& file, const std::strin
                                             " bytes; the header is corrupt"));
   }
   info.bricks = static_cast<int64_t>(bricks);
-  const int64_t expected = h.header_bytes + info.bricks * kBytesPerBrick + kChecksumBytes;
+  const int64_t expected =
+      h.header_bytes + info.bricks * kBytesPerBrick + info.keyframe_bytes + kChecksumBytes;
+  // Version 2 names the keyframe section too: its size is the header's other claim.
+  const std::string keyframes =
+      version >= 2 ? absl::StrCat(" and ", info.keyframe_bytes, " bytes of keyframes") : "";
   if (size < expected) {
-    return TruncatedError(path, absl::StrCat(expected, " bytes for ", info.bricks, " bricks"),
-                          size);
+    return TruncatedError(
+        path, absl::StrCat(expected, " bytes for ", info.bricks, " bricks", keyframes), size);
   }
   if (size > expected) {
     return absl::DataLossError(absl::StrCat(
-        path, ": brick count ", info.bricks, " is inconsistent with the file size: ", info.bricks,
-        " bricks need ", expected, " bytes, the file has ", size));
+        path, ": brick count ", info.bricks, keyframes, " is inconsistent with the file size: ",
+        info.bricks, " bricks", keyframes, " need ", expected, " bytes, the file has ", size));
   }
   return h;
 }
@@ -413,13 +446,22 @@ class MapWriter {
   absl::Status status_;
 };
 
-void WriteMap(const PlenoxelMap& map, MapWriter& w) {
+// What the writer puts in the file besides the grid: the state of a version-2 file, its
+// keyframe section already encoded (its size is a header field).
+struct EncodedState {
+  uint32_t version = kOldestMapFileVersion;
+  uint64_t map_version = 0;
+  uint32_t keyframes = 0;
+  std::string section;
+};
+
+void WriteMap(const PlenoxelMap& map, const EncodedState& state, MapWriter& w) {
   const SparseGrid& grid = map.grid;
   const RenderOptions& r = map.render;
   const uint32_t source_bytes = static_cast<uint32_t>(map.source.size());
   w.Bytes(kMapFileMagic, sizeof(kMapFileMagic));
-  w.U32(kMapFileVersion);
-  w.U32(static_cast<uint32_t>(kHeaderBytesWithoutSource + source_bytes));
+  w.U32(state.version);
+  w.U32(static_cast<uint32_t>(HeaderBytes(state.version, source_bytes)));
   w.F32(grid.voxel_size());
   w.F32(r.step_voxels);
   w.F32(r.sigma_threshold);
@@ -432,11 +474,17 @@ void WriteMap(const PlenoxelMap& map, MapWriter& w) {
   w.U32(source_bytes);
   w.Bytes(map.source.data(), map.source.size());
   w.U64(static_cast<uint64_t>(grid.num_bricks()));
+  if (state.version >= 2) {
+    w.U64(state.map_version);
+    w.U32(state.keyframes);
+    w.U64(state.section.size());
+  }
   for (const BrickCoord& b : grid.brick_coords()) {
     w.I32(b.x);
     w.I32(b.y);
     w.I32(b.z);
   }
+  w.Bytes(state.section.data(), state.section.size());
   // Bricks are stored apart in memory (copy-on-write versions) but contiguously in the file:
   // every brick's densities, then every brick's SH.
   for (int64_t slot = 0; slot < grid.num_bricks(); ++slot) {
@@ -447,7 +495,31 @@ void WriteMap(const PlenoxelMap& map, MapWriter& w) {
   }
 }
 
-absl::Status SaveMapUnguarded(const PlenoxelMap& map, const std::string& path) {
+// The state as the file stores it: checked keyframe by keyframe (what the reader would refuse
+// is never written) and encoded. The oldest version that holds it.
+absl::StatusOr<EncodedState> EncodeState(const MapFileState& state) {
+  EncodedState out;
+  if (state.empty()) return out;
+  out.version = kMapFileVersion;
+  out.map_version = state.map_version;
+  if (state.keyframes.size() > std::numeric_limits<uint32_t>::max()) {
+    return absl::InvalidArgumentError(absl::StrCat(state.keyframes.size(), " keyframes"));
+  }
+  out.keyframes = static_cast<uint32_t>(state.keyframes.size());
+  int64_t bytes = 0;
+  for (size_t i = 0; i < state.keyframes.size(); ++i) {
+    if (absl::Status s = CheckStorableKeyframe(state.keyframes[i]); !s.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat("keyframe ", i, ": ", s.message()));
+    }
+    bytes += EncodedMapKeyframeBytes(state.keyframes[i]);
+  }
+  out.section.reserve(static_cast<size_t>(bytes));
+  for (const MapKeyframe& k : state.keyframes) AppendEncodedMapKeyframe(k, &out.section);
+  return out;
+}
+
+absl::Status SaveMapUnguarded(const PlenoxelMap& map, const MapFileState& state,
+                              const std::string& path) {
   const SparseGrid& grid = map.grid;
   const std::string what = absl::StrCat("cannot save map to ", path);
   // Refuse to write anything LoadMap would reject (the same checks), so a saved map always
@@ -457,6 +529,11 @@ absl::Status SaveMapUnguarded(const PlenoxelMap& map, const std::string& path) {
       !s.ok()) {
     return absl::Status(s.code(), absl::StrCat(what, ": ", s.message()));
   }
+  absl::StatusOr<EncodedState> encoded = EncodeState(state);
+  if (!encoded.ok()) {
+    return absl::Status(encoded.status().code(),
+                        absl::StrCat(what, ": ", encoded.status().message()));
+  }
   const int64_t bricks = grid.num_bricks();
 
   // Not "<name>.plx.tmp.<pid>.plx": a leftover temporary must not look like a map to the
@@ -464,10 +541,11 @@ absl::Status SaveMapUnguarded(const PlenoxelMap& map, const std::string& path) {
   PLX_ASSIGN_OR_RETURN(AtomicFileWriter file,
                        AtomicFileWriter::Open(path, what, /*keep_extension=*/false));
   MapWriter writer(&file);
-  WriteMap(map, writer);
+  WriteMap(map, *encoded, writer);
   PLX_RETURN_IF_ERROR(writer.Finish());
-  const int64_t expected = kHeaderBytesWithoutSource + static_cast<int64_t>(map.source.size()) +
-                           bricks * kBytesPerBrick + kChecksumBytes;
+  const int64_t expected = HeaderBytes(encoded->version, map.source.size()) +
+                           bricks * kBytesPerBrick +
+                           static_cast<int64_t>(encoded->section.size()) + kChecksumBytes;
   if (writer.bytes_written() != expected) {
     return absl::InternalError(absl::StrCat(what, ": wrote ", writer.bytes_written(),
                                             " bytes, the layout needs ", expected));
@@ -476,8 +554,8 @@ absl::Status SaveMapUnguarded(const PlenoxelMap& map, const std::string& path) {
   return file.Commit();
 }
 
-absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMapUnguarded(const std::string& path,
-                                                              const LoadMapOptions& options) {
+absl::StatusOr<LoadedMapFile> LoadMapUnguarded(const std::string& path,
+                                               const LoadMapOptions& options) {
   PLX_ASSIGN_OR_RETURN(const OpenedFile file, OpenForRead(path));
   PLX_ASSIGN_OR_RETURN(ParsedHeader header, ReadHeader(file, path));
   if (options.max_memory_bytes > 0) {
@@ -510,6 +588,20 @@ absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMapUnguarded(const std::string&
       !s.ok()) {
     return absl::DataLossError(absl::StrCat(path, ": ", s.message(), "; the file is corrupt"));
   }
+  LoadedMapFile out;
+  out.state.map_version = info.map_version;
+  if (info.keyframe_bytes > 0 || info.keyframes > 0) {
+    // Before the grid: a bad keyframe fails the load without gigabytes read for nothing.
+    std::string section(static_cast<size_t>(info.keyframe_bytes), '\0');
+    PLX_RETURN_IF_ERROR(ReadExactAt(file.fd.get(), header.keyframes_offset(), section.data(),
+                                    section.size(), path));
+    absl::StatusOr<MapKeyframes> keyframes = DecodeMapKeyframes(section, info.keyframes);
+    if (!keyframes.ok()) {
+      return absl::DataLossError(
+          absl::StrCat(path, ": ", keyframes.status().message(), "; the file is corrupt"));
+    }
+    out.state.keyframes = *std::move(keyframes);
+  }
 
   auto map = std::make_unique<PlenoxelMap>(info.voxel_size);
   map->render = info.render;
@@ -528,7 +620,7 @@ absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMapUnguarded(const std::string&
     return absl::InternalError(absl::StrCat(path, ": rebuilt grid has ", map->grid.num_bricks(),
                                             " bricks, the file has ", n));
   }
-  int64_t offset = header.header_bytes + n * kTableBytesPerBrick;
+  int64_t offset = header.payload_offset();
   for (int64_t slot = 0; slot < n; ++slot) {
     PLX_RETURN_IF_ERROR(ReadFloatsAt(file.fd.get(), offset, map->grid.mutable_brick_density(slot),
                                      kDensityFloatsPerBrick, path));
@@ -539,14 +631,19 @@ absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMapUnguarded(const std::string&
                                      kShFloatsPerBrick, path));
     offset += kShFloatsPerBrick * static_cast<int64_t>(sizeof(float));
   }
-  return map;
+  out.map = std::move(map);
+  return out;
 }
 
 }  // namespace
 
 absl::Status SaveMap(const PlenoxelMap& map, const std::string& path) {
+  return SaveMap(map, MapFileState(), path);
+}
+
+absl::Status SaveMap(const PlenoxelMap& map, const MapFileState& state, const std::string& path) {
   return CatchAllocationFailure(absl::StrCat("saving ", path),
-                                [&] { return SaveMapUnguarded(map, path); });
+                                [&] { return SaveMapUnguarded(map, state, path); });
 }
 
 absl::StatusOr<MapFileInfo> ReadMapInfo(const std::string& path) {
@@ -555,13 +652,19 @@ absl::StatusOr<MapFileInfo> ReadMapInfo(const std::string& path) {
   return std::move(header.info);
 }
 
-absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMap(const std::string& path,
-                                                     const LoadMapOptions& options) {
+absl::StatusOr<LoadedMapFile> LoadMapFile(const std::string& path,
+                                          const LoadMapOptions& options) {
   // A request's allocation failure (the brick table, the grid) fails the request, not the
   // process.
   return CatchAllocationFailure(absl::StrCat("loading ", path), [&] {
     return LoadMapUnguarded(path, options);
   });
+}
+
+absl::StatusOr<std::unique_ptr<PlenoxelMap>> LoadMap(const std::string& path,
+                                                     const LoadMapOptions& options) {
+  PLX_ASSIGN_OR_RETURN(LoadedMapFile loaded, LoadMapFile(path, options));
+  return std::move(loaded.map);
 }
 
 }  // namespace plx

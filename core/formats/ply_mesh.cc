@@ -11,27 +11,10 @@ namespace {
 constexpr size_t kVertexBytes = 6 * 4 + 3;
 constexpr size_t kFaceBytes = 1 + 3 * 4;
 
-absl::Status CheckMesh(const TriangleMesh& mesh) {
-  const size_t n = mesh.positions.size();
-  if (n % 3 != 0 || mesh.normals.size() != n || mesh.colors.size() != n ||
-      mesh.triangles.size() % 3 != 0) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "mesh arrays disagree: ", n, " position, ", mesh.normals.size(), " normal, ",
-        mesh.colors.size(), " colour values and ", mesh.triangles.size(), " face indices"));
-  }
-  for (int32_t v : mesh.triangles) {
-    if (v < 0 || v >= mesh.num_vertices()) {
-      return absl::InvalidArgumentError(absl::StrCat("a face names vertex ", v, " of ",
-                                                     mesh.num_vertices()));
-    }
-  }
-  return absl::OkStatus();
-}
-
 }  // namespace
 
 absl::StatusOr<PlyMesh> EncodePlyMesh(const TriangleMesh& mesh, absl::string_view source) {
-  if (absl::Status s = CheckMesh(mesh); !s.ok()) return s;
+  if (absl::Status s = CheckTriangleMesh(mesh); !s.ok()) return s;
   return CatchAllocationFailure("writing the mesh", [&]() -> absl::StatusOr<PlyMesh> {
     PlyMesh out;
     out.vertices = mesh.num_vertices();

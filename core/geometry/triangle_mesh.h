@@ -1,10 +1,13 @@
 // An indexed triangle mesh with per-vertex normals and colours: what mesh extraction
-// (core/mesh) produces and the PLY mesh writer (core/formats/ply_mesh.h) writes. Plain arrays
-// so a writer or a test reads them without knowing how the mesh was made.
+// (core/mesh) produces, simplification (core/mesh/mesh_simplify.h) reduces and the PLY and glTF
+// writers (core/formats/ply_mesh.h, glb_mesh.h) write. Plain arrays so a writer or a test reads
+// them without knowing how the mesh was made.
 #pragma once
 
 #include <cstdint>
 #include <vector>
+
+#include "absl/status/status.h"
 
 namespace plx {
 
@@ -18,5 +21,10 @@ struct TriangleMesh {
   int64_t num_vertices() const { return static_cast<int64_t>(positions.size() / 3); }
   int64_t num_triangles() const { return static_cast<int64_t>(triangles.size() / 3); }
 };
+
+// InvalidArgument when the arrays disagree in size (positions, normals and colours three
+// values a vertex, three indices a triangle) or a triangle names a vertex that does not exist:
+// what every writer and the simplifier check before they index the arrays.
+absl::Status CheckTriangleMesh(const TriangleMesh& mesh);
 
 }  // namespace plx

@@ -5,6 +5,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
+#include "core/mapping/map_keyframes_of.h"
 #include "core/slam/slam_session.h"
 
 namespace plx {
@@ -54,6 +55,54 @@ SlamCoordinator::SlamCoordinator(const SlamMapperOptions& mapper_options,
   main->published = {std::move(base), base_version};
   main->progress.map_version = base_version;
   segments_.push_back(std::move(main));
+}
+
+template <typename T>
+std::vector<T> SlamCoordinator::AfterSaved(const std::vector<T>& saved, std::vector<T> rest) {
+  if (saved.empty()) return rest;
+  std::vector<T> out;
+  out.reserve(saved.size() + rest.size());
+  out.insert(out.end(), saved.begin(), saved.end());
+  out.insert(out.end(), std::make_move_iterator(rest.begin()),
+             std::make_move_iterator(rest.end()));
+  return out;
+}
+
+absl::Status SlamCoordinator::SeedSavedKeyframes(MapKeyframes saved) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const Segment& main = *segments_[0];
+  if (started_ || main.progress.keyframes > 0 || !saved_.empty()) {
+    return absl::FailedPreconditionError(
+        "saved keyframes are seeded once, before the mapper starts and any keyframe comes");
+  }
+  if (base_ == nullptr) {
+    return absl::FailedPreconditionError(
+        "saved keyframes belong to a base map, and this coordinator has none");
+  }
+  for (const MapKeyframe& k : saved) {
+    saved_poses_.push_back({k.timestamp, k.pose});
+    saved_features_.push_back(k.features);
+  }
+  saved_ = std::move(saved);
+  published_keyframes_ = std::make_shared<const MapKeyframes>(saved_);
+  return absl::OkStatus();
+}
+
+void SlamCoordinator::SetPublishedKeyframes(const SlamMapper& mapper) {
+  MapKeyframes integrated = MapKeyframesOf(mapper.integrated_keyframes());
+  std::lock_guard<std::mutex> lock(mutex_);
+  // Keyframe i of the mapper is features[i]: both are in the order the keyframes were added.
+  const std::vector<std::shared_ptr<const FrameFeatures>>& features = segments_[0]->features;
+  for (size_t i = 0; i < integrated.size() && i < features.size(); ++i) {
+    integrated[i].features = features[i];
+  }
+  published_keyframes_ =
+      std::make_shared<const MapKeyframes>(AfterSaved(saved_, std::move(integrated)));
+}
+
+std::shared_ptr<const MapKeyframes> SlamCoordinator::published_keyframes() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return published_keyframes_;
 }
 
 bool SlamCoordinator::mapper_started() const {
@@ -413,6 +462,7 @@ absl::StatusOr<SlamStepResult> SlamCoordinator::SwapInRebuild() {
   }
   PLX_RETURN_IF_ERROR(rebuild->PublishIfChanged());
   const SlamMapVersion latest = rebuild->latest();
+  SetPublishedKeyframes(*rebuild);
   int64_t number = 0;
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -486,6 +536,7 @@ absl::StatusOr<SlamStepResult> SlamCoordinator::StepSegment(Segment* segment, bo
   const int integrated = mapper->progress().keyframes_integrated;
   int64_t number = latest.version + segment->version_offset;
   if (latest.map != nullptr && latest.version != segment->handed_mapper_version) {
+    if (main) SetPublishedKeyframes(*mapper);
     if (publisher_ && main) {
       PLX_ASSIGN_OR_RETURN(
           number, publisher_(latest.map, integrated - segment->integrated_at_publish));
@@ -520,7 +571,14 @@ int SlamCoordinator::CurrentGenerationLocked() const {
 
 std::vector<LoopEdge> SlamCoordinator::loops() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return segments_[0]->loops;
+  std::vector<LoopEdge> loops = segments_[0]->loops;
+  // The graph numbers the mapper's keyframes; the main map's list starts with the saved ones.
+  const int saved = static_cast<int>(saved_.size());
+  for (LoopEdge& loop : loops) {
+    loop.from += saved;
+    loop.to += saved;
+  }
+  return loops;
 }
 
 std::shared_ptr<const SlamCorrection> SlamCoordinator::correction() const {
@@ -542,6 +600,15 @@ SlamMapView SlamCoordinator::ViewLocked(int segment) const {
     view.accepted_keyframes = s.mapper->accepted_keyframes();
     view.keyframe_poses = s.mapper->keyframe_poses();
     view.keyframe_features = s.features;
+  }
+  if (segment == 0) {
+    // The saved keyframes first: relocalisation and the keyframe policy see the whole map.
+    // Poses and features stay index-aligned (both lists start with the same saved ones).
+    view.accepted_keyframes = AfterSaved(saved_poses_, std::move(view.accepted_keyframes));
+    view.keyframe_poses = AfterSaved(saved_poses_, std::move(view.keyframe_poses));
+    view.keyframe_features =
+        AfterSaved(saved_features_, s.mapper == nullptr ? decltype(view.keyframe_features){}
+                                                        : std::move(view.keyframe_features));
   }
   view.pending_keyframes = s.progress.pending_keyframes;
   view.map_rebuilding = s.rebuild != nullptr || s.rebuild_collecting;
@@ -581,6 +648,9 @@ SlamMapperProgress SlamCoordinator::progress() const {
   std::lock_guard<std::mutex> lock(mutex_);
   SlamMapperProgress progress = segments_[0]->progress;
   progress.loops = loop_counts_;
+  // The saved keyframes are in the base map: accepted and integrated long ago.
+  progress.keyframes += static_cast<int>(saved_.size());
+  progress.keyframes_integrated += static_cast<int>(saved_.size());
   return progress;
 }
 
@@ -592,7 +662,8 @@ SlamMapVersion SlamCoordinator::latest() const {
 std::vector<StampedPose> SlamCoordinator::keyframe_poses() const {
   std::lock_guard<std::mutex> lock(mutex_);
   const Segment& main = *segments_[0];
-  return main.mapper == nullptr ? std::vector<StampedPose>{} : main.mapper->keyframe_poses();
+  return AfterSaved(saved_poses_, main.mapper == nullptr ? std::vector<StampedPose>{}
+                                                         : main.mapper->keyframe_poses());
 }
 
 SlamSegmentCounts SlamCoordinator::segments() const {

@@ -32,6 +32,9 @@
 //     published as one version with a SlamCorrection (View().correction): cameras move with
 //     it before their next frame, and a keyframe tracked in the old frame is moved into the
 //     new one when it is accepted.
+//   - a base map's saved keyframes (SeedSavedKeyframes: a map file's, or the daemon's previous
+//     job's): the main map's keyframe list starts with them, and every published version
+//     carries the list a map file keeps (published_keyframes).
 //
 // Threads: AddKeyframe, View, MayCameraProceed and the accessors from any thread (an internal
 // lock guards the coordinator's state; the mapper has its own); StartMapper and Step from one
@@ -45,6 +48,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "core/formats/map_keyframe.h"
 #include "core/geometry/intrinsics.h"
 #include "core/geometry/rgbd_frame.h"
 #include "core/geometry/se3.h"
@@ -125,6 +129,16 @@ class SlamCoordinator {
   const SlamMapperOptions& mapper_options() const { return mapper_options_; }
   const SlamGateOptions& gate() const { return gate_; }
 
+  // The keyframes the base map was built from (core/formats/map_keyframe.h: its file's, or
+  // what the previous job on it published): the main map's keyframes start with them. Cameras
+  // relocalise against their features, the keyframe policy counts them (a view they cover adds
+  // no keyframe), and every count and index of the main map's keyframes includes them, first
+  // (View, keyframe_poses, loops, progress, published_keyframes). They are not mapped again
+  // (the base holds what they built) and take no part in loop closure (their images are not
+  // kept). Before StartMapper and before any keyframe; once; only with a base map
+  // (FailedPrecondition otherwise).
+  absl::Status SeedSavedKeyframes(MapKeyframes saved);
+
   // Creates the mapper on `backend` (it must outlive the coordinator) and hands it the
   // keyframes added before. Step-runner; once.
   absl::Status StartMapper(Backend* backend);
@@ -171,6 +185,11 @@ class SlamCoordinator {
   std::shared_ptr<const SlamCorrection> correction() const;
   // The loop edges in the main map's pose graph now (keyframe indices; the viewer draws them).
   std::vector<LoopEdge> loops() const;
+  // The main map's keyframes in its newest published version as a map file keeps them
+  // (MapFileState): the saved ones, then each keyframe mapping integrated into that version at
+  // its refined pose with its features. Set before the publisher is called with the version,
+  // so the publisher may read it; never null (empty before the first version). Any thread.
+  std::shared_ptr<const MapKeyframes> published_keyframes() const;
 
  private:
   struct EarlyKeyframe {
@@ -241,6 +260,12 @@ class SlamCoordinator {
   // One step of the rebuild; once it is ready, swaps it in and publishes it.
   absl::StatusOr<SlamStepResult> StepRebuild();
   absl::StatusOr<SlamStepResult> SwapInRebuild();
+  // The saved keyframes, then what `mapper` (the main map's, whose version is being published)
+  // integrated, with their features: published_keyframes() from now on. Step-runner.
+  void SetPublishedKeyframes(const SlamMapper& mapper);
+  // The main map's keyframe lists with the saved keyframes first.
+  template <typename T>
+  static std::vector<T> AfterSaved(const std::vector<T>& saved, std::vector<T> rest);
 
   const SlamMapperOptions mapper_options_;
   const SlamGateOptions gate_;
@@ -253,6 +278,11 @@ class SlamCoordinator {
   bool started_ = false;                            // StartMapper ran
   SlamSegmentCounts segment_counts_;
   SlamLoopCounts loop_counts_;
+  // SeedSavedKeyframes': as given, and their poses and features as views list them.
+  MapKeyframes saved_;
+  std::vector<StampedPose> saved_poses_;
+  std::vector<std::shared_ptr<const FrameFeatures>> saved_features_;
+  std::shared_ptr<const MapKeyframes> published_keyframes_ = std::make_shared<MapKeyframes>();
 };
 
 }  // namespace plx

@@ -72,6 +72,7 @@ absl::StatusOr<SlamDatasetResult> RunSlamOnDataset(
   PLX_RETURN_IF_ERROR(session->Finish());
   out.wall_s = SecondsSince(wall_start);
   out.map = session->latest_map();
+  out.map_keyframes = session->latest_map_keyframes();
   out.keyframes = session->keyframe_poses();
   out.loops = session->loops();
   out.progress = session->progress();

@@ -14,6 +14,7 @@
 
 #include "absl/status/statusor.h"
 #include "core/datasets/dataset.h"
+#include "core/formats/map_keyframe.h"
 #include "core/geometry/stamped_pose.h"
 #include "core/slam/slam_session.h"
 
@@ -35,6 +36,7 @@ struct SlamDatasetResult {
   std::vector<StampedPose> keyframes;      // final (refined) keyframe poses
   std::vector<LoopEdge> loops;             // the map's loop edges at the end (keyframe indices)
   std::shared_ptr<const PlenoxelMap> map;  // the final version
+  std::shared_ptr<const MapKeyframes> map_keyframes;  // its keyframes, as a map file keeps them
   SlamProgress progress;
   bool started_from_ground_truth = false;
   int frames = 0;   // in the dataset (up to max_frames)

@@ -36,6 +36,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "core/formats/map_keyframe.h"
 #include "core/geometry/intrinsics.h"
 #include "core/geometry/rgbd_frame.h"
 #include "core/geometry/se3.h"
@@ -149,6 +150,11 @@ class SlamSession {
   absl::Status Finish();
 
   std::shared_ptr<const PlenoxelMap> latest_map() const;
+  // latest_map()'s keyframes as a map file keeps them (SlamCoordinator::published_keyframes),
+  // so a saved map can be continued (core/formats/map_file.h).
+  std::shared_ptr<const MapKeyframes> latest_map_keyframes() const {
+    return coordinator_.published_keyframes();
+  }
   // Keyframe poses as refined so far (timestamp, world_T_camera), in keyframe order.
   std::vector<StampedPose> keyframe_poses() const;
   // The loop edges in the map's pose graph (keyframe indices; docs/SLAM.md, "Loop closure").

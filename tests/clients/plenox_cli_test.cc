@@ -17,6 +17,8 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "absl/strings/str_cat.h"
+#include "core/formats/map_file.h"
 #include "tests/clients/cli_runner.h"
 #include "tests/clients/depthless_dataset.h"
 #include "tests/clients/mesh_output.h"
@@ -115,9 +117,9 @@ TEST(PlenoxUsageTest, EveryCommandHelpListsItsFlags) {
       {"synth",
        {"--out", "--frames", "--width", "--height", "--noise", "--noise-seed", "--help"}},
       {"export",
-       {"--map", "--out", "--mesh", "--min-density", "--iso-level", "--min-component",
-        "--max-triangles", "--keep-unobserved", "--mesh-color", "--backend", "--device",
-        "--threads", "--json", "--quiet", "--help"}},
+       {"--map", "--out", "--mesh", "--format", "--lod-triangles", "--min-density",
+        "--iso-level", "--min-component", "--max-triangles", "--keep-unobserved", "--mesh-color",
+        "--backend", "--device", "--threads", "--json", "--quiet", "--help"}},
       {"demo",
        {"--out", "--frames", "--width", "--height", "--no-noise", "--noise-seed", "--voxel-size",
         "--iterations", "--seed", "--every", "--backend", "--device", "--threads", "--json",
@@ -259,6 +261,83 @@ TEST_F(PlenoxBadInputTest, ExportWritesAMeshOrPointsOfAMapFile) {
   ASSERT_EQ(points.exit_code, kExitOk) << points.Describe();
   EXPECT_THAT(points.out, HasSubstr("points"));
   EXPECT_THAT(ReadFileToString(work / "points.ply"), Not(HasSubstr("element face")));
+}
+
+// --format glb (or an --out ending in .glb): binary glTF the tests' strict reader reads, counts
+// in the JSON line matching it; --lod-triangles N: at most N triangles, in either format, the
+// JSON saying how many the full mesh had.
+TEST_F(PlenoxBadInputTest, ExportWritesGlbAndLevelsOfDetail) {
+  ScopedTempDir work("plenox_export_glb");
+  const CommandResult full = RunPlenox({"export", "--map", *map_, "--out", "mesh.glb", "--mesh",
+                                        "--keep-unobserved", "--threads", kThreads, "--json"},
+                                       work.path());
+  ASSERT_EQ(full.exit_code, kExitOk) << full.Describe();
+  const plx::testing::GlbFile glb =
+      plx::testing::ExpectGlbFileMatchingJson(work / "mesh.glb", full);
+  const int64_t triangles = glb.mesh.num_triangles();
+  ASSERT_GT(triangles, 20);
+  EXPECT_EQ(JsonNumber(LastLineJson(full), "full_faces").value_or(-1), triangles);
+
+  // The same with --format glb and another name.
+  const CommandResult named = RunPlenox({"export", "--map", *map_, "--out", "mesh.bin", "--mesh",
+                                         "--format", "glb", "--keep-unobserved", "--threads",
+                                         kThreads},
+                                        work.path());
+  ASSERT_EQ(named.exit_code, kExitOk) << named.Describe();
+  EXPECT_EQ(ReadFileToString(work / "mesh.bin"), ReadFileToString(work / "mesh.glb"));
+  EXPECT_THAT(named.out, HasSubstr("glTF"));
+
+  const int64_t budget = triangles / 4;
+  for (const char* out : {"lod.glb", "lod.ply"}) {
+    SCOPED_TRACE(out);
+    const CommandResult lod = RunPlenox(
+        {"export", "--map", *map_, "--out", out, "--mesh", "--keep-unobserved", "--lod-triangles",
+         std::to_string(budget), "--threads", kThreads, "--json"},
+        work.path());
+    ASSERT_EQ(lod.exit_code, kExitOk) << lod.Describe();
+    const FlatJson json = LastLineJson(lod);
+    EXPECT_LE(JsonNumber(json, "faces").value_or(1e9), budget) << lod.Describe();
+    EXPECT_EQ(JsonNumber(json, "full_faces").value_or(-1), triangles) << lod.Describe();
+    EXPECT_GT(JsonNumber(json, "lod_error_m").value_or(-1), 0.0) << lod.Describe();
+    if (std::string(out) == "lod.glb") {
+      EXPECT_LE(plx::testing::ExpectGlbFileMatchingJson(work / out, lod).mesh.num_triangles(),
+                budget);
+    } else {
+      EXPECT_LE(plx::testing::ExpectMeshFileMatchingJson(work / out, lod).num_triangles(), budget);
+    }
+  }
+  // Without --json: the summary names the level of detail.
+  const CommandResult text = RunPlenox({"export", "--map", *map_, "--out", "small.glb", "--mesh",
+                                        "--keep-unobserved", "--lod-triangles",
+                                        std::to_string(budget), "--threads", kThreads},
+                                       work.path());
+  ASSERT_EQ(text.exit_code, kExitOk) << text.Describe();
+  EXPECT_THAT(text.out, AllOf(HasSubstr("wrote small.glb"),
+                              HasSubstr(absl::StrCat("a level of detail of ", triangles)),
+                              HasSubstr("glTF")))
+      << text.Describe();
+}
+
+TEST_F(PlenoxBadInputTest, ExportFormatAndLevelOfDetailMistakesAreUsageErrors) {
+  ScopedTempDir work("plenox_export_glb_bad");
+  ExpectFailsCleanly({"export", "--map", *map_, "--out", "x.glb", "--format", "glb"}, kExitUsage,
+                     {"--format glb applies to --mesh only"}, work);
+  ExpectFailsCleanly({"export", "--map", *map_, "--out", "x.glb"}, kExitUsage,
+                     {"x.glb", "add --mesh"}, work);
+  ExpectFailsCleanly({"export", "--map", *map_, "--out", "x.ply", "--lod-triangles", "100"},
+                     kExitUsage, {"--lod-triangles applies to --mesh only"}, work);
+  ExpectFailsCleanly({"export", "--map", *map_, "--out", "x.ply", "--mesh", "--format", "glb"},
+                     kExitUsage, {"--format glb", "x.ply"}, work);
+  ExpectFailsCleanly({"export", "--map", *map_, "--out", "x.glb", "--mesh", "--format", "ply"},
+                     kExitUsage, {"--format ply", "x.glb"}, work);
+  ExpectFailsCleanly({"export", "--map", *map_, "--out", "x.obj", "--mesh", "--format", "obj"},
+                     kExitUsage, {"--format", "ply or glb", "obj"}, work);
+  ExpectFailsCleanly(
+      {"export", "--map", *map_, "--out", "x.glb", "--mesh", "--lod-triangles", "-1"},
+      kExitUsage, {"--lod-triangles"}, work);
+  ExpectFailsCleanly(
+      {"export", "--map", *map_, "--out", "x.glb", "--mesh", "--lod-triangles", "20000001"},
+      kExitUsage, {"--lod-triangles"}, work);
 }
 
 TEST_F(PlenoxBadInputTest, ExportFlagsOfTheOtherFormatAreUsageErrors) {
@@ -772,6 +851,11 @@ TEST_F(PlenoxEndToEndTest, SlamWritesTrajectoryKeyframesAndMapAndScoresThem) {
   // The map is a map: eval-map reads it and it renders the held-out frames.
   const FlatJson eval = EvalMap(map);
   EXPECT_GT(JsonNumber(eval, "coverage").value_or(0), 0.8);
+  // With its keyframes (format version 2), so plenoxd loading it can continue it.
+  const absl::StatusOr<LoadedMapFile> file = LoadMapFile(map);
+  ASSERT_TRUE(file.ok()) << file.status();
+  ASSERT_EQ(static_cast<double>(file->state.keyframes.size()), keyframe_count);
+  for (const MapKeyframe& k : file->state.keyframes) EXPECT_NE(k.features, nullptr);
 }
 
 // A sequence whose first frames have no depth (a depth camera starting up): they are WAITING,

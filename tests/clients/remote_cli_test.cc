@@ -366,6 +366,34 @@ TEST_F(RemoteCliTest, ExportMeshWritesAPlyMesh) {
   EXPECT_THAT(ListTree(capped.path()), IsEmpty());
 }
 
+// --format glb and --lod-triangles through the daemon: the GLB the daemon built, counts read
+// from its JSON chunk into the summary, at most the budget.
+TEST_F(RemoteCliTest, ExportMeshWritesGlbAtALevelOfDetail) {
+  ScopedTempDir work("plenox_remote_glb");
+  const CommandResult full =
+      Remote({"export", "--map", kMap, "--out", "mesh.glb", "--mesh", "--json"}, work.path());
+  ASSERT_EQ(full.exit_code, kExitOk) << full.Describe();
+  const int64_t triangles =
+      plx::testing::ExpectGlbFileMatchingJson(work / "mesh.glb", full).mesh.num_triangles();
+  ASSERT_GT(triangles, 100);
+  const int64_t budget = triangles / 10;
+  const CommandResult lod = Remote({"export", "--map", kMap, "--out", "lod.glb", "--mesh",
+                                    "--lod-triangles", std::to_string(budget), "--json"},
+                                   work.path());
+  ASSERT_EQ(lod.exit_code, kExitOk) << lod.Describe();
+  EXPECT_LE(plx::testing::ExpectGlbFileMatchingJson(work / "lod.glb", lod).mesh.num_triangles(),
+            budget);
+  EXPECT_EQ(JsonNumber(LastLineJson(lod), "full_faces").value_or(-1), triangles);
+  EXPECT_GT(JsonNumber(LastLineJson(lod), "lod_error_m").value_or(-1), 0.0);
+  const CommandResult ply = Remote({"export", "--map", kMap, "--out", "lod.ply", "--mesh",
+                                    "--lod-triangles", std::to_string(budget), "--json"},
+                                   work.path());
+  ASSERT_EQ(ply.exit_code, kExitOk) << ply.Describe();
+  EXPECT_LE(plx::testing::ExpectMeshFileMatchingJson(work / "lod.ply", ply).num_triangles(),
+            budget);
+  EXPECT_EQ(ListTree(work.path()), (std::set<std::string>{"mesh.glb", "lod.glb", "lod.ply"}));
+}
+
 TEST_F(RemoteCliTest, SaveWritesTheMapFileAndLoadReadsItBack) {
   const CommandResult saved = Remote({"save", "--map", kMap, "--json"});
   ASSERT_EQ(saved.exit_code, kExitOk) << saved.Describe();

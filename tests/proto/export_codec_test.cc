@@ -1,6 +1,7 @@
 // The Export codec (proto/export_codec.h): a request with no options is core's defaults for its
-// format, every field reads into the spec and is written back from it, a spec survives the
-// round trip, and every refusal is INVALID_ARGUMENT naming its field at core's limits.
+// format, every field reads into the spec and is written back from it (the glTF format and the
+// level of detail included), a spec survives the round trip, and every refusal is
+// INVALID_ARGUMENT naming its field at core's limits.
 #include "proto/export_codec.h"
 
 #include <gmock/gmock.h>
@@ -37,6 +38,7 @@ ExportSpec ChosenMeshSpec() {
   spec.mesh_options.max_triangles = 123456;
   spec.mesh_options.keep_unobserved = true;
   spec.mesh_options.color_mode = MeshColorMode::kViewAlongNormal;
+  spec.lod_triangles = 5000;
   return spec;
 }
 
@@ -48,6 +50,8 @@ void ExpectSameSpec(const ExportSpec& got, const ExportSpec& want) {
   EXPECT_EQ(got.mesh_options.max_triangles, want.mesh_options.max_triangles);
   EXPECT_EQ(got.mesh_options.keep_unobserved, want.mesh_options.keep_unobserved);
   EXPECT_EQ(got.mesh_options.color_mode, want.mesh_options.color_mode);
+  EXPECT_EQ(got.mesh_format, want.mesh_format);
+  EXPECT_EQ(got.lod_triangles, want.lod_triangles);
 }
 
 TEST(ExportCodecTest, AnEmptyRequestIsPointsAtCoresDensity) {
@@ -66,6 +70,27 @@ TEST(ExportCodecTest, AMeshRequestWithNoOptionsIsCoresMeshDefaults) {
   EXPECT_EQ(spec->mesh_options.min_component_triangles, 0);
   EXPECT_FALSE(spec->mesh_options.keep_unobserved);
   EXPECT_EQ(spec->mesh_options.color_mode, MeshColorMode::kDc);
+  EXPECT_EQ(spec->mesh_format, MeshFileFormat::kPly);
+  EXPECT_EQ(spec->lod_triangles, 0);  // the full mesh
+}
+
+TEST(ExportCodecTest, MeshGlbIsTheSameMeshAsBinaryGltf) {
+  pb::ExportRequest request;
+  request.set_format(pb::EXPORT_FORMAT_MESH_GLB);
+  const absl::StatusOr<ExportSpec> spec = ExportSpecFromProto(request);
+  ASSERT_TRUE(spec.ok()) << spec.status();
+  EXPECT_TRUE(spec->mesh);
+  EXPECT_EQ(spec->mesh_format, MeshFileFormat::kGlb);
+  EXPECT_EQ(spec->mesh_options.iso_level, kDefaultMeshIsoLevel);
+  EXPECT_EQ(spec->lod_triangles, 0);
+  request.set_lod_triangles(777);
+  request.set_min_density(1.0f);  // a points field on a mesh format
+  const absl::StatusOr<ExportSpec> refused = ExportSpecFromProto(request);
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kInvalidArgument);
+  request.set_min_density(0.0f);
+  const absl::StatusOr<ExportSpec> lod = ExportSpecFromProto(request);
+  ASSERT_TRUE(lod.ok()) << lod.status();
+  EXPECT_EQ(lod->lod_triangles, 777);
 }
 
 TEST(ExportCodecTest, EveryFieldIsRead) {
@@ -82,6 +107,7 @@ TEST(ExportCodecTest, EveryFieldIsRead) {
   mesh.set_max_triangles(123456);
   mesh.set_keep_unobserved(true);
   mesh.set_mesh_color(pb::MESH_COLOR_ALONG_NORMAL);
+  mesh.set_lod_triangles(5000);
   const absl::StatusOr<ExportSpec> m = ExportSpecFromProto(mesh);
   ASSERT_TRUE(m.ok()) << m.status();
   ExpectSameSpec(*m, ChosenMeshSpec());
@@ -95,6 +121,7 @@ TEST(ExportCodecTest, EveryFieldIsWritten) {
   EXPECT_EQ(mesh.max_triangles(), 123456u);
   EXPECT_TRUE(mesh.keep_unobserved());
   EXPECT_EQ(mesh.mesh_color(), pb::MESH_COLOR_ALONG_NORMAL);
+  EXPECT_EQ(mesh.lod_triangles(), 5000u);
   EXPECT_EQ(mesh.min_density(), 0.0f);  // points only: the daemon refuses it on a mesh
   EXPECT_TRUE(mesh.map().empty());      // the caller's
 
@@ -109,6 +136,11 @@ TEST(ExportCodecTest, EveryFieldIsWritten) {
   EXPECT_EQ(points.max_triangles(), 0u);
   EXPECT_FALSE(points.keep_unobserved());
   EXPECT_EQ(points.mesh_color(), pb::MESH_COLOR_DC);
+  EXPECT_EQ(points.lod_triangles(), 0u);
+
+  ExportSpec glb_spec = ChosenMeshSpec();
+  glb_spec.mesh_format = MeshFileFormat::kGlb;
+  EXPECT_EQ(ExportSpecToProto(glb_spec).format(), pb::EXPORT_FORMAT_MESH_GLB);
 }
 
 TEST(ExportCodecTest, DefaultsAreSentResolved) {
@@ -124,7 +156,7 @@ TEST(ExportCodecTest, DefaultsAreSentResolved) {
 }
 
 TEST(ExportCodecTest, ASpecSurvivesTheRoundTrip) {
-  std::vector<ExportSpec> specs(5);
+  std::vector<ExportSpec> specs(6);
   specs[1].min_density = 0.25f;
   specs[2].mesh = true;
   specs[3] = ChosenMeshSpec();
@@ -133,6 +165,9 @@ TEST(ExportCodecTest, ASpecSurvivesTheRoundTrip) {
   specs[4].mesh_options.keep_unobserved = false;
   specs[4].mesh_options.max_triangles = kDefaultMaxMeshTriangles;  // the limit itself
   specs[4].mesh_options.min_component_triangles = kDefaultMaxMeshTriangles;
+  specs[4].lod_triangles = kMaxLodTriangles;
+  specs[5] = ChosenMeshSpec();
+  specs[5].mesh_format = MeshFileFormat::kGlb;
   for (size_t i = 0; i < specs.size(); ++i) {
     SCOPED_TRACE(i);
     const absl::StatusOr<ExportSpec> back = ExportSpecFromProto(ExportSpecToProto(specs[i]));
@@ -148,9 +183,12 @@ TEST(ExportCodecTest, AnExplicitRequestSurvivesTheRoundTrip) {
   mesh.set_max_triangles(99);
   mesh.set_keep_unobserved(true);
   mesh.set_mesh_color(pb::MESH_COLOR_ALONG_NORMAL);
+  mesh.set_lod_triangles(10);
+  pb::ExportRequest glb = mesh;
+  glb.set_format(pb::EXPORT_FORMAT_MESH_GLB);
   pb::ExportRequest points;
   points.set_min_density(7.0f);
-  for (const pb::ExportRequest& request : {mesh, points}) {
+  for (const pb::ExportRequest& request : {mesh, glb, points}) {
     const absl::StatusOr<ExportSpec> spec = ExportSpecFromProto(request);
     ASSERT_TRUE(spec.ok()) << spec.status();
     EXPECT_EQ(ExportSpecToProto(*spec).SerializeAsString(), request.SerializeAsString())
@@ -173,7 +211,7 @@ TEST(ExportCodecTest, EveryRefusalNamesItsField) {
   const auto points = [](pb::ExportRequest* r) { r->set_format(pb::EXPORT_FORMAT_POINTS); };
   const std::vector<Case> cases = {
       {[](pb::ExportRequest* r) { r->set_format(static_cast<pb::ExportFormat>(7)); },
-       "format: unknown value 7 (POINTS or MESH)"},
+       "format: unknown value 7 (POINTS, MESH or MESH_GLB)"},
       {[&](pb::ExportRequest* r) {
          points(r);
          r->set_min_density(-1.0f);
@@ -205,33 +243,46 @@ TEST(ExportCodecTest, EveryRefusalNamesItsField) {
          points(r);
          r->set_iso_level(50.0f);
        },
-       "iso_level: applies to format MESH only"},
+       "iso_level: applies to formats MESH and MESH_GLB only"},
       {[&](pb::ExportRequest* r) {
          points(r);
          r->set_min_component_triangles(1);
        },
-       "min_component_triangles: applies to format MESH only"},
+       "min_component_triangles: applies to formats MESH and MESH_GLB only"},
       {[&](pb::ExportRequest* r) {
          points(r);
          r->set_max_triangles(1);
        },
-       "max_triangles: applies to format MESH only"},
+       "max_triangles: applies to formats MESH and MESH_GLB only"},
       {[&](pb::ExportRequest* r) {
          points(r);
          r->set_keep_unobserved(true);
        },
-       "keep_unobserved: applies to format MESH only"},
+       "keep_unobserved: applies to formats MESH and MESH_GLB only"},
       {[&](pb::ExportRequest* r) {
          points(r);
          r->set_mesh_color(pb::MESH_COLOR_ALONG_NORMAL);
        },
-       "mesh_color: applies to format MESH only"},
+       "mesh_color: applies to formats MESH and MESH_GLB only"},
+      {[&](pb::ExportRequest* r) {
+         points(r);
+         r->set_lod_triangles(100);
+       },
+       "lod_triangles: applies to formats MESH and MESH_GLB only"},
       // Mesh options out of range.
       {[](pb::ExportRequest* r) { r->set_mesh_color(static_cast<pb::MeshColor>(9)); },
        "mesh_color: unknown value 9"},
       {[](pb::ExportRequest* r) { r->set_max_triangles(kTriangleLimit + 1); },
        absl::StrCat("max_triangles: at most ", kDefaultMaxMeshTriangles, " (0 = that), got ",
                     kTriangleLimit + 1)},
+      {[](pb::ExportRequest* r) { r->set_lod_triangles(kTriangleLimit + 1); },
+       absl::StrCat("lod_triangles: at most ", kMaxLodTriangles, " (0 = the full mesh), got ",
+                    kTriangleLimit + 1)},
+      {[](pb::ExportRequest* r) {
+         r->set_format(pb::EXPORT_FORMAT_MESH_GLB);
+         r->set_lod_triangles(uint64_t{1} << 40);
+       },
+       "lod_triangles: at most "},
       {[](pb::ExportRequest* r) { r->set_min_component_triangles(uint64_t{1} << 40); },
        absl::StrCat("min_component_triangles: at most ", kDefaultMaxMeshTriangles, ", got ",
                     uint64_t{1} << 40)},

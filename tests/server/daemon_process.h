@@ -129,6 +129,14 @@ class DaemonProcess {
     return exit;
   }
 
+  // SIGKILL (a crash, an OOM kill): no drain, no save. Waits for the process to be gone.
+  void Kill() {
+    if (pid_ <= 0) return;
+    ::kill(pid_, SIGKILL);
+    ::waitpid(pid_, nullptr, 0);
+    pid_ = -1;
+  }
+
   std::string Log() const {
     return "--- plenoxd stdout ---\n" + ReadWholeFile(dir_ + "/plenoxd.out") +
            "--- plenoxd stderr ---\n" + ReadWholeFile(dir_ + "/plenoxd.err");

@@ -5,7 +5,10 @@ Drives Chromium over the DevTools protocol on --remote-debugging-pipe (fd 3: com
 answers out, each message JSON ended by a NUL byte), so no port is opened. Polls the page's
 state, which viewer.js keeps in document.body.dataset (points, faces, mode, cameras, pathPoints,
 keyframes, framesDrawn), until the conditions given hold, then captures the viewport as PNG.
-With --mesh it then clicks the page's Mesh toggle and waits for the mesh to be drawn first.
+With --mesh it then clicks the page's Mesh toggle and waits for the mesh to be drawn first; with
+--lod N it first sets the page's mesh detail to N triangles, so the page fetches the map's mesh
+as binary glTF at that level of detail and loads it through three.js's GLTFLoader (the state
+then says the vertices, triangles and material the loader produced).
 
 Prints the page's last state as one JSON line on stdout. Exit codes: 0 the conditions held and
 the screenshot was written; 1 they did not hold before --timeout (the state and any page errors
@@ -142,6 +145,9 @@ def main():
     parser.add_argument("--mesh", action="store_true",
                         help="then switch the page to Mesh and wait for --min-faces triangles")
     parser.add_argument("--min-faces", type=int, default=1)
+    parser.add_argument("--lod", type=int, default=-1,
+                        help="with --mesh: the mesh detail (triangles) to choose first; "
+                             "-1 keeps the page's")
     parser.add_argument("--timeout", type=float, default=45.0)
     args = parser.parse_args()
 
@@ -183,12 +189,19 @@ def main():
                         "expression": "document.querySelector('#cameras li[style]').click()"},
                         session=session)
                 if args.mesh:
+                    if args.lod >= 0:
+                        # An option of its own, so any budget can be asked for.
+                        browser.call("Runtime.evaluate", {"expression": (
+                            "(() => { const s = document.getElementById('mesh-detail');"
+                            " s.add(new Option('test', '%d')); s.value = '%d'; })()"
+                            % (args.lod, args.lod))}, session=session)
                     browser.call("Runtime.evaluate", {
                         "expression": "document.getElementById('show-mesh').click()"},
                         session=session)
                     while time.monotonic() < deadline and not (
                             state.get("mode") == "mesh" and
-                            number(state, "faces") >= args.min_faces):
+                            number(state, "faces") >= args.min_faces and
+                            (args.lod < 0 or state.get("lodTriangles") == str(args.lod))):
                         time.sleep(0.1)
                         result = browser.call("Runtime.evaluate",
                                               {"expression": STATE_JS, "returnByValue": True},
@@ -214,6 +227,10 @@ def main():
                 return 0
             time.sleep(0.25)
         print(json.dumps(state))
+        status = browser.call("Runtime.evaluate", {
+            "expression": "(document.getElementById('status') || {}).textContent",
+            "returnByValue": True}, session=session)
+        print("page status line: %s" % status.get("result", {}).get("value"), file=sys.stderr)
         for error in page_errors(browser.events):
             print("page error: %s" % error, file=sys.stderr)
         print("the page did not reach the state asked for in %.0f s" % args.timeout,

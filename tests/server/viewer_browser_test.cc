@@ -4,7 +4,10 @@
 // the 3D view), show the stream's camera and path in its colour, follow the path as it grows
 // without a reload, and show a render when the camera is clicked. The screenshot goes to
 // $PLX_VIEWER_SCREENSHOT when set (docs/images/viewer.png is made this way). A second test
-// clicks the page's Mesh toggle on a saved map and checks that the mesh is drawn.
+// clicks the page's Mesh toggle on a saved map and checks that the mesh is drawn; a third picks
+// a level of detail, so the page loads /viewer/api/mesh.glb through three.js's GLTFLoader, and
+// checks that the loader saw exactly the vertices and triangles the file declares (the
+// "opens in three.js" evidence for the GLB files Export and the viewer write).
 #include <atomic>
 #include <cstdio>
 #include <cstdlib>
@@ -13,7 +16,9 @@
 #include <thread>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
+#include "core/formats/glb_mesh.h"
 #include "core/io/image_io.h"
 #include "tests/server/viewer_fixture.h"
 
@@ -72,6 +77,19 @@ ViewPixels CountViewPixels(const cv::Mat& rgb_image) {  // RGB order (core/io/im
     }
   }
   return count;
+}
+
+// The page's state line (viewer_browser.py prints the body's data attributes as JSON).
+nlohmann::json PageState(const std::string& output) {
+  const size_t start = output.rfind('{');
+  return start == std::string::npos
+             ? nlohmann::json()
+             : nlohmann::json::parse(output.substr(start), nullptr, /*allow_exceptions=*/false);
+}
+
+int64_t StateNumber(const nlohmann::json& state, const char* key) {
+  if (!state.is_object() || !state.contains(key) || !state[key].is_string()) return -1;
+  return std::atoll(state[key].get<std::string>().c_str());
 }
 
 TEST(ViewerBrowserTest, PageDrawsTheMapAndALiveSlamCamera) {
@@ -148,6 +166,14 @@ TEST(ViewerBrowserTest, MeshToggleDrawsTheMesh) {
   EXPECT_NE(state.find("\"mode\": \"mesh\""), std::string::npos) << state;
   EXPECT_NE(state.find("\"points\": \"0\""), std::string::npos)
       << "the points were replaced by the mesh: " << state;
+  // The full mesh, as glTF through GLTFLoader: the triangles the viewer's PLY mesh has.
+  EXPECT_NE(state.find("\"meshFormat\": \"glb\""), std::string::npos) << state;
+  const HttpAnswer ply = HttpGetAnswer(port, "/viewer/api/mesh?map=room");
+  ASSERT_EQ(ply.status, 200);
+  const size_t faces_at = ply.headers.find("x-faces: ");
+  ASSERT_NE(faces_at, std::string::npos) << ply.headers;
+  EXPECT_EQ(StateNumber(PageState(state), "faces"), std::atoll(ply.headers.c_str() + faces_at + 9))
+      << state;
 
   absl::StatusOr<cv::Mat> decoded = DecodeColorFile(shot);
   ASSERT_TRUE(decoded.ok()) << decoded.status();
@@ -156,6 +182,59 @@ TEST(ViewerBrowserTest, MeshToggleDrawsTheMesh) {
   const int64_t drawn = view.drawn, total = view.total;
   std::printf("3D view (mesh): %.1f%% drawn\n", 100.0 * drawn / total);
   EXPECT_GT(drawn, total / 10) << "the mesh was not drawn";
+}
+
+// A level of detail through three.js's GLTFLoader: the page asks for mesh.glb at 2000
+// triangles, and what the loader built has exactly the vertices and triangles of that file
+// (fetched here too), at most 2000, with the file's unlit material and vertex colours.
+TEST(ViewerBrowserTest, ALevelOfDetailLoadsThroughGltfLoader) {
+  PLX_SKIP_WITHOUT_THREE_JS();
+  const std::string chromium = FindChromium();
+  if (chromium.empty()) GTEST_SKIP() << "no chromium";
+  absl::StatusOr<std::unique_ptr<TestDaemon>> started =
+      StartWithMaps({"room"}, ViewerDaemonOptions("plx_srv_viewer_browser_glb"));
+  ASSERT_TRUE(started.ok()) << started.status();
+  const int port = (*started)->daemon->metrics_port();
+  constexpr int kBudget = 2000;
+  const std::string shot = ScratchDir("plx_srv_viewer_glb_shot") + "/glb.png";
+  const std::string command = absl::StrCat(
+      "/usr/bin/python3 ", PLX_SOURCE_DIR, "/tests/server/viewer_browser.py --chromium ",
+      chromium, " --url 'http://127.0.0.1:", port, "/viewer/#map=room' --out ", shot,
+      " --min-points 500 --mesh --lod ", kBudget, " --min-faces 100 --timeout 40");
+  std::string output;
+  const int status = RunCommand(command, &output);
+  ASSERT_EQ(status, 0) << "viewer_browser.py: " << output;
+  std::printf("page state: %s", output.c_str());
+  const nlohmann::json state = PageState(output);
+  ASSERT_TRUE(state.is_object()) << output;
+  EXPECT_EQ(state.value("meshFormat", ""), "glb");
+  EXPECT_EQ(state.value("lodTriangles", ""), absl::StrCat(kBudget));
+  EXPECT_EQ(state.value("material", ""), "MeshBasicMaterial") << "KHR_materials_unlit";
+  EXPECT_EQ(state.value("vertexColors", ""), "true");
+
+  // The same file, as the page fetched it (the map's version has not changed).
+  const HttpAnswer glb =
+      HttpGetAnswer(port, absl::StrCat("/viewer/api/mesh.glb?map=room&triangles=", kBudget));
+  ASSERT_EQ(glb.status, 200) << glb.body.substr(0, 200);
+  const absl::StatusOr<GlbMeshInfo> info = ReadGlbMeshInfo(glb.body);
+  ASSERT_TRUE(info.ok()) << info.status();
+  EXPECT_LE(info->triangles, kBudget);
+  EXPECT_GT(info->full_triangles, info->triangles);
+  EXPECT_EQ(StateNumber(state, "faces"), info->triangles) << "GLTFLoader's triangles";
+  EXPECT_EQ(StateNumber(state, "vertices"), info->vertices) << "GLTFLoader's vertices";
+  EXPECT_EQ(StateNumber(state, "fullFaces"), info->full_triangles);
+  std::printf("GLTFLoader: %lld vertices, %lld triangles (a level of detail of %lld)\n",
+              static_cast<long long>(StateNumber(state, "vertices")),
+              static_cast<long long>(StateNumber(state, "faces")),
+              static_cast<long long>(info->full_triangles));
+
+  absl::StatusOr<cv::Mat> decoded = DecodeColorFile(shot);
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  const ViewPixels view = CountViewPixels(*decoded);
+  ASSERT_GT(view.total, 0);
+  std::printf("3D view (GLB at %d triangles): %.1f%% drawn\n", kBudget,
+              100.0 * view.drawn / view.total);
+  EXPECT_GT(view.drawn, view.total / 10) << "the level of detail was not drawn";
 }
 
 }  // namespace

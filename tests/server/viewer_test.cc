@@ -1,7 +1,8 @@
 // The web viewer on plenoxd's HTTP port (--viewer): the page and three.js, the map list, point
 // clouds, live SLAM trajectories and renders, authentication, and bad requests answered with
 // 4xx instead of work or a crash. Also the pieces on their own: the point cloud thinning and the
-// mesh endpoint's triangle cap and cache (the trajectory record's bounds: trajectory_record_test).
+// mesh endpoints' triangle cap and caches, the glTF levels of detail among them (the trajectory
+// record's bounds: trajectory_record_test).
 #include <cmath>
 #include <chrono>
 #include <cstdio>
@@ -15,6 +16,8 @@
 #include "app/make_backend.h"
 #include "core/formats/map_file.h"
 #include "core/io/image_io.h"
+#include "core/formats/glb_mesh.h"
+#include "tests/glb_reader.h"
 #include "tests/ply_mesh_reader.h"
 #include "tests/server/viewer_fixture.h"
 #include "web/point_cloud_cache.h"
@@ -115,6 +118,33 @@ TEST(ViewerTest, ServesThePageTheMapsPointsAndRenders) {
   // Asked again: the same mesh (built once per version).
   EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/mesh?map=room").body, mesh.body);
 
+  // The same mesh as binary glTF: in full, and at a level of detail.
+  const HttpAnswer glb = HttpGetAnswer(port, "/viewer/api/mesh.glb?map=room");
+  ASSERT_EQ(glb.status, 200) << glb.body.substr(0, 200);
+  EXPECT_NE(glb.headers.find("content-type: model/gltf-binary"), std::string::npos);
+  absl::StatusOr<plx::testing::GlbFile> full_glb = plx::testing::ReadGlb(glb.body);
+  ASSERT_TRUE(full_glb.ok()) << full_glb.status();
+  EXPECT_EQ(full_glb->mesh.positions, m.positions);
+  EXPECT_EQ(full_glb->mesh.triangles, m.triangles);
+  EXPECT_NE(glb.headers.find(absl::StrCat("x-full-faces: ", m.num_triangles())),
+            std::string::npos)
+      << glb.headers;
+  const int64_t budget = m.num_triangles() / 10;
+  const HttpAnswer lod =
+      HttpGetAnswer(port, absl::StrCat("/viewer/api/mesh.glb?map=room&triangles=", budget));
+  ASSERT_EQ(lod.status, 200) << lod.body.substr(0, 200);
+  absl::StatusOr<plx::testing::GlbFile> lod_glb = plx::testing::ReadGlb(lod.body);
+  ASSERT_TRUE(lod_glb.ok()) << lod_glb.status();
+  EXPECT_LE(lod_glb->mesh.num_triangles(), budget);
+  EXPECT_GT(lod_glb->mesh.num_triangles(), budget / 2);
+  EXPECT_NE(lod.headers.find(absl::StrCat("x-faces: ", lod_glb->mesh.num_triangles())),
+            std::string::npos)
+      << lod.headers;
+  EXPECT_NE(lod.headers.find("x-lod-error-m: "), std::string::npos);
+  EXPECT_EQ(HttpGetAnswer(port, absl::StrCat("/viewer/api/mesh.glb?map=room&triangles=", budget))
+                .body,
+            lod.body);
+
   const HttpAnswer color = HttpGetAnswer(port, RenderQuery("room", 5, 160, 120, "color"));
   ASSERT_EQ(color.status, 200) << color.body;
   EXPECT_NE(color.headers.find("content-type: image/png"), std::string::npos);
@@ -169,6 +199,17 @@ TEST(ViewerTest, BadRequestsGet4xxAndTheDaemonGoesOn) {
   EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/points?map=").status, 400);
   EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/points?map=" + std::string(300, 'x')).status, 400);
   EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/mesh").status, 400);
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/mesh.glb").status, 400);
+  EXPECT_EQ(HttpGetAnswer(port, "/viewer/api/mesh.glb?map=nope").status, 404);
+  for (const char* triangles : {"abc", "-1", "1e3", "%2B5", "12.5", "1000001", "99999999999999",
+                                "5%20"}) {
+    const HttpAnswer a =
+        HttpGetAnswer(port, absl::StrCat("/viewer/api/mesh.glb?map=room&triangles=", triangles));
+    EXPECT_EQ(a.status, 400) << triangles << ": " << a.body;
+    EXPECT_NE(a.body.find("triangles: expected a whole number from 0 to 1000000"),
+              std::string::npos)
+        << a.body;
+  }
   EXPECT_EQ(render(size), 400);                                             // no pose
   EXPECT_EQ(render("pose=1%2C2%2C3" + size), 400);                          // 3 numbers
   EXPECT_EQ(render("pose=0%2C0%2C0%2C0%2C0%2C0%2C0" + size), 400);          // zero quaternion
@@ -393,6 +434,73 @@ TEST(ViewerMeshTest, OverTheTriangleCapIs413AndEachVersionIsBuiltOnce) {
   EXPECT_EQ(source.device_calls, 3);
   EXPECT_EQ(capped.Handle(MeshRequest("room")).status, 413);
   EXPECT_EQ(source.device_calls, 3) << "a refused version is not built again";
+}
+
+web::HttpRequest GlbRequest(const std::string& map, int64_t triangles) {
+  web::HttpRequest r;
+  r.path = "/viewer/api/mesh.glb";
+  r.params["map"] = map;
+  r.params["triangles"] = absl::StrCat(triangles);
+  return r;
+}
+
+// Levels of detail come from the version's cached mesh (no new device work), each budget is
+// built once, budgets at or above the mesh's size are the full mesh, and a mesh over the cap is
+// 413 as GLB too.
+TEST(ViewerMeshTest, LevelsOfDetailAreBuiltFromTheCachedMesh) {
+  absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(CachedRoomMapFile());
+  ASSERT_TRUE(map.ok()) << map.status();
+  absl::StatusOr<std::unique_ptr<Backend>> backend = MakeBackend(BackendKind::kCpu, 0, 2);
+  ASSERT_TRUE(backend.ok()) << backend.status();
+  CountingSource source(std::shared_ptr<const PlenoxelMap>(std::move(*map)),
+                        std::move(*backend));
+  web::Viewer viewer(&source, web::ThreeJsFiles{}, web::ViewerOptions{});
+  const web::HttpResponse full = viewer.Handle(GlbRequest("room", 0));
+  ASSERT_EQ(full.status, 200) << full.Body().substr(0, 200);
+  EXPECT_EQ(full.content_type, "model/gltf-binary");
+  const absl::StatusOr<GlbMeshInfo> full_info = ReadGlbMeshInfo(full.Body());
+  ASSERT_TRUE(full_info.ok()) << full_info.status();
+  EXPECT_EQ(source.device_calls, 1);
+  EXPECT_EQ(viewer.Handle(MeshRequest("room")).status, 200);
+  EXPECT_EQ(source.device_calls, 1) << "the PLY and the GLB share the version's mesh";
+
+  const int64_t budget = full_info->triangles / 5;
+  const web::HttpResponse lod = viewer.Handle(GlbRequest("room", budget));
+  ASSERT_EQ(lod.status, 200);
+  const absl::StatusOr<GlbMeshInfo> lod_info = ReadGlbMeshInfo(lod.Body());
+  ASSERT_TRUE(lod_info.ok()) << lod_info.status();
+  EXPECT_LE(lod_info->triangles, budget);
+  EXPECT_EQ(lod_info->full_triangles, full_info->triangles);
+  EXPECT_EQ(source.device_calls, 1);
+  // Served from the cache: the very same bytes object.
+  EXPECT_EQ(viewer.Handle(GlbRequest("room", budget)).shared_body.get(), lod.shared_body.get());
+  // A budget at or above the mesh is the full mesh, the same entry.
+  EXPECT_EQ(viewer.Handle(GlbRequest("room", full_info->triangles)).shared_body.get(),
+            full.shared_body.get());
+
+  web::ViewerOptions tight;
+  tight.max_mesh_triangles = 10;
+  web::Viewer capped(&source, web::ThreeJsFiles{}, tight);
+  EXPECT_EQ(capped.Handle(GlbRequest("room", 5)).status, 413);
+  EXPECT_EQ(capped.Handle(GlbRequest("room", 11)).status, 400) << "over the viewer's limit";
+}
+
+TEST(MapVersionCacheTest, VariantsOfAVersionAreKeptApartAndDroppedWithIt) {
+  web::MapVersionCache<int> cache(4);
+  int builds = 0;
+  auto build = [&](int value) {
+    return [&builds, value]() -> absl::StatusOr<int> {
+      ++builds;
+      return value;
+    };
+  };
+  EXPECT_EQ(**cache.Get("a", 100, 1, build(1)), 1);
+  EXPECT_EQ(**cache.Get("a", 200, 1, build(2)), 2);
+  EXPECT_EQ(**cache.Get("a", 100, 1, build(9)), 1);
+  EXPECT_EQ(builds, 2);
+  EXPECT_EQ(cache.size(), 2u);
+  EXPECT_EQ(**cache.Get("a", 100, 2, build(3)), 3);  // a new version drops both variants
+  EXPECT_EQ(cache.size(), 1u);
 }
 
 TEST(MapVersionCacheTest, KeepsTheNewestEntriesAndDropsOldVersionsAndFailures) {

@@ -1,9 +1,10 @@
-// The plenoxd map viewer. Runs on Debian's three.js r111 (the THREE global and
-// THREE.OrbitControls from its examples), loaded by index.html from the same server.
+// The plenoxd map viewer. Runs on Debian's three.js r111 (the THREE global, and
+// THREE.OrbitControls and THREE.GLTFLoader from its examples), loaded by index.html from the
+// same server.
 //
 // It polls the server's JSON (web/viewer_routes.h): the map list every 2 s, the selected map's
-// SLAM cameras and keyframes every 0.5 s, and fetches the map's point cloud or mesh (PLY, as the
-// Points / Mesh toggle says) again only when its version changed. Cameras follow OpenCV's convention (x right, y down, z forward);
+// SLAM cameras and keyframes every 0.5 s, and fetches the map's point cloud (PLY) or mesh (glTF
+// at a level of detail), as the Points / Mesh toggle says, again only when its version changed. Cameras follow OpenCV's convention (x right, y down, z forward);
 // three.js cameras look down -z with y up, so the two differ by a half turn about x.
 (function () {
   'use strict';
@@ -355,7 +356,7 @@
       showMapObject(new THREE.Points(geometry, material), info, 'points', v.count, 0);
       updateStatus();
     } catch (e) {
-      handleError(e, 'points');
+      handleError(e, mode);  // 'points' or 'mesh'
     } finally {
       state.loadingPoints = false;
     }
@@ -381,15 +382,38 @@
     }
   }
 
-  // The mesh: marching cubes on the server (/viewer/api/mesh), drawn with its vertex colours
-  // and normals under the scene's ambient and directional lights. Both sides are lit: walls
-  // are seen from inside rooms and from outside. A map over the server's triangle cap answers
-  // 413; that version is not asked for again, and the status line says why nothing shows.
+  // The mesh: marching cubes on the server, fetched as binary glTF (/viewer/api/mesh.glb) at
+  // the level of detail the "mesh detail" choice names and loaded with three.js's GLTFLoader,
+  // as a headset or any glTF client would. It is drawn with the file's own material: unlit
+  // vertex colours (the colours the cameras saw), both sides (walls are seen from inside rooms
+  // and from outside). The file's node turns the map's +Z up to glTF's +Y up; this scene is in
+  // map coordinates (the "up" choice orients the view), so that turn is undone. A map over the
+  // server's triangle cap answers 413; that version is not asked for again, and the status line
+  // says why nothing shows.
+  function parseGltf(buffer) {
+    return new Promise((resolve, reject) => {
+      new THREE.GLTFLoader().parse(buffer, '', resolve,
+                                   (e) => reject(e instanceof Error ? e : new Error(String(e))));
+    });
+  }
+
+  async function fetchGlb(params) {
+    const response = await fetch(api('mesh.glb', params), { headers: headers(),
+                                                             cache: 'no-store' });
+    if (!response.ok) {
+      let message = response.statusText;
+      try { message = (await response.json()).error || message; } catch (e) { /* not JSON */ }
+      throw new HttpError(response.status, message);
+    }
+    return { buffer: await response.arrayBuffer(), headers: response.headers };
+  }
+
   async function loadMesh(info) {
     const name = info.name;
-    let buffer;
+    const triangles = $('mesh-detail').value;
+    let answer;
     try {
-      buffer = await get(api('mesh', { map: name }), 'buffer');
+      answer = await fetchGlb({ map: name, triangles });
     } catch (e) {
       if (!(e instanceof HttpError) || e.status !== 413) throw e;
       if (name !== state.selected || state.mode !== 'mesh') return;
@@ -397,27 +421,42 @@
       setStatus('mesh: ' + e.message + ' (showing nothing; switch to points)', true);
       return;
     }
-    const ply = parsePly(buffer);
+    const gltf = await parseGltf(answer.buffer);
     if (name !== state.selected || state.mode !== 'mesh') return;
-    const v = ply.vertex || { count: 0, cols: {} };
-    const indices = ply.face ? ply.face.cols.indices : [];
-    const positions = interleave(v, ['x', 'y', 'z'], Float32Array);
-    const normals = interleave(v, ['nx', 'ny', 'nz'], Float32Array);
-    const colors = interleave(v, ['red', 'green', 'blue'], Uint8Array);
-    const geometry = new THREE.BufferGeometry();
-    geometry.setAttribute('position', new THREE.BufferAttribute(positions, 3));
-    geometry.setAttribute('normal', new THREE.BufferAttribute(normals, 3));
-    geometry.setAttribute('color', new THREE.BufferAttribute(colors, 3, true));
-    geometry.setIndex(new THREE.BufferAttribute(Uint32Array.from(indices), 1));
-    geometry.computeBoundingSphere();
-    const material = new THREE.MeshLambertMaterial({ vertexColors: THREE.VertexColors,
-                                                     side: THREE.DoubleSide });
-    showMapObject(new THREE.Mesh(geometry, material), info, 'mesh', 0, indices.length / 3);
+    let mesh = null;
+    gltf.scene.traverse((o) => { if (o.isMesh && !mesh) mesh = o; });
+    let faces = 0;
+    if (mesh) {
+      if (mesh.parent) mesh.parent.remove(mesh);
+      mesh.position.set(0, 0, 0);
+      mesh.quaternion.set(0, 0, 0, 1);  // r111 has no Quaternion.identity()
+      mesh.scale.set(1, 1, 1);
+      mesh.updateMatrix();
+      const g = mesh.geometry;
+      faces = (g.index ? g.index.count : g.getAttribute('position').count) / 3;
+      g.computeBoundingSphere();
+      body.dataset.vertices = String(g.getAttribute('position').count);
+      body.dataset.material = mesh.material.type;
+      body.dataset.vertexColors = String(Boolean(mesh.material.vertexColors));
+    }
+    body.dataset.meshFormat = 'glb';
+    body.dataset.lodTriangles = triangles;
+    body.dataset.fullFaces = answer.headers.get('X-Full-Faces') || '0';
+    body.dataset.lodErrorM = answer.headers.get('X-Lod-Error-M') || '0';
+    showMapObject(mesh, info, 'mesh', 0, faces);
     updateStatus();
   }
 
   $('point-size').addEventListener('input', () => {
     if (state.cloud && state.cloud.isPoints) state.cloud.material.size = pointSize();
+  });
+
+  // Another level of detail of the same version is fetched at once (the view stays).
+  $('mesh-detail').addEventListener('change', () => {
+    if (state.mode !== 'mesh') return;
+    state.loadedVersion = -1;
+    const current = state.maps.find((m) => m.name === state.selected);
+    if (current) maybeLoadPoints(current);
   });
 
   // Points / Mesh: the other form of the same version is fetched at once (the view stays).
@@ -635,7 +674,12 @@
     if (state.selected !== null) parts.push(state.selected);
     if (state.loadedVersion >= 0) parts.push('version ' + state.loadedVersion);
     if (state.cloud && state.cloud.isPoints) parts.push(body.dataset.points + ' points');
-    if (state.cloud && state.cloud.isMesh) parts.push(body.dataset.faces + ' triangles');
+    if (state.cloud && state.cloud.isMesh) {
+      const full = Number(body.dataset.fullFaces || 0), faces = Number(body.dataset.faces);
+      parts.push(faces + ' triangles' + (full > faces
+        ? ' of ' + full + ' (error ' + (1000 * Number(body.dataset.lodErrorM)).toFixed(1) +
+          ' mm)' : ''));
+    }
     const t = state.trajectory;
     if (t && (t.cameras.length || t.keyframes.length)) {
       parts.push((t.slam_running ? 'SLAM running: ' : 'SLAM: ') + t.cameras.length +

@@ -1,17 +1,25 @@
-// ExportMapPly (core/export/map_export.h), the PLY file `plenox export` and the daemon's Export
-// both make: for points it is the surface point export at the spec's density, for a mesh the
-// marching-cubes mesh with the spec's options encoded with the map's source, and a cancelled or
-// refused export makes no file.
+// ExportMap (core/export/map_export.h), the file `plenox export` and the daemon's Export both
+// make: for points it is the surface point export at the spec's density, for a mesh the
+// marching-cubes mesh with the spec's options encoded with the map's source as PLY or binary
+// glTF (the same mesh either way), simplified to the spec's triangle budget when it names one,
+// and a cancelled or refused export makes no file.
 #include "core/export/map_export.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
+#include <cmath>
 #include <memory>
 #include <vector>
 
 #include "core/cpu/cpu_backend.h"
+#include "core/formats/glb_mesh.h"
 #include "core/formats/ply_mesh.h"
+#include "core/math/spherical_harmonics.h"
+#include "tests/glb_reader.h"
 #include "tests/grid_fill.h"
+#include "tests/ply_mesh_reader.h"
 
 namespace plx {
 namespace {
@@ -27,12 +35,38 @@ PlenoxelMap AlternatingMap(float dense) {
   return map;
 }
 
+// A ball of radius 0.3 m at 2 cm voxels: density falling 500/m across its surface at the
+// default iso-level (50/m), grey and seen (non-zero SH): about 8500 triangles of smooth surface.
+PlenoxelMap BallMap() {
+  constexpr float kVoxel = 0.02f, kRadius = 0.3f;
+  PlenoxelMap map(kVoxel);
+  map.source = "a ball";
+  std::vector<BrickCoord> bricks;
+  for (int z = -3; z < 3; ++z) {
+    for (int y = -3; y < 3; ++y) {
+      for (int x = -3; x < 3; ++x) bricks.push_back({x, y, z});
+    }
+  }
+  EXPECT_TRUE(map.grid.AllocateBricks(bricks).ok());
+  for (int64_t slot = 0; slot < map.grid.num_bricks(); ++slot) {
+    float* d = map.grid.mutable_brick_density(slot);
+    float* sh = map.grid.mutable_brick_sh(slot);
+    for (int i = 0; i < kBrickVertices; ++i) {
+      const std::array<float, 3> p = map.grid.VertexPosition(slot, i);
+      const float r = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+      d[i] = std::max(0.0f, kDefaultMeshIsoLevel + 500.0f * (kRadius - r));
+      for (int c = 0; c < 3; ++c) sh[i * kShCoeffCount + c * kShBasisCount] = ShDcForColor(0.6f);
+    }
+  }
+  return map;
+}
+
 TEST(MapExportTest, PointsAreTheSurfacePointsAtTheSpecsDensity) {
   const PlenoxelMap map = AlternatingMap(3.0f);
   std::unique_ptr<Backend> backend = MakeCpuBackend(1);
   ExportSpec spec;
   spec.min_density = 2.0f;
-  const absl::StatusOr<MapPly> ply = ExportMapPly(spec, map, *backend);
+  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, *backend);
   ASSERT_TRUE(ply.ok()) << ply.status();
   const absl::StatusOr<PlyExport> direct = ExportSurfacePointsPly(map, 2.0f);
   ASSERT_TRUE(direct.ok()) << direct.status();
@@ -41,7 +75,7 @@ TEST(MapExportTest, PointsAreTheSurfacePointsAtTheSpecsDensity) {
   EXPECT_EQ(ply->bytes, direct->bytes);
 
   // The default threshold (5/m) is above every vertex of this map.
-  const absl::StatusOr<MapPly> by_default = ExportMapPly(ExportSpec(), map, *backend);
+  const absl::StatusOr<MapExport> by_default = ExportMap(ExportSpec(), map, *backend);
   ASSERT_TRUE(by_default.ok()) << by_default.status();
   EXPECT_EQ(by_default->vertices, 0);
 }
@@ -53,7 +87,7 @@ TEST(MapExportTest, AMeshIsTheEnginesMeshWithTheMapsSource) {
   spec.mesh = true;
   spec.mesh_options.iso_level = 5.0f;
   spec.mesh_options.keep_unobserved = true;  // the SH are 0: no view saw anything
-  const absl::StatusOr<MapPly> ply = ExportMapPly(spec, map, *backend);
+  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, *backend);
   ASSERT_TRUE(ply.ok()) << ply.status();
 
   const absl::StatusOr<TriangleMesh> mesh = ExtractMesh(map.grid, *backend, spec.mesh_options);
@@ -68,9 +102,100 @@ TEST(MapExportTest, AMeshIsTheEnginesMeshWithTheMapsSource) {
 
   // The options are the spec's: without keep_unobserved nothing is left.
   spec.mesh_options.keep_unobserved = false;
-  const absl::StatusOr<MapPly> observed_only = ExportMapPly(spec, map, *backend);
+  const absl::StatusOr<MapExport> observed_only = ExportMap(spec, map, *backend);
   ASSERT_TRUE(observed_only.ok()) << observed_only.status();
   EXPECT_EQ(observed_only->faces, 0);
+}
+
+TEST(MapExportTest, GlbIsTheSameMeshAsPly) {
+  const PlenoxelMap map = BallMap();
+  std::unique_ptr<Backend> backend = MakeCpuBackend(2);
+  ExportSpec spec;
+  spec.mesh = true;
+  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, *backend);
+  ASSERT_TRUE(ply.ok()) << ply.status();
+  spec.mesh_format = MeshFileFormat::kGlb;
+  const absl::StatusOr<MapExport> glb = ExportMap(spec, map, *backend);
+  ASSERT_TRUE(glb.ok()) << glb.status();
+  EXPECT_GT(glb->faces, 5000);
+  EXPECT_EQ(glb->faces, ply->faces);
+  EXPECT_EQ(glb->full_faces, glb->faces);
+  EXPECT_EQ(glb->lod_error_m, 0.0);
+  const absl::StatusOr<testing::PlyMeshFile> from_ply = testing::ReadPlyMesh(ply->bytes);
+  const absl::StatusOr<testing::GlbFile> from_glb = testing::ReadGlb(glb->bytes);
+  ASSERT_TRUE(from_ply.ok()) << from_ply.status();
+  ASSERT_TRUE(from_glb.ok()) << from_glb.status();
+  EXPECT_EQ(from_glb->mesh.positions, from_ply->mesh.positions);
+  EXPECT_EQ(from_glb->mesh.colors, from_ply->mesh.colors);
+  EXPECT_EQ(from_glb->mesh.triangles, from_ply->mesh.triangles);
+  EXPECT_EQ(from_glb->json["asset"]["extras"]["plenoxd"]["source"], "a ball");
+  EXPECT_EQ(from_glb->index_component_type, 5123);
+}
+
+TEST(MapExportTest, ALevelOfDetailKeepsToTheBudgetInEitherFormat) {
+  const PlenoxelMap map = BallMap();
+  std::unique_ptr<Backend> backend = MakeCpuBackend(2);
+  ExportSpec spec;
+  spec.mesh = true;
+  const absl::StatusOr<MapExport> full = ExportMap(spec, map, *backend);
+  ASSERT_TRUE(full.ok()) << full.status();
+  spec.lod_triangles = full->faces / 10;
+  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, *backend);
+  ASSERT_TRUE(ply.ok()) << ply.status();
+  EXPECT_LE(ply->faces, spec.lod_triangles);
+  EXPECT_GT(ply->faces, spec.lod_triangles * 9 / 10);
+  EXPECT_EQ(ply->full_faces, full->faces);
+  // A 2 cm-voxel ball at a tenth of its triangles (850) moves by less than half a voxel (the
+  // reported error sums the halving passes' errors, so it is the generous side).
+  EXPECT_GT(ply->lod_error_m, 0.0);
+  EXPECT_LT(ply->lod_error_m, 0.01);
+  spec.mesh_format = MeshFileFormat::kGlb;
+  const absl::StatusOr<MapExport> glb = ExportMap(spec, map, *backend);
+  ASSERT_TRUE(glb.ok()) << glb.status();
+  EXPECT_EQ(glb->faces, ply->faces);
+  EXPECT_EQ(glb->lod_error_m, ply->lod_error_m);
+  const absl::StatusOr<testing::GlbFile> file = testing::ReadGlb(glb->bytes);
+  ASSERT_TRUE(file.ok()) << file.status();
+  EXPECT_EQ(file->mesh.num_triangles(), glb->faces);
+  const nlohmann::json& extras = file->json["asset"]["extras"]["plenoxd"];
+  EXPECT_EQ(extras["full_triangles"], full->faces);
+  EXPECT_EQ(extras["lod_error_m"], glb->lod_error_m);
+  // Every vertex still lies on the ball's surface (a LOD keeps input vertices).
+  for (int64_t v = 0; v < file->mesh.num_vertices(); ++v) {
+    const float* p = &file->mesh.positions[3 * v];
+    ASSERT_NEAR(std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]), 0.3f, 0.01f);
+  }
+  // A budget at or above the mesh's size is the full mesh.
+  spec.lod_triangles = full->faces;
+  const absl::StatusOr<MapExport> same = ExportMap(spec, map, *backend);
+  ASSERT_TRUE(same.ok()) << same.status();
+  EXPECT_EQ(same->faces, full->faces);
+  EXPECT_EQ(same->lod_error_m, 0.0);
+}
+
+TEST(MapExportTest, SpecsCoreRefusesAreRefusedNamingTheField) {
+  const PlenoxelMap map = AlternatingMap(10.0f);
+  std::unique_ptr<Backend> backend = MakeCpuBackend(1);
+  struct Case {
+    ExportSpec spec;
+    const char* field;
+  };
+  std::vector<Case> cases(4);
+  cases[0].spec.mesh_format = MeshFileFormat::kGlb;  // points as glTF
+  cases[0].field = "mesh_format";
+  cases[1].spec.lod_triangles = 10;  // points at a level of detail
+  cases[1].field = "lod_triangles";
+  cases[2].spec.mesh = true;
+  cases[2].spec.lod_triangles = -1;
+  cases[2].field = "lod_triangles";
+  cases[3].spec.mesh = true;
+  cases[3].spec.lod_triangles = kMaxLodTriangles + 1;
+  cases[3].field = "lod_triangles";
+  for (const Case& c : cases) {
+    const absl::StatusOr<MapExport> r = ExportMap(c.spec, map, *backend);
+    EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument) << c.field;
+    EXPECT_NE(r.status().message().find(c.field), std::string::npos) << r.status();
+  }
 }
 
 TEST(MapExportTest, ACancelledExportOfEitherFormIsCancelled) {
@@ -80,7 +205,7 @@ TEST(MapExportTest, ACancelledExportOfEitherFormIsCancelled) {
     SCOPED_TRACE(mesh ? "mesh" : "points");
     ExportSpec spec;
     spec.mesh = mesh;
-    const absl::StatusOr<MapPly> ply = ExportMapPly(spec, map, *backend, [] { return true; });
+    const absl::StatusOr<MapExport> ply = ExportMap(spec, map, *backend, [] { return true; });
     EXPECT_EQ(ply.status().code(), absl::StatusCode::kCancelled) << ply.status();
   }
 }
@@ -91,7 +216,7 @@ TEST(MapExportTest, MeshOptionsCoreRefusesAreRefused) {
   ExportSpec spec;
   spec.mesh = true;
   spec.mesh_options.max_triangles = 0;
-  const absl::StatusOr<MapPly> ply = ExportMapPly(spec, map, *backend);
+  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, *backend);
   EXPECT_EQ(ply.status().code(), absl::StatusCode::kInvalidArgument) << ply.status();
   EXPECT_NE(ply.status().message().find("max_triangles"), std::string::npos) << ply.status();
 }
