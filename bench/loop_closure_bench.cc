@@ -1,12 +1,14 @@
 // plx_loop_closure_bench: loop closure on its own (docs/BENCHMARKS.md, "Loop closure").
 //
 //   build/bench/plx_loop_closure_bench [--width 320 --height 240 --laps 2 --iterations 30
-//                                       --yaw-drift-deg 0.35 --creep-cm 0.6 --graph-only]
+//                                       --yaw-drift-deg 0.35 --creep-cm 0.6 --graph-only
+//                                       --cases true,drift,loop,loop-unrefined]
 //
 // 1. The synthetic two-lap loop: keyframes every 0.4 s over `laps` laps of the room (12 s
 //    each), handed to a lock-step SlamCoordinator at poses that drift (each step's true
-//    motion times a yaw and a forward creep: odometry that drifts), once with loop closure and
-//    once without, and once at the true poses (the reference map). Prints per run: the last
+//    motion times a yaw and a forward creep: odometry that drifts), once with loop closure,
+//    again without the rebuild's refinement of every keyframe (loop-unrefined), once without
+//    loop closure, and once at the true poses (the reference map). Prints per run: the last
 //    keyframe's error, the keyframes' mean translation error and ATE (rigidly aligned), loops
 //    accepted and false (a loop edge more than 5 cm or 2 degrees from the truth), corrections
 //    published, the held-out frames' depth L1 and PSNR (frames halfway between keyframes, at
@@ -25,6 +27,8 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
 #include "core/cpu/cpu_backend.h"
 #include "core/eval/map_metrics.h"
 #include "core/eval/trajectory_metrics.h"
@@ -53,6 +57,9 @@ struct Flags {
   int width = 320, height = 240, laps = 2, iterations = 30;
   double yaw_drift_deg = 0.35, creep_cm = 0.6;
   bool graph_only = false;
+  // Which two-lap runs: true (true poses), drift (no loop closure), loop (loop closure),
+  // loop-unrefined (loop closure without the rebuild's refinement of every keyframe).
+  std::string cases = "true,drift,loop,loop-unrefined";
 };
 
 plx::SE3 Bias(const Flags& f) {
@@ -78,13 +85,15 @@ absl::StatusOr<RunResult> RunKeyframes(const plx::InMemoryDataset& data,
                                        const std::vector<int>& indices,
                                        const std::vector<plx::SE3>& poses,
                                        const std::vector<plx::SE3>& truth, bool loop_closure,
+                                       bool refine_rebuild,
                                        const Flags& flags, const std::vector<int>& held_out) {
   plx::SlamOptions o = plx::DefaultSlamOptions();
   o.deterministic = true;
   o.mapping.iterations_per_keyframe = flags.iterations;
   o.refinement.window = 0;  // the graph corrects the poses handed in, nothing else moves them
   o.loop_closure.enabled = loop_closure;
-  const plx::SlamSplitOptions split = plx::SplitSlamOptions(o);
+  plx::SlamSplitOptions split = plx::SplitSlamOptions(o);
+  split.mapper.rebuild_refines_all = refine_rebuild;
   std::unique_ptr<plx::Backend> backend = plx::MakeCpuBackend(0);
   plx::SlamCoordinator coordinator(split.mapper, split.gate);
   if (absl::Status s = coordinator.StartMapper(backend.get()); !s.ok()) return s;
@@ -187,15 +196,21 @@ int TwoLapLoop(const Flags& flags) {
               "ate_cm", "loops", "false", "corr", "depthL1", "psnr", "alignL1", "apsnr",
               "secs");
   struct Case {
+    const char* key;
     const char* name;
     const std::vector<plx::SE3>* poses;
     bool loop_closure;
+    bool refine_rebuild;
   };
-  for (const Case& c : {Case{"true poses", &truth, false},
-                        Case{"drift, no loop closure", &drifted, false},
-                        Case{"drift, loop closure", &drifted, true}}) {
-    absl::StatusOr<RunResult> r =
-        RunKeyframes(*data, indices, *c.poses, truth, c.loop_closure, flags, held_out);
+  for (const Case& c : {Case{"true", "true poses", &truth, false, true},
+                        Case{"drift", "drift, no loop closure", &drifted, false, true},
+                        Case{"loop", "drift, loop closure", &drifted, true, true},
+                        Case{"loop-unrefined", "drift, LC, unrefined", &drifted, true, false}}) {
+    if (!absl::StrContains(absl::StrCat(",", flags.cases, ","), absl::StrCat(",", c.key, ","))) {
+      continue;
+    }
+    absl::StatusOr<RunResult> r = RunKeyframes(*data, indices, *c.poses, truth, c.loop_closure,
+                                               c.refine_rebuild, flags, held_out);
     if (!r.ok()) {
       std::fprintf(stderr, "%s: %s\n", c.name, r.status().ToString().c_str());
       return 1;
@@ -329,6 +344,7 @@ int main(int argc, char** argv) {
     else if (flag == "--iterations") flags.iterations = std::atoi(value);
     else if (flag == "--yaw-drift-deg") flags.yaw_drift_deg = std::atof(value);
     else if (flag == "--creep-cm") flags.creep_cm = std::atof(value);
+    else if (flag == "--cases") flags.cases = value;
     else {
       std::fprintf(stderr, "unknown flag %s\n", flag.c_str());
       return 2;

@@ -16,6 +16,7 @@ const char* MeshFieldSetOnPoints(const pb::ExportRequest& request) {
   if (request.keep_unobserved()) return "keep_unobserved";
   if (request.mesh_color() != 0) return "mesh_color";
   if (request.lod_triangles() != 0) return "lod_triangles";
+  if (request.has_region()) return "region";
   return nullptr;
 }
 
@@ -52,6 +53,11 @@ absl::StatusOr<MeshOptions> MeshOptionsFromProto(const pb::ExportRequest& reques
   o.color_mode = request.mesh_color() == pb::MESH_COLOR_ALONG_NORMAL
                      ? MeshColorMode::kViewAlongNormal
                      : MeshColorMode::kDc;
+  if (request.has_region()) {
+    const pb::BoundingBox& r = request.region();
+    o.region = AxisBox{{r.min_x(), r.min_y(), r.min_z()}, {r.max_x(), r.max_y(), r.max_z()}};
+  }
+  // Names "region: ..." for a box that is not finite or has min >= max on an axis.
   if (absl::Status s = ValidateMeshOptions(o); !s.ok()) return s;
   return o;
 }
@@ -112,6 +118,15 @@ pb::ExportRequest ExportSpecToProto(const ExportSpec& spec) {
                              ? pb::MESH_COLOR_ALONG_NORMAL
                              : pb::MESH_COLOR_DC);
   request.set_lod_triangles(static_cast<uint64_t>(spec.lod_triangles));
+  if (o.region) {
+    pb::BoundingBox* r = request.mutable_region();
+    r->set_min_x(o.region->min[0]);
+    r->set_min_y(o.region->min[1]);
+    r->set_min_z(o.region->min[2]);
+    r->set_max_x(o.region->max[0]);
+    r->set_max_y(o.region->max[1]);
+    r->set_max_z(o.region->max[2]);
+  }
   return request;
 }
 

@@ -16,8 +16,9 @@ namespace plx {
 // not finite, a field of the other format set (a mesh field, lod_triangles included, on
 // POINTS; min_density on a mesh), max_triangles or min_component_triangles over
 // kDefaultMaxMeshTriangles, lod_triangles over kMaxLodTriangles, or mesh options that
-// ValidateMeshOptions refuses. The map name is
-// not read here (the caller checks it).
+// ValidateMeshOptions refuses (a region that is not finite or has min >= max on an axis:
+// "region: ..."). A region becomes MeshOptions::region. The map name is not read here (the
+// caller checks it).
 absl::StatusOr<ExportSpec> ExportSpecFromProto(const pb::ExportRequest& request);
 
 // The inverse: the format and that format's fields, sent as they are (a spec holds resolved

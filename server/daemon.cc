@@ -4,15 +4,21 @@
 #include <grpcpp/health_check_service_interface.h>
 #include <grpcpp/server_builder.h>
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <climits>
 #include <filesystem>
 #include <memory>
 #include <optional>
+#include <random>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "core/common/status_macros.h"
 #include "core/cpu/cpu_backend.h"
+#include "core/storage/directory_storage.h"
 #include "server/daemon_viewer_source.h"
 #include "server/log.h"
 #include "server/secret_files.h"
@@ -46,6 +52,16 @@ class ReflectionOption final : public grpc::ServerBuilderOption {
  private:
   bool enabled_;
 };
+
+// This process's lease holder id (core/storage/lease_policy.h): host, pid and 64 random bits,
+// so a restarted daemon that got the same pid is still another holder.
+std::string NewHolderId() {
+  char host[HOST_NAME_MAX + 1] = {};
+  if (::gethostname(host, sizeof(host) - 1) != 0) host[0] = '\0';
+  std::random_device random;
+  const uint64_t bits = (uint64_t{random()} << 32) ^ random();
+  return MakeHolderId(host, ::getpid(), bits);
+}
 
 // The compute workers of DaemonOptions::backend / gpus, each with its own backend and queue.
 absl::StatusOr<std::vector<std::unique_ptr<DeviceWorker>>> MakeWorkers(const DaemonOptions& o) {
@@ -144,20 +160,44 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   absl::StatusOr<std::vector<std::unique_ptr<DeviceWorker>>> workers = MakeWorkers(options);
   if (!workers.ok()) return workers.status();
   d->workers_ = std::make_unique<WorkerPool>(std::move(*workers));
-  if (!options.data_dir.empty()) {
-    std::error_code ec;
-    std::filesystem::create_directories(options.data_dir, ec);
-    if (ec) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("--data-dir ", options.data_dir, ": ", ec.message()));
-    }
+  if (!options.data_dir.empty() && !options.shared_dir.empty()) {
+    return absl::InvalidArgumentError("--data-dir and --shared-dir: give one of them");
   }
+  const auto make_dir = [](const char* flag, const std::string& dir) -> absl::Status {
+    std::error_code ec;
+    if (!dir.empty()) std::filesystem::create_directories(dir, ec);
+    if (ec) return absl::InvalidArgumentError(absl::StrCat(flag, " ", dir, ": ", ec.message()));
+    return absl::OkStatus();
+  };
+  PLX_RETURN_IF_ERROR(make_dir("--data-dir", options.data_dir));
+  PLX_RETURN_IF_ERROR(make_dir("--shared-dir", options.shared_dir));
   MapStoreOptions store;
   store.data_dir = options.data_dir;
   store.max_maps = options.max_maps;
   store.max_map_bytes = options.max_map_bytes;
   store.test_only_save_delay = options.test_only_save_delay;
+  std::shared_ptr<DirectoryMapStorage> shared;
+  if (!options.shared_dir.empty()) {
+    if (options.lease_term <= absl::ZeroDuration()) {
+      return absl::InvalidArgumentError("--lease-seconds: must be above 0");
+    }
+    store.holder = NewHolderId();
+    store.lease = LeaseTermsFor(options.lease_term);
+    shared = std::make_shared<DirectoryMapStorage>(
+        DirectoryStorageOptions{options.shared_dir, absl::Seconds(10), store.holder});
+    store.shared = shared;
+  }
   d->maps_ = std::make_unique<MapStore>(store);
+  if (shared != nullptr) {
+    // Staging files of writers that died between writing and publishing; an hour is far
+    // longer than any save, and a live writer's file changes as it is written.
+    for (const StaleTempFile& stale : shared->RemoveStaleStaging(absl::Hours(1), absl::Now())) {
+      LogEvent(stale.removed.ok() ? "info" : "warning",
+               stale.removed.ok() ? "stale_staging_removed" : "stale_staging_not_removed",
+               {{"path", stale.path}, {"reason", std::string(stale.removed.message())}});
+    }
+    d->leases_ = std::make_unique<LeaseKeeper>(d->maps_.get(), store.lease.renew_every);
+  }
   // Temporaries of saves a crash interrupted are never read again: remove them (and say so).
   for (const StaleTempFile& stale : d->maps_->RemoveStaleTempFiles()) {
     if (stale.removed.ok()) {
@@ -192,7 +232,8 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
   d->state_.config.backend = BackendKindText(options.backend);
   d->state_.config.cuda_built = BuiltWithCuda();
   d->service_ = std::make_unique<PlenoxdService>(&d->state_);
-  if (options.snapshot_interval > absl::ZeroDuration() && !options.data_dir.empty()) {
+  if (options.snapshot_interval > absl::ZeroDuration() &&
+      (!options.data_dir.empty() || !options.shared_dir.empty())) {
     // Background work by nature: its thread yields the CPU to tracking like the mapping
     // worker's (nice is best effort, as there).
     d->snapshot_worker_ = std::make_unique<DeviceWorker>(
@@ -261,7 +302,12 @@ absl::StatusOr<std::unique_ptr<Daemon>> Daemon::Start(const DaemonOptions& optio
             {"viewer", options.viewer ? "on" : "off"},
             {"snapshot_s", d->snapshots_ != nullptr
                                ? absl::StrCat(absl::ToDoubleSeconds(options.snapshot_interval))
-                               : "off"}});
+                               : "off"},
+            {"shared_dir", options.shared_dir.empty() ? "off" : options.shared_dir},
+            {"lease_holder", store.holder},
+            {"lease_s", options.shared_dir.empty()
+                            ? "off"
+                            : absl::StrCat(absl::ToDoubleSeconds(options.lease_term))}});
   return d;
 }
 
@@ -276,6 +322,9 @@ std::string Daemon::RenderMetrics() const {
   const absl::Time oldest = maps_->OldestUnsavedChange();
   g.unsaved_s =
       oldest == absl::InfiniteFuture() ? 0.0 : absl::ToDoubleSeconds(absl::Now() - oldest);
+  g.leases_held = maps_->leases_held();
+  g.lease_losses = maps_->lease_losses();
+  g.fenced_saves_refused = maps_->fenced_saves_refused();
   for (const std::shared_ptr<SlamJob>& job : slam_jobs_->Running()) {
     const SlamJobStatus s = job->Status();
     ++g.slam_jobs;
@@ -331,6 +380,13 @@ absl::Status Daemon::Drain(absl::Duration grace) {
     LogEvent("error", "map_not_saved",
              {{"map", map.name}, {"reason", std::string(map.reason.message())}});
     names.push_back(map.name);
+  }
+  // Shared storage: the saves above needed live leases; now they are given up, so another
+  // daemon takes the maps at once instead of after their expiry.
+  if (leases_ != nullptr) leases_->Stop();
+  for (const MapLeaseEvent& event : maps_->ReleaseLeases()) {
+    LogEvent("warning", "lease_not_released",
+             {{"map", event.name}, {"reason", std::string(event.status.message())}});
   }
   http_.reset();
   LogEvent(unsaved.empty() ? "info" : "error", "stopped",

@@ -14,7 +14,9 @@
 #include "absl/time/time.h"
 #include "app/make_backend.h"
 #include "core/formats/snapshot_policy.h"
+#include "core/storage/lease_policy.h"
 #include "server/daemon_state.h"
+#include "server/lease_keeper.h"
 #include "server/metrics.h"
 #include "server/plenoxd_service.h"
 #include "server/slam_job.h"
@@ -34,6 +36,11 @@ namespace plx::server {
 struct DaemonOptions {
   std::string listen = "127.0.0.1:50051";  // host:port; port 0 picks a free one
   std::string data_dir;                    // maps are loaded from and saved to here
+  // Shared map storage instead of data_dir (one of the two): a directory on a volume several
+  // daemons mount. Maps are loaded when a call names them and written only under their lease
+  // (server/map_store.h, core/storage/lease_policy.h), which lasts lease_term.
+  std::string shared_dir;
+  absl::Duration lease_term = absl::Seconds(kDefaultLeaseSeconds);
   // Maps with unsaved changes are saved in the background once their oldest unsaved change is
   // this old (server/snapshot_scheduler.h; needs data_dir). Zero: only SaveMap and the drain
   // save.
@@ -107,6 +114,7 @@ class Daemon {
   // to it, destroyed first.
   std::unique_ptr<DeviceWorker> snapshot_worker_;
   std::unique_ptr<SnapshotScheduler> snapshots_;
+  std::unique_ptr<LeaseKeeper> leases_;  // --shared-dir: renews the maps' leases
   DaemonState state_;
   // Destroyed before the state and the workers it uses (a job detaches from its worker).
   std::unique_ptr<SlamJobs> slam_jobs_;

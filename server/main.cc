@@ -43,11 +43,21 @@ int main(int argc, char** argv) {
   flags.Add("listen", "HOST:PORT", "address to serve on (0.0.0.0:PORT for all interfaces)",
             "127.0.0.1:50051")
       .Add("data-dir", "DIR", "maps are loaded from and saved to DIR/<name>.plx")
+      .Add("shared-dir", "DIR",
+           "instead of --data-dir: maps live in DIR on a volume several daemons share; a call "
+           "naming a map this daemon does not hold loads it from DIR, and a map is written only "
+           "by the daemon holding its lease (fencing token checked at every save; "
+           "deploy/README.md)")
+      .Add("lease-seconds", "S",
+           "with --shared-dir: a map's lease lasts S seconds, renewed every S/3; a daemon that "
+           "stops renewing loses its maps to another after S, and writes none of them after "
+           "S*3/4 without a renewal",
+           "15")
       .Add("snapshot-seconds", "S",
            "save a map with unsaved changes in the background once its oldest unsaved change "
            "is S seconds old (a published version, copy-on-write, written atomically; with "
-           "--data-dir): kill -9 loses at most about S seconds of mapping; 0 = only SaveMap "
-           "and SIGTERM save",
+           "--data-dir or --shared-dir): kill -9 loses at most about S seconds of mapping; "
+           "0 = only SaveMap and SIGTERM save",
            "30")
       .Add("auth-token-file", "F",
            "require 'authorization: Bearer <token>' with the token in F (printable ASCII, no "
@@ -131,14 +141,23 @@ int main(int argc, char** argv) {
   auto drain = flags.GetDouble("drain-seconds", 0.0, 3600.0);
   auto snapshot = flags.GetDouble("snapshot-seconds", 0.0, 86400.0);
   auto stop_grace = flags.GetDouble("stop-grace-seconds", 0.0, 86400.0);
+  auto lease = flags.GetDouble("lease-seconds", 0.5, 3600.0);
   for (const absl::Status& s : {metrics_port.status(), max_maps.status(), max_map_mb.status(),
                                 max_streams.status(), max_message_mb.status(),
                                 max_frame_pixels.status(), max_render_pixels.status(),
                                 threads.status(), mapping_nice.status(), drain.status(),
-                                stop_grace.status(), snapshot.status()}) {
+                                stop_grace.status(), snapshot.status(), lease.status()}) {
     if (!s.ok()) return Usage(s);
   }
   options.metrics_port = *metrics_port;
+  options.shared_dir = flags.GetString("shared-dir");
+  if (!options.data_dir.empty() && !options.shared_dir.empty()) {
+    return Usage(absl::InvalidArgumentError("--data-dir and --shared-dir: give one of them"));
+  }
+  if (flags.IsSet("lease-seconds") && options.shared_dir.empty()) {
+    return Usage(absl::InvalidArgumentError("--lease-seconds only applies with --shared-dir"));
+  }
+  options.lease_term = absl::Seconds(*lease);
   options.snapshot_interval = absl::Seconds(*snapshot);
   if (options.viewer && options.metrics_port < 0) {
     return Usage(absl::InvalidArgumentError(

@@ -11,10 +11,20 @@
 // delete wait for each other), so two saves never share the atomic writer's temporary.
 // Snapshots (server/snapshot_scheduler.h) are saves the store picks by core's rule
 // (core/formats/snapshot_policy.h): ClaimDueSnapshots, then Snapshot or ReleaseSnapshot.
+//
+// Shared storage (plenoxd --shared-dir, core/storage/map_storage.h) instead of a data dir: no
+// map is loaded at start; a call that names a map the store does not hold (Info, Latest,
+// BeginMapping, Delete) loads it from the storage first, and every map the store holds, made
+// or loaded, is held under its lease (core/storage/lease_policy.h), renewed by RenewLeases
+// (server/lease_keeper.h). Every save is a fenced write: the lease is checked against the
+// token the map was taken under when the file is published, so a store whose lease was taken
+// over writes nothing; it then drops the map, and calls naming it get the error that names
+// the new owner's generation until the store can take the lease again.
 #pragma once
 
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -23,12 +33,15 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "absl/time/clock.h"
 #include "absl/time/time.h"
+#include "core/formats/map_file.h"
 #include "core/formats/map_keyframe.h"
 #include "core/formats/snapshot_policy.h"
 #include "core/grid/map_status.h"
 #include "core/grid/plenoxel_map.h"
 #include "core/io/atomic_write.h"
+#include "core/storage/map_storage.h"
 
 namespace plx::server {
 
@@ -39,6 +52,21 @@ struct MapStoreOptions {
   // TEST ONLY (the stop watchdog's test, via $PLENOXD_TEST_ONLY_SAVE_DELAY_S in main.cc): every
   // save first sleeps this long, a save stuck on a hung file system. Zero in production.
   absl::Duration test_only_save_delay = absl::ZeroDuration();
+  // Shared storage instead of data_dir (which is then empty); null: none. `holder` is this
+  // store's lease holder id (MakeHolderId), `lease` the lease's terms, `clock` what lease
+  // decisions read (tests move it by hand).
+  std::shared_ptr<MapStorage> shared;
+  std::string holder;
+  LeaseTerms lease;
+  std::function<absl::Time()> clock = [] { return absl::Now(); };
+};
+
+// A map whose lease could not be renewed (RenewLeases) or given back (ReleaseLeases); `lost`:
+// another store took it over and this one dropped the map.
+struct MapLeaseEvent {
+  std::string name;
+  absl::Status status;
+  bool lost = false;
 };
 
 // Maps are listed as core's MapStatus (core/grid/map_status.h).
@@ -82,9 +110,10 @@ class MapStore {
   std::vector<StaleTempFile> RemoveStaleTempFiles();
 
   absl::StatusOr<MapStatus> Create(const std::string& name, float voxel_size);
-  absl::StatusOr<MapStatus> Info(const std::string& name) const;
+  // Info and Latest load a map in shared storage that the store does not hold (see above).
+  absl::StatusOr<MapStatus> Info(const std::string& name);
   std::vector<MapStatus> List() const;
-  absl::StatusOr<MapVersion> Latest(const std::string& name) const;
+  absl::StatusOr<MapVersion> Latest(const std::string& name);
   // Forgets the map and removes the file this store loaded it from or last saved it to (no
   // other: a file of the same name the store never read stays). When that file cannot be
   // removed the map is kept and the error returned, so it does not come back at the next start
@@ -93,8 +122,9 @@ class MapStore {
   // Saves the newest version with its keyframes and version number (waiting for a save of the
   // map that is running first).
   absl::StatusOr<MapStatus> Save(const std::string& name);
-  // Loads <data_dir>/<name>.plx; RESOURCE_EXHAUSTED before reading the payload when its header
-  // says it needs more than max_map_bytes, or when the store is full.
+  // Loads <data_dir>/<name>.plx (shared: the stored map, after taking its lease);
+  // RESOURCE_EXHAUSTED before reading the payload when its header says it needs more than
+  // max_map_bytes, or when the store is full.
   absl::StatusOr<MapStatus> Load(const std::string& name);
   // Saves every dirty map (drain), trying them all; returns those that could not be saved.
   std::vector<UnsavedMap> SaveDirty();
@@ -133,6 +163,20 @@ class MapStore {
   int64_t TotalBytes() const;
   int size() const;
 
+  // Shared storage. Renews the lease of every map held (the lease keeper calls it every
+  // LeaseTerms::renew_every); maps whose lease was taken over are dropped. Returns the maps
+  // whose renewal failed.
+  std::vector<MapLeaseEvent> RenewLeases();
+  // Gives every lease up (the drain, after its save): another daemon may take the maps at
+  // once. Nothing is written after it. Returns the maps whose lease could not be given back.
+  std::vector<MapLeaseEvent> ReleaseLeases();
+  bool shared() const { return options_.shared != nullptr; }
+  int leases_held() const;
+  // Maps dropped because another store took their lease over, and saves refused because the
+  // lease they were written under was no longer this store's (nothing was published).
+  int64_t lease_losses() const;
+  int64_t fenced_saves_refused() const;
+
  private:
   struct Entry {
     std::shared_ptr<const PlenoxelMap> map;
@@ -144,6 +188,16 @@ class MapStore {
     bool mapping = false;
     MappingJobKind mapping_kind = MappingJobKind::kIntegrate;  // when `mapping`
     std::string file;  // the file this store loaded the map from or saved it to; empty: none
+    uint64_t lease_token = 0;  // shared storage: the fencing token the map is held under
+    // Not OK: the lease was taken over while a mapping job held the map; every call gets this
+    // until the job ends (EndMapping), then the entry goes.
+    absl::Status lost;
+  };
+  // A map file read, before it joins the store.
+  struct LoadedFile {
+    std::shared_ptr<const PlenoxelMap> map;
+    std::shared_ptr<const MapKeyframes> keyframes;
+    uint64_t saved_version = 0;
   };
   MapStatus StatusOf(const std::string& name, const Entry& e) const;
   // A map's file is touched by one operation at a time (save, snapshot, load, delete): a turn
@@ -166,12 +220,31 @@ class MapStore {
   std::string PathOf(const std::string& name) const;
   absl::StatusOr<Entry*> Find(const std::string& name);
   absl::StatusOr<const Entry*> Find(const std::string& name) const;
+  // Why a name is not held: the lease loss that dropped it, or NotFound.
+  absl::Status Missing(const std::string& name) const;
+  absl::Status FullError() const;
+  absl::StatusOr<LoadedFile> ReadFile(const std::string& path) const;
+  // Puts a file read into the store (mutex_ held): a new entry, or the held one replaced.
+  absl::StatusOr<MapStatus> Install(const std::string& name, LoadedFile file,
+                                    const std::string& path, uint64_t lease_token);
+  // Shared storage: loads `name` if it is stored and not held (OK when it is not stored:
+  // the caller's lookup then says so).
+  absl::Status HoldShared(const std::string& name);
+  absl::StatusOr<MapStatus> LoadShared(const std::string& name, bool only_if_absent);
+  absl::Status SaveShared(const std::string& name, uint64_t token, const PlenoxelMap& map,
+                          const MapFileState& state);
+  // The lease of `name` was taken over (mutex_ held): the map goes (or, while a mapping job
+  // holds it, turns into a tombstone) and `why` answers calls naming it.
+  void DropLost(const std::string& name, const absl::Status& why);
 
   MapStoreOptions options_;
   mutable std::mutex mutex_;
   std::map<std::string, Entry> maps_;
   std::set<std::string> file_busy_;    // names whose file an operation is working on
   std::condition_variable file_free_;  // one of them was given back
+  std::map<std::string, absl::Status> lost_;  // maps dropped by DropLost, and why
+  int64_t lease_losses_ = 0;
+  int64_t fenced_saves_refused_ = 0;
 };
 
 }  // namespace plx::server

@@ -152,6 +152,13 @@ std::string Metrics::Render(const Gauges& g) const {
           snapshot_failures.load());
   snapshot_latency_.Render("plenoxd_snapshot_seconds", "Time a snapshot took to write its file.",
                            &out);
+  gauge("plenoxd_leases_held", "Maps held under a lease in shared storage (--shared-dir).",
+        g.leases_held);
+  counter("plenoxd_lease_losses_total",
+          "Maps dropped because another daemon took their lease over.", g.lease_losses);
+  counter("plenoxd_fenced_saves_refused_total",
+          "Saves refused because the map's lease had passed to another daemon (nothing written).",
+          g.fenced_saves_refused);
   // The HTTP port's bounds at work: a rising refusal or timeout count is a client (or an
   // attacker) the port turned away.
   gauge("plenoxd_http_connections_open", "Open connections to the metrics/viewer port.",

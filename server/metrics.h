@@ -72,6 +72,11 @@ class Metrics {
     // lose now (bounded by --snapshot-seconds plus a save).
     int64_t unsaved_maps = 0;
     double unsaved_s = 0.0;
+    // Shared storage (--shared-dir): maps held under a lease, maps dropped because another
+    // daemon took their lease over, and saves the fence refused (nothing was written).
+    int64_t leases_held = 0;
+    int64_t lease_losses = 0;
+    int64_t fenced_saves_refused = 0;
     // One per compute worker: plenoxd_device_info{device, kind, name} 1 and, per device, the
     // tasks queued or running and the streams bound to it.
     struct Device {

@@ -21,10 +21,10 @@ namespace plx::web {
 
 // The newest `entries` results of a build per (map name, variant, version); the results for an
 // older version of a map (any variant) are dropped when a newer one is built. A variant tells
-// results of one version apart (the mesh's levels of detail: its triangle budget); most caches
-// have one (0). Thread-safe; builds run one at a time (the mutex is held while one runs, so a
-// second page asking for the same version waits and then finds it). A failed build is not kept:
-// the next request tries again.
+// results of one version apart (the mesh's levels of detail: its triangle budget, and a region's
+// box with its budget); most caches have one (0). Thread-safe; builds run one at a time (the
+// mutex is held while one runs, so a second page asking for the same version waits and then
+// finds it). A failed build is not kept: the next request tries again.
 template <typename T>
 class MapVersionCache {
  public:
@@ -39,6 +39,13 @@ class MapVersionCache {
 
   absl::StatusOr<std::shared_ptr<const T>> Get(const std::string& name, int64_t variant,
                                                uint64_t version, const Build& build) {
+    return Get(name, std::to_string(variant), version, build);
+  }
+
+  // A variant named by text (a mesh region and its budget).
+  absl::StatusOr<std::shared_ptr<const T>> Get(const std::string& name,
+                                               const std::string& variant, uint64_t version,
+                                               const Build& build) {
     std::lock_guard<std::mutex> lock(mutex_);
     for (auto it = entries_.begin(); it != entries_.end(); ++it) {
       if (it->name == name && it->variant == variant && it->version == version) {
@@ -64,7 +71,7 @@ class MapVersionCache {
  private:
   struct Entry {
     std::string name;
-    int64_t variant = 0;
+    std::string variant;
     uint64_t version = 0;
     std::shared_ptr<const T> value;
   };

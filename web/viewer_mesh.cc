@@ -4,6 +4,7 @@
 
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "core/formats/glb_mesh.h"
 #include "core/formats/ply_mesh.h"
 #include "core/mesh/iso_surface.h"
@@ -12,13 +13,16 @@
 namespace plx::web {
 
 absl::StatusOr<ViewerMesh> BuildViewerMesh(ViewerSource& source, const ViewerMap& map,
-                                           int64_t max_triangles, absl::Duration timeout) {
+                                           int64_t max_triangles, absl::Duration timeout,
+                                           const std::optional<AxisBox>& region) {
   if (max_triangles <= 0) {
     return absl::InvalidArgumentError(
         absl::StrCat("max_mesh_triangles: must be > 0, got ", max_triangles));
   }
   MeshOptions options;  // the Export RPC's defaults: iso-level 50/m, DC colours, seen faces
   options.max_triangles = max_triangles;
+  options.region = region;
+  if (absl::Status s = ValidateMeshOptions(options); !s.ok()) return s;
   absl::StatusOr<TriangleMesh> mesh = absl::UnknownError("not built");
   const absl::Status ran = source.RunOnDevice(
       [&](Backend& backend, const std::function<bool()>& cancelled) {
@@ -35,18 +39,20 @@ absl::StatusOr<ViewerMesh> BuildViewerMesh(ViewerSource& source, const ViewerMap
     if (absl::IsResourceExhausted(ran) &&
         absl::StartsWith(ran.message(), "the mesh has more than")) {
       out.too_large = absl::StrCat(
-          "the mesh of this map version has more than ", max_triangles,
-          " triangles, the viewer's limit; export it instead (plenox export --mesh)");
+          "the mesh of this ", region ? "region of the " : "", "map version has more than ",
+          max_triangles, " triangles, the viewer's limit; ",
+          region ? "ask for a smaller box or " : "", "export it instead (plenox export --mesh)");
       return out;
     }
     return ran;
   }
-  absl::StatusOr<PlyMesh> ply = EncodePlyMesh(*mesh, map.map->source);
+  absl::StatusOr<PlyMesh> ply = EncodePlyMesh(*mesh, map.map->source, region);
   if (!ply.ok()) return ply.status();
   out.ply = std::move(ply->bytes);
   out.vertices = ply->vertices;
   out.faces = ply->faces;
   out.mesh = std::move(*mesh);
+  out.region = region;
   return out;
 }
 
@@ -61,6 +67,7 @@ absl::StatusOr<ViewerGlb> BuildViewerGlb(const ViewerMesh& mesh, const std::stri
   GlbMeshMetadata metadata;
   metadata.source = source_text;
   metadata.full_triangles = out.full_faces;
+  metadata.region = mesh.region;
   absl::StatusOr<GlbMesh> glb = absl::UnknownError("not written");
   if (triangles <= 0 || triangles >= out.full_faces) {
     glb = EncodeGlbMesh(mesh.mesh, metadata);
@@ -97,6 +104,22 @@ absl::StatusOr<std::shared_ptr<const ViewerGlb>> MeshCache::GetGlb(ViewerSource&
   const int64_t variant = triangles <= 0 || triangles >= full ? 0 : triangles;
   return glb_cache_.Get(name, variant, map.version, [&] {
     return BuildViewerGlb(**mesh, map.map->source, variant);
+  });
+}
+
+absl::StatusOr<std::shared_ptr<const ViewerGlb>> MeshCache::GetRegionGlb(
+    ViewerSource& source, const std::string& name, const ViewerMap& map, int64_t triangles,
+    const AxisBox& region) {
+  // Exact coordinates (17 digits), so two boxes share an entry only when they are the same.
+  const std::string variant = absl::StrFormat(
+      "region %.17g %.17g %.17g %.17g %.17g %.17g, %d triangles", region.min[0], region.min[1],
+      region.min[2], region.max[0], region.max[1], region.max[2], triangles);
+  return glb_cache_.Get(name, variant, map.version,
+                        [&]() -> absl::StatusOr<ViewerGlb> {
+    absl::StatusOr<ViewerMesh> mesh =
+        BuildViewerMesh(source, map, max_triangles_, timeout_, region);
+    if (!mesh.ok()) return mesh.status();
+    return BuildViewerGlb(*mesh, map.map->source, triangles);
   });
 }
 

@@ -9,15 +9,18 @@
 // within ~10% of the smallest form that carries normals and colours, and it is the very file
 // Export MESH gives: a saved answer opens in MeshLab or Blender, and tests check it with the
 // same reader as the export's. The GLB answer is the file Export MESH_GLB gives with
-// lod_triangles: what the page loads through three.js's GLTFLoader, and what a headset fetches.
+// lod_triangles: what the page loads through three.js's GLTFLoader, and what a headset fetches,
+// of the whole map or of a box of it (Export's region, built for that box alone).
 #pragma once
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
+#include "core/geometry/axis_box.h"
 #include "core/geometry/triangle_mesh.h"
 #include "web/point_cloud_cache.h"
 #include "web/viewer_source.h"
@@ -29,6 +32,7 @@ struct ViewerMesh {
   int64_t vertices = 0;
   int64_t faces = 0;
   TriangleMesh mesh;      // what `ply` holds: the source of the levels of detail
+  std::optional<AxisBox> region;  // the box it was cut to (MeshOptions::region); unset: all
   // Set when the map's mesh has more triangles than the cap: the message the page shows (HTTP
   // 413). Kept in the cache like a mesh, so asking again for that version costs nothing.
   std::string too_large;
@@ -44,14 +48,16 @@ struct ViewerGlb {
   std::string too_large;     // the full mesh's refusal, as ViewerMesh's
 };
 
-// Builds `map`'s mesh on `source`'s device within `timeout`. A mesh over `max_triangles` is a
-// ViewerMesh with too_large set, not an error; errors are the device's (DEADLINE_EXCEEDED,
-// UNAVAILABLE while the daemon drains, RESOURCE_EXHAUSTED when out of memory).
+// Builds `map`'s mesh (of `region` only, when given: only its bricks are meshed) on `source`'s
+// device within `timeout`. A mesh over `max_triangles` is a ViewerMesh with too_large set, not
+// an error; errors are the device's (DEADLINE_EXCEEDED, UNAVAILABLE while the daemon drains,
+// RESOURCE_EXHAUSTED when out of memory).
 absl::StatusOr<ViewerMesh> BuildViewerMesh(ViewerSource& source, const ViewerMap& map,
-                                           int64_t max_triangles, absl::Duration timeout);
+                                           int64_t max_triangles, absl::Duration timeout,
+                                           const std::optional<AxisBox>& region = std::nullopt);
 
 // `mesh` as GLB, simplified to at most `triangles` (0 or at least the mesh's count: the full
-// mesh). Runs on the calling thread (meshoptimizer on the CPU).
+// mesh), recording the mesh's region. Runs on the calling thread (meshoptimizer on the CPU).
 absl::StatusOr<ViewerGlb> BuildViewerGlb(const ViewerMesh& mesh, const std::string& source_text,
                                          int64_t triangles);
 
@@ -61,8 +67,8 @@ class MeshCache {
   // as many vertices) and as much again for the mesh it was written from, 54 MB at the viewer's
   // default cap.
   static constexpr size_t kEntries = 2;
-  // Levels of detail kept (a page and a headset asking for different budgets): each at most
-  // about max_triangles * 26 bytes of GLB.
+  // Levels of detail and regions kept (a page and a headset asking for different budgets or
+  // rooms): each at most about max_triangles * 26 bytes of GLB.
   static constexpr size_t kGlbEntries = 2;
 
   MeshCache(int64_t max_triangles, absl::Duration timeout)
@@ -78,6 +84,16 @@ class MeshCache {
   absl::StatusOr<std::shared_ptr<const ViewerGlb>> GetGlb(ViewerSource& source,
                                                           const std::string& name,
                                                           const ViewerMap& map, int64_t triangles);
+
+  // The mesh of `region` of the map as GLB at `triangles`: built on the device for the region
+  // alone (a map whose whole mesh is over the cap may still have a room under it), capped at
+  // max_triangles like the whole map's, and kept in the levels' cache per (region, budget),
+  // so a headset polling its room costs one build per map version.
+  absl::StatusOr<std::shared_ptr<const ViewerGlb>> GetRegionGlb(ViewerSource& source,
+                                                                const std::string& name,
+                                                                const ViewerMap& map,
+                                                                int64_t triangles,
+                                                                const AxisBox& region);
 
  private:
   const int64_t max_triangles_;

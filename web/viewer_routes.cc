@@ -1,12 +1,16 @@
 #include "web/viewer_routes.h"
 
 #include <algorithm>
+#include <optional>
 #include <utility>
+#include <vector>
 
 #include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
 #include "core/formats/glb_mesh.h"
+#include "core/geometry/axis_box.h"
 #include "core/render/render_view.h"
 #include "web/json_writer.h"
 #include "web/viewer_assets.h"
@@ -228,15 +232,38 @@ absl::StatusOr<int64_t> ParseTriangleBudget(const HttpRequest& request, int64_t 
   return triangles;
 }
 
+// The region a mesh.glb request asks for: `bbox` = "xmin,ymin,zmin,xmax,ymax,zmax" (metres, map
+// coordinates; as `plenox export --bbox` takes it), absent for the whole map.
+absl::StatusOr<std::optional<AxisBox>> ParseRegion(const HttpRequest& request) {
+  const std::string* value = request.Param("bbox");
+  if (value == nullptr) return std::nullopt;
+  const std::vector<absl::string_view> parts = absl::StrSplit(*value, ',');
+  AxisBox box;
+  bool ok = parts.size() == 6 && value->size() <= 512;
+  for (size_t i = 0; ok && i < parts.size(); ++i) {
+    ok = absl::SimpleAtod(parts[i], i < 3 ? &box.min[i] : &box.max[i - 3]);
+  }
+  if (!ok) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "bbox: expected six numbers xmin,ymin,zmin,xmax,ymax,zmax (metres, map coordinates), "
+        "got \"", value->substr(0, 64), "\""));
+  }
+  if (absl::Status s = CheckAxisBox(box, "bbox"); !s.ok()) return s;
+  return box;
+}
+
 }  // namespace
 
 HttpResponse Viewer::MeshGlb(const HttpRequest& request, const std::string& map) {
   absl::StatusOr<int64_t> triangles = ParseTriangleBudget(request, options_.max_mesh_triangles);
   if (!triangles.ok()) return ErrorResponse(triangles.status());
+  absl::StatusOr<std::optional<AxisBox>> region = ParseRegion(request);
+  if (!region.ok()) return ErrorResponse(region.status());
   absl::StatusOr<ViewerMap> latest = source_->Latest(map);
   if (!latest.ok()) return ErrorResponse(latest.status());
   absl::StatusOr<std::shared_ptr<const ViewerGlb>> glb =
-      meshes_.GetGlb(*source_, map, *latest, *triangles);
+      *region ? meshes_.GetRegionGlb(*source_, map, *latest, *triangles, **region)
+              : meshes_.GetGlb(*source_, map, *latest, *triangles);
   if (!glb.ok()) return ErrorResponse(glb.status());
   if (!(*glb)->too_large.empty()) {
     HttpResponse r = JsonError(413, (*glb)->too_large);

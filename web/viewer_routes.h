@@ -8,11 +8,14 @@
 //   /viewer/api/points?map=M      PLY: M's coloured surface points (web/point_cloud_cache.h)
 //   /viewer/api/mesh?map=M        PLY: M's triangle mesh with normals and colours
 //                                 (web/viewer_mesh.h); 413 over max_mesh_triangles
-//   /viewer/api/mesh.glb?map=M[&triangles=N]
+//   /viewer/api/mesh.glb?map=M[&triangles=N][&bbox=XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX]
 //                                 binary glTF (model/gltf-binary): the same mesh simplified to
 //                                 at most N triangles (a level of detail; absent or 0: the full
 //                                 mesh); N is 0..max_mesh_triangles (else 400); headers
-//                                 X-Faces, X-Full-Faces, X-Lod-Error-M (metres)
+//                                 X-Faces, X-Full-Faces, X-Lod-Error-M (metres). With bbox only
+//                                 that box of the map (metres, map coordinates; Export's region:
+//                                 built for the box alone, capped like the whole map's mesh;
+//                                 400 unless six finite numbers with min < max)
 //   /viewer/api/trajectory?map=M  JSON: M's SLAM cameras (pose, path) and keyframes
 //   /viewer/api/render?map=M&...  PNG: M rendered from a pose (web/viewer_render.h)
 //

@@ -25,7 +25,8 @@ int RunExport(const std::vector<std::string>& args) {
                 "PLY (MeshLab, Open3D, Blender) or, with --format glb or an --out ending in\n"
                 ".glb, as binary glTF 2.0 (headsets, three.js, Blender, game engines).\n"
                 "--lod-triangles N simplifies the mesh to at most N triangles (a level of\n"
-                "detail). With --server, --map names a map on the daemon instead of a file.");
+                "detail); --bbox meshes only a box of the map. With --server, --map names a\n"
+                "map on the daemon instead of a file.");
   flags.Add("map", "MAP", "map file", std::nullopt, true);
   AddExportFlags(flags);
   AddBackendFlags(flags);
@@ -53,6 +54,7 @@ int RunExport(const std::vector<std::string>& args) {
   summary.faces = file->faces;
   summary.full_faces = file->full_faces;
   summary.lod_error_m = file->lod_error_m;
+  summary.region = spec->mesh_options.region;
   summary.bytes = file->bytes.size();
   if (flags.GetSwitch("json")) {
     JsonObject json;

@@ -25,6 +25,10 @@ struct RemoteOptions {
   std::string server;      // --server HOST:PORT
   std::string token_file;  // --token-file F: bearer token for an authenticating daemon
   std::string tls_ca;      // --tls-ca PEM: root certificate of a TLS daemon
+  // --retry-seconds S: how long a call waits for a daemon that answered before and went away
+  // (restarted, failed over), and how long a Slam stream waits to reconnect (0: no retries;
+  // app/retry_policy.h says which calls are retried and why).
+  double retry_seconds = 30.0;
 };
 
 // The same commands against a plenoxd daemon (remote_*.cc; only in builds with gRPC, where

@@ -1,10 +1,13 @@
 #include "clients/plenox/export_flags.h"
 
 #include <string>
+#include <vector>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
 #include "core/formats/ply_export.h"
 
 namespace plx::cli {
@@ -43,6 +46,24 @@ absl::StatusOr<MeshFileFormat> MeshFormatFromFlags(const FlagSet& flags, bool me
   return format == "glb" ? MeshFileFormat::kGlb : MeshFileFormat::kPly;
 }
 
+// --bbox "xmin,ymin,zmin,xmax,ymax,zmax": six numbers, a finite box with min < max.
+absl::StatusOr<AxisBox> BoxFromFlag(const std::string& text) {
+  const std::vector<std::string> parts = absl::StrSplit(text, ',');
+  AxisBox box;
+  bool ok = parts.size() == 6;
+  for (size_t i = 0; ok && i < parts.size(); ++i) {
+    double& v = i < 3 ? box.min[i] : box.max[i - 3];
+    ok = absl::SimpleAtod(absl::StripAsciiWhitespace(parts[i]), &v);
+  }
+  if (!ok) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--bbox: expected six numbers xmin,ymin,zmin,xmax,ymax,zmax (metres, map "
+        "coordinates), got \"", text.substr(0, 200), "\""));
+  }
+  if (absl::Status s = CheckAxisBox(box, "--bbox"); !s.ok()) return s;
+  return box;
+}
+
 }  // namespace
 
 void AddExportFlags(FlagSet& flags) {
@@ -56,6 +77,9 @@ void AddExportFlags(FlagSet& flags) {
            absl::StrCat("mesh: a level of detail, simplified to at most N triangles (0 = the "
                         "full mesh; at most ", kMaxLodTriangles, ")"),
            "0")
+      .Add("bbox", "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX",
+           "mesh: only this box of the map (metres, map coordinates): the triangles of the "
+           "voxels whose centres are in it, kept whole")
       .Add("min-density", "D",
            absl::StrCat("points: where the density exceeds D (0 = the default, ",
                         kDefaultExportMinDensity, ")"),
@@ -100,6 +124,7 @@ absl::StatusOr<ExportSpec> ExportSpecFromFlags(const FlagSet& flags) {
                             : *components != 0           ? "--min-component"
                             : *max_triangles != 0        ? "--max-triangles"
                             : *lod_triangles != 0        ? "--lod-triangles"
+                            : flags.IsSet("bbox")        ? "--bbox"
                             : flags.GetSwitch("keep-unobserved") ? "--keep-unobserved"
                             : color != "dc"              ? "--mesh-color"
                                                          : nullptr;
@@ -118,6 +143,11 @@ absl::StatusOr<ExportSpec> ExportSpecFromFlags(const FlagSet& flags) {
   if (*max_triangles > 0) o.max_triangles = *max_triangles;
   o.keep_unobserved = flags.GetSwitch("keep-unobserved");
   o.color_mode = color == "normal" ? MeshColorMode::kViewAlongNormal : MeshColorMode::kDc;
+  if (flags.IsSet("bbox")) {
+    absl::StatusOr<AxisBox> box = BoxFromFlag(flags.GetString("bbox"));
+    if (!box.ok()) return box.status();
+    o.region = *box;
+  }
   spec.mesh_format = *format;
   spec.lod_triangles = *lod_triangles;
   return spec;

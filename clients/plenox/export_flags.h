@@ -9,14 +9,15 @@
 
 namespace plx::cli {
 
-// --out, --mesh, --format, --lod-triangles, --min-density, --iso-level, --min-component,
-// --max-triangles, --keep-unobserved, --mesh-color.
+// --out, --mesh, --format, --lod-triangles, --bbox, --min-density, --iso-level,
+// --min-component, --max-triangles, --keep-unobserved, --mesh-color.
 void AddExportFlags(FlagSet& flags);
 
 // The spec the flags ask for, a 0 (the flags' default) read as core's default. The mesh's file
 // format is --format's, else glb when --out ends in .glb, else ply. InvalidArgument (a usage
-// error) for a value out of range, a flag of the other form (points or mesh), or a --format that
-// contradicts --out's .ply or .glb.
+// error) for a value out of range, a flag of the other form (points or mesh), a --format that
+// contradicts --out's .ply or .glb, or a --bbox that is not six numbers of a finite box with
+// min < max on every axis.
 absl::StatusOr<ExportSpec> ExportSpecFromFlags(const FlagSet& flags);
 
 }  // namespace plx::cli

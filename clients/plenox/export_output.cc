@@ -1,5 +1,6 @@
 #include "clients/plenox/export_output.h"
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 
 namespace plx::cli {
@@ -11,6 +12,7 @@ std::string ExportSummaryText(const ExportSummary& s) {
     text += absl::StrFormat(" (a level of detail of %d, error %.1f mm)", s.full_faces,
                             1000.0 * s.lod_error_m);
   }
+  if (s.region) text += absl::StrCat(" in the box ", AxisBoxText(*s.region));
   text += s.format == MeshFileFormat::kGlb ? ", glTF" : ", PLY";
   return text;
 }
@@ -22,6 +24,11 @@ void AddExportSummaryJson(JsonObject& json, const ExportSummary& s) {
     json.Add("vertices", s.vertices).Add("faces", s.faces);
     json.Add("format", std::string(s.format == MeshFileFormat::kGlb ? "glb" : "ply"));
     json.Add("full_faces", s.full_faces).Add("lod_error_m", s.lod_error_m);
+    if (s.region) {
+      const AxisBox& b = *s.region;
+      json.Add("bbox", absl::StrFormat("%.17g,%.17g,%.17g,%.17g,%.17g,%.17g", b.min[0],
+                                       b.min[1], b.min[2], b.max[0], b.max[1], b.max[2]));
+    }
   }
   json.Add("bytes", static_cast<int64_t>(s.bytes));
 }

@@ -15,7 +15,8 @@ namespace {
 
 constexpr char kUsage[] =
     "usage: plenox <command> [flags]   (plenox <command> --help for its flags)\n"
-    "       plenox --server HOST:PORT [--token-file F] [--tls-ca PEM] <command> [flags]\n"
+    "       plenox --server HOST:PORT [--token-file F] [--tls-ca PEM] [--retry-seconds S]\n"
+    "              <command> [flags]\n"
     "\n"
     "commands:\n"
     "  demo       generate a synthetic RGB-D sequence, map it, score held-out views, track it\n"
@@ -40,7 +41,10 @@ constexpr char kUsage[] =
     "global flags (before the command):\n"
     "  --server HOST:PORT  talk to the plenoxd daemon there (plenoxd's default: 127.0.0.1:50051)\n"
     "  --token-file F      bearer token for a daemon started with --auth-token-file\n"
-    "  --tls-ca PEM        root certificate of a daemon serving TLS\n";
+    "  --tls-ca PEM        root certificate of a daemon serving TLS\n"
+    "  --retry-seconds S   how long to wait for a daemon that went away (restarted, failed\n"
+    "                      over): calls safe to repeat are retried with backoff, a slam stream\n"
+    "                      reconnects and goes on in its map (default 30; 0: fail at once)\n";
 
 // Commands that only exist against a daemon, and commands that only run in-process.
 const std::set<std::string> kDaemonOnly = {"maps", "save", "load", "info"};
@@ -66,13 +70,15 @@ absl::Status CheckServerAddress(const std::string& address) {
   return absl::OkStatus();
 }
 
-// Takes the global flags (--server, --token-file, --tls-ca; "--flag value" or "--flag=value")
-// off the front of `args`.
+// Takes the global flags (--server, --token-file, --tls-ca, --retry-seconds; "--flag value" or
+// "--flag=value") off the front of `args`.
 absl::Status ParseGlobalFlags(std::vector<std::string>* args, plx::cli::RemoteOptions* remote) {
+  std::string retry_seconds;
   const std::vector<std::pair<std::string, std::string*>> flags = {
       {"--server", &remote->server},
       {"--token-file", &remote->token_file},
-      {"--tls-ca", &remote->tls_ca}};
+      {"--tls-ca", &remote->tls_ca},
+      {"--retry-seconds", &retry_seconds}};
   std::set<std::string> seen;
   size_t i = 0;
   while (i < args->size()) {
@@ -107,7 +113,17 @@ absl::Status ParseGlobalFlags(std::vector<std::string>* args, plx::cli::RemoteOp
     if (!remote->tls_ca.empty()) {
       return absl::InvalidArgumentError("--tls-ca only applies together with --server");
     }
+    if (!retry_seconds.empty()) {
+      return absl::InvalidArgumentError("--retry-seconds only applies together with --server");
+    }
     return absl::OkStatus();
+  }
+  if (!retry_seconds.empty() &&
+      (!absl::SimpleAtod(retry_seconds, &remote->retry_seconds) ||
+       !(remote->retry_seconds >= 0.0 && remote->retry_seconds <= 86400.0))) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--retry-seconds: expected seconds from 0 (no retries) to 86400, got \"", retry_seconds,
+        "\""));
   }
   return CheckServerAddress(remote->server);
 }

@@ -9,6 +9,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <optional>
 #include <sstream>
 
@@ -17,6 +18,7 @@
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/time/clock.h"
 #include "clients/plenox/cli_common.h"
 #include "core/common/status_macros.h"
 #include "proto/slam_codec.h"
@@ -85,9 +87,18 @@ absl::StatusOr<std::unique_ptr<RemoteClient>> RemoteClient::Create(const RemoteO
   } else {
     credentials = grpc::InsecureChannelCredentials();
   }
+  client->retry_.budget = absl::Seconds(options.retry_seconds);
+  if (absl::Status s = ValidateRetryOptions(client->retry_); !s.ok()) return s;
   grpc::ChannelArguments arguments;
   arguments.SetMaxReceiveMessageSize(kRemoteMaxMessageBytes);
   arguments.SetMaxSendMessageSize(kRemoteMaxMessageBytes);
+  // After the daemon went away gRPC reconnects on a backoff of its own (from 1 s up to 120 s by
+  // default), and a call made while it waits fails at once: kept within the retry policy's
+  // waits, a retried call finds a restarted daemon about max_backoff after it is back.
+  arguments.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS,
+                   static_cast<int>(absl::ToInt64Milliseconds(client->retry_.initial_backoff)));
+  arguments.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS,
+                   static_cast<int>(absl::ToInt64Milliseconds(client->retry_.max_backoff)));
   client->channel_ = grpc::CreateCustomChannel(options.server, credentials, arguments);
   if (!client->channel_) {
     return absl::InvalidArgumentError(
@@ -154,6 +165,33 @@ absl::Status RemoteClient::ToStatus(const grpc::Status& status) const {
   }
 }
 
+template <typename T>
+absl::StatusOr<T> RemoteClient::Retried(bool idempotent,
+                                        const std::function<absl::StatusOr<T>()>& call) {
+  const absl::Time start = absl::Now();
+  int waits = 0;
+  absl::StatusOr<T> result = CallWithRetry<T>(
+      retry_, idempotent, call, RetryClock::Real(), [&](const absl::Status& s, int attempt) {
+        waits = attempt;
+        NoteRetry(s, attempt);
+      });
+  if (!result.ok() && waits > 0 && result.status().code() == absl::StatusCode::kUnavailable) {
+    return absl::Status(result.status().code(),
+                        absl::StrFormat("%s; gave up after waiting %.1f s (--retry-seconds %g)",
+                                        result.status().message(),
+                                        absl::ToDoubleSeconds(absl::Now() - start),
+                                        absl::ToDoubleSeconds(retry_.budget)));
+  }
+  return result;
+}
+
+void RemoteClient::NoteRetry(const absl::Status& status, int attempt) const {
+  // Once per outage: the user learns why the command pauses, not each attempt.
+  if (attempt != 1) return;
+  std::cerr << absl::StrFormat("plenox: %s; trying again for up to %g s (--retry-seconds)\n",
+                               status.message(), absl::ToDoubleSeconds(retry_.budget));
+}
+
 absl::StatusOr<pb::MapInfo> RemoteClient::CreateMap(const std::string& name, float voxel_size) {
   pb::CreateMapRequest request;
   request.set_name(name);
@@ -167,59 +205,88 @@ absl::StatusOr<pb::MapInfo> RemoteClient::CreateMap(const std::string& name, flo
 }
 
 absl::StatusOr<pb::MapInfo> RemoteClient::GetMap(const std::string& name) {
+  return Retried<pb::MapInfo>(true, [&]() -> absl::StatusOr<pb::MapInfo> {
+    pb::GetMapRequest request;
+    request.set_name(name);
+    pb::MapInfo info;
+    const auto context = NewContext(kRemoteUnaryDeadline, name);
+    if (grpc::Status s = stub_->GetMap(context.get(), request, &info); !s.ok()) {
+      return ToStatus(s);
+    }
+    return info;
+  });
+}
+
+absl::Status RemoteClient::Probe(const std::string& map) {
   pb::GetMapRequest request;
-  request.set_name(name);
+  request.set_name(map);
   pb::MapInfo info;
-  const auto context = NewContext(kRemoteUnaryDeadline, name);
-  if (grpc::Status s = stub_->GetMap(context.get(), request, &info); !s.ok()) return ToStatus(s);
-  return info;
+  const auto context = NewContext(kRemoteConnectTimeout, map);
+  const grpc::Status s = stub_->GetMap(context.get(), request, &info);
+  if (s.ok() || s.error_code() == grpc::StatusCode::NOT_FOUND) return absl::OkStatus();
+  return ToStatus(s);
 }
 
 absl::StatusOr<std::vector<pb::MapInfo>> RemoteClient::ListMaps() {
-  pb::ListMapsResponse response;
-  const auto context = NewContext();
-  if (grpc::Status s = stub_->ListMaps(context.get(), pb::ListMapsRequest(), &response);
-      !s.ok()) {
-    return ToStatus(s);
-  }
-  return std::vector<pb::MapInfo>(response.maps().begin(), response.maps().end());
+  return Retried<std::vector<pb::MapInfo>>(
+      true, [&]() -> absl::StatusOr<std::vector<pb::MapInfo>> {
+        pb::ListMapsResponse response;
+        const auto context = NewContext();
+        if (grpc::Status s = stub_->ListMaps(context.get(), pb::ListMapsRequest(), &response);
+            !s.ok()) {
+          return ToStatus(s);
+        }
+        return std::vector<pb::MapInfo>(response.maps().begin(), response.maps().end());
+      });
 }
 
 absl::StatusOr<pb::ServerInfo> RemoteClient::GetServerInfo() {
-  pb::ServerInfo info;
-  const auto context = NewContext();
-  if (grpc::Status s = stub_->GetServerInfo(context.get(), pb::GetServerInfoRequest(), &info);
-      !s.ok()) {
-    return ToStatus(s);
-  }
-  return info;
+  return Retried<pb::ServerInfo>(true, [&]() -> absl::StatusOr<pb::ServerInfo> {
+    pb::ServerInfo info;
+    const auto context = NewContext();
+    if (grpc::Status s = stub_->GetServerInfo(context.get(), pb::GetServerInfoRequest(), &info);
+        !s.ok()) {
+      return ToStatus(s);
+    }
+    return info;
+  });
 }
 
 absl::StatusOr<pb::MapInfo> RemoteClient::SaveMap(const std::string& name) {
-  pb::SaveMapRequest request;
-  request.set_name(name);
-  pb::MapInfo info;
-  const auto context = NewContext(kRemoteFileDeadline, name);
-  if (grpc::Status s = stub_->SaveMap(context.get(), request, &info); !s.ok()) return ToStatus(s);
-  return info;
+  return Retried<pb::MapInfo>(true, [&]() -> absl::StatusOr<pb::MapInfo> {
+    pb::SaveMapRequest request;
+    request.set_name(name);
+    pb::MapInfo info;
+    const auto context = NewContext(kRemoteFileDeadline, name);
+    if (grpc::Status s = stub_->SaveMap(context.get(), request, &info); !s.ok()) {
+      return ToStatus(s);
+    }
+    return info;
+  });
 }
 
 absl::StatusOr<pb::MapInfo> RemoteClient::LoadMap(const std::string& name) {
-  pb::LoadMapRequest request;
-  request.set_name(name);
-  pb::MapInfo info;
-  const auto context = NewContext(kRemoteFileDeadline, name);
-  if (grpc::Status s = stub_->LoadMap(context.get(), request, &info); !s.ok()) return ToStatus(s);
-  return info;
+  return Retried<pb::MapInfo>(true, [&]() -> absl::StatusOr<pb::MapInfo> {
+    pb::LoadMapRequest request;
+    request.set_name(name);
+    pb::MapInfo info;
+    const auto context = NewContext(kRemoteFileDeadline, name);
+    if (grpc::Status s = stub_->LoadMap(context.get(), request, &info); !s.ok()) {
+      return ToStatus(s);
+    }
+    return info;
+  });
 }
 
 absl::StatusOr<pb::RenderResponse> RemoteClient::Render(const pb::RenderRequest& request) {
-  pb::RenderResponse response;
-  const auto context = NewContext(kRemoteUnaryDeadline, request.map());
-  if (grpc::Status s = stub_->Render(context.get(), request, &response); !s.ok()) {
-    return ToStatus(s);
-  }
-  return response;
+  return Retried<pb::RenderResponse>(true, [&]() -> absl::StatusOr<pb::RenderResponse> {
+    pb::RenderResponse response;
+    const auto context = NewContext(kRemoteUnaryDeadline, request.map());
+    if (grpc::Status s = stub_->Render(context.get(), request, &response); !s.ok()) {
+      return ToStatus(s);
+    }
+    return response;
+  });
 }
 
 std::unique_ptr<RemoteClient> ConnectOrReport(const std::string& command,

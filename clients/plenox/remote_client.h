@@ -4,11 +4,15 @@
 // calls, and grpc::Status -> absl::Status so that commands report the daemon's own message
 // ("plenox map: no map named "x" (NOT_FOUND)") through ReportError with exit code 1. gRPC's own
 // log lines are dropped unless GRPC_VERBOSITY is set (e.g. GRPC_VERBOSITY=debug to debug TLS).
+// Once connected, a daemon that goes away (restarted, failed over to another replica) is waited
+// for: the unary calls that are safe to repeat are retried on UNAVAILABLE with backoff for up to
+// --retry-seconds (app/retry_policy.h), and `slam` reconnects its stream (remote_slam.cc).
 //
 // Only built with PLX_WITH_SERVER (clients/plenox/CMakeLists.txt).
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -21,6 +25,7 @@
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
 #include "app/flags.h"
+#include "app/retry_policy.h"
 #include "clients/plenox/commands.h"
 #include "core/datasets/dataset.h"
 #include "core/geometry/intrinsics.h"
@@ -57,6 +62,14 @@ class RemoteClient {
 
   pb::Plenoxd::Stub& stub() { return *stub_; }
   const std::string& server() const { return server_; }
+  // --retry-seconds as a policy (budget 0: no retries).
+  const RetryOptions& retry() const { return retry_; }
+
+  // One GetMap of `map` with a short deadline and no retry, for a stream that waits for its
+  // daemon under a backoff of its own: OK when a daemon answered, with the map or without it
+  // (NOT_FOUND: a Slam stream then starts it again); else the failure (UNAVAILABLE while
+  // nothing serves the address).
+  absl::Status Probe(const std::string& map);
 
   // A context for one call: the bearer token when there is one, a deadline unless `deadline`
   // is infinite (streams), and the map's name as "x-plenoxd-map" metadata when the call is about
@@ -69,7 +82,10 @@ class RemoteClient {
   // UNAVAILABLE / DEADLINE_EXCEEDED naming the server.
   absl::Status ToStatus(const grpc::Status& status) const;
 
-  // Unary calls (kRemoteUnaryDeadline; save and load kRemoteFileDeadline).
+  // Unary calls (kRemoteUnaryDeadline; save and load kRemoteFileDeadline). All but CreateMap
+  // are retried on UNAVAILABLE (reads; SaveMap writes the same file again, LoadMap reads it
+  // again); CreateMap is not: done before the connection was lost, it would fail with
+  // ALREADY_EXISTS when repeated.
   absl::StatusOr<pb::MapInfo> CreateMap(const std::string& name, float voxel_size);
   absl::StatusOr<pb::MapInfo> GetMap(const std::string& name);
   absl::StatusOr<std::vector<pb::MapInfo>> ListMaps();
@@ -81,10 +97,16 @@ class RemoteClient {
  private:
   RemoteClient() = default;
   absl::Status Unreachable(const std::string& why) const;
+  // `call` under the retry policy when `idempotent`; says on stderr that it waits, once per
+  // outage, and when it gave up.
+  template <typename T>
+  absl::StatusOr<T> Retried(bool idempotent, const std::function<absl::StatusOr<T>()>& call);
+  void NoteRetry(const absl::Status& status, int attempt) const;
 
   std::string server_;
   std::string token_;
   bool tls_ = false;
+  RetryOptions retry_;
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<pb::Plenoxd::Stub> stub_;
 };

@@ -13,6 +13,7 @@
 #include "clients/plenox/export_output.h"
 #include "clients/plenox/remote_client.h"
 #include "core/formats/glb_mesh.h"
+#include "core/formats/ply_mesh.h"
 #include "core/io/atomic_write.h"
 #include "proto/export_codec.h"
 
@@ -34,14 +35,21 @@ int64_t ElementCount(const std::string& head, const std::string& element) {
   return absl::SimpleAtoi(head.substr(begin, end - begin), &count) ? count : -1;
 }
 
+// Whether a PLY header (up to end_header) has the region comment (core/formats/ply_mesh.h).
+bool RegionCommentIn(const std::string& head) {
+  const size_t at = head.find(absl::StrCat("\n", kPlyRegionComment));
+  const size_t header_end = head.find("end_header");
+  return at != std::string::npos && (header_end == std::string::npos || at < header_end);
+}
+
 FlagSet RemoteExportFlags() {
   FlagSet flags("plenox export",
                 "With --server: writes map N on the daemon as a coloured point cloud (binary\n"
                 "little-endian PLY, one point per voxel vertex on the surface of the density\n"
                 "field) or, with --mesh, a triangle mesh built on the daemon's device, as PLY\n"
                 "or (--format glb, or an --out ending in .glb) binary glTF 2.0; --lod-triangles\n"
-                "N simplifies it to at most N triangles. The file appears only once it is\n"
-                "complete.");
+                "N simplifies it to at most N triangles; --bbox meshes only a box of the\n"
+                "map. The file appears only once it is complete.");
   flags.Add("map", "N", "the map on the daemon", std::nullopt, true);
   AddExportFlags(flags);
   AddJsonAndQuietSwitches(flags);
@@ -116,12 +124,15 @@ absl::StatusOr<ExportedFile> ReceiveExport(RemoteClient& client, const pb::Expor
 }
 
 // What the file holds, read from its beginning: the PLY header's counts, or the GLB's JSON
-// chunk (vertices, triangles, and what simplification did). A file of the wrong kind, or a
-// level of detail over its budget (a daemon older than lod_triangles sends the full mesh), is
-// refused before it replaces `out`.
+// chunk (vertices, triangles, and what simplification did). A file of the wrong kind, a level
+// of detail over its budget (a daemon older than lod_triangles sends the full mesh) or a file
+// that does not record the region asked for (a daemon older than region sends the whole map)
+// is refused before it replaces `out`.
 absl::Status CheckAndCount(const ExportSpec& spec, const ExportedFile& file,
                            ExportSummary* summary) {
   summary->bytes = file.bytes;
+  const std::optional<AxisBox>& region = spec.mesh_options.region;
+  std::optional<AxisBox> recorded;  // the region the file says it holds
   if (spec.mesh && spec.mesh_format == MeshFileFormat::kGlb) {
     absl::StatusOr<GlbMeshInfo> info = ReadGlbMeshInfo(file.head);
     if (!info.ok()) {
@@ -132,6 +143,7 @@ absl::Status CheckAndCount(const ExportSpec& spec, const ExportedFile& file,
     summary->faces = info->triangles;
     summary->full_faces = info->full_triangles > 0 ? info->full_triangles : info->triangles;
     summary->lod_error_m = info->lod_error_m;
+    recorded = info->region;
   } else {
     if (file.head.rfind("ply\n", 0) != 0) {
       return absl::InternalError("the daemon's answer is not the PLY file asked for");
@@ -139,6 +151,7 @@ absl::Status CheckAndCount(const ExportSpec& spec, const ExportedFile& file,
     summary->vertices = ElementCount(file.head, "vertex");
     summary->faces = spec.mesh ? ElementCount(file.head, "face") : 0;
     summary->full_faces = summary->faces;  // a PLY does not say; the LOD check follows
+    if (region && RegionCommentIn(file.head)) recorded = region;
   }
   if (spec.mesh && spec.lod_triangles > 0 && summary->faces > spec.lod_triangles) {
     return absl::FailedPreconditionError(absl::StrFormat(
@@ -146,6 +159,12 @@ absl::Status CheckAndCount(const ExportSpec& spec, const ExportedFile& file,
         "lod_triangles (older than this client); nothing was written",
         summary->faces, spec.lod_triangles));
   }
+  if (spec.mesh && region && !recorded) {
+    return absl::FailedPreconditionError(
+        "the daemon's file does not record the --bbox region: it does not know the region "
+        "field (older than this client) and sent the whole map; nothing was written");
+  }
+  summary->region = region;
   return absl::OkStatus();
 }
 

@@ -1,12 +1,26 @@
 // plenox --server HOST:PORT slam: online SLAM of a dataset's frames on the daemon (one Slam
 // stream into map N): the same trajectory, summary and JSON as in-process `plenox slam`, plus
 // the round trip seen here.
+//
+// A failover (the daemon killed or restarted, the map reloaded from its last snapshot by the
+// new one, here or on another replica behind the same address) does not end the run: the
+// stream that broke with UNAVAILABLE is replaced by a new one into the same map, within
+// --retry-seconds, which gives no start pose of its own but the last pose tracked in the map
+// as the hint: the camera relocalises against the map's saved keyframes (their features first)
+// and the poses go on in the map's frame. Frames are treated as a camera's: those whose update
+// never came back (the one in flight in lock-step) and, with --realtime, those due while no
+// stream was open, are lost, not sent again later (stale by then, and the new stream finds
+// its place from the next frame anyway); the summary and the JSON count them
+// (frames_lost_in_failover) with the reconnects and the time from the break to the first
+// frame tracked again (failover_resume_s).
 #include <algorithm>
+#include <cmath>
 #include <iostream>
 #include <string>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "app/retry_policy.h"
 #include "clients/plenox/cli_common.h"
 #include "clients/plenox/commands.h"
 #include "clients/plenox/frame_stream.h"
@@ -109,6 +123,7 @@ struct SlamStream {
   std::optional<SE3> start_pose;
   bool realtime = false;
   double speed = 1.0;
+  bool quiet = false;  // --quiet: no progress line (failover notices are still printed)
 
   std::vector<StampedPose> trajectory{};  // in the main map's frame (PosesInMainMap) at the end
   std::vector<StampedPose> corrected{};   // and moved by the corrections (FollowCorrections)
@@ -118,6 +133,19 @@ struct SlamStream {
   bool done = false;
   absl::Time done_at{};
   FrameStreamResult result{};  // records: each update's frame, times and state [keyframe]
+
+  // Failovers: each stream's first result in `given` and first correction (segments and
+  // corrections are numbered per stream, so each stream's poses are put in its map's frame
+  // on their own); the reconnects, the frames lost, and the longest time from a stream
+  // breaking to the first frame tracked on its replacement (NaN: no reconnect).
+  std::vector<size_t> stream_given{};
+  std::vector<size_t> stream_corrections{};
+  int reconnects = 0;
+  int frames_lost = 0;
+  double resume_s = std::nan("");
+  // The last pose tracked in the map (segment 0, not LOST or WAITING): a new stream's hint.
+  std::optional<SE3> last_in_map{};
+  std::optional<absl::Time> broke_at{};  // set until a frame is tracked after a reconnect
 };
 
 // Counts an update into `report` and shows it; its frame is `record`.
@@ -143,6 +171,15 @@ absl::Status TakeUpdate(const pb::SlamUpdate& update, FrameRecord& record, SlamS
     ++report.segments_joined;
   }
   report.segments += update.new_segment();
+  const bool tracked = update.state() == pb::SLAM_STATE_OK ||
+                       update.state() == pb::SLAM_STATE_DEGRADED ||
+                       update.state() == pb::SLAM_STATE_RELOCALISED;
+  if (tracked && update.segment() == 0) s.last_in_map = *pose;
+  if (tracked && s.broke_at) {
+    const double resume_s = absl::ToDoubleSeconds(absl::Now() - *s.broke_at);
+    s.resume_s = std::isnan(s.resume_s) ? resume_s : std::max(s.resume_s, resume_s);
+    s.broke_at.reset();
+  }
   record.note = absl::StrCat(SlamStateText(update.state()), update.keyframe() ? " keyframe" : "");
   report.keyframes += update.keyframe();
   report.dropped += static_cast<int>(update.dropped());
@@ -160,9 +197,35 @@ absl::Status TakeUpdate(const pb::SlamUpdate& update, FrameRecord& record, SlamS
   return absl::OkStatus();
 }
 
-// Streams the frames (the first with the map, the options and the start pose), one at a time
-// or at their timestamps, and collects the updates; the error to report when it went wrong.
-absl::Status StreamFrames(SlamStream& s, SlamReport& report, ProgressLine& line) {
+// A failover notice on a line of its own. Printed with --quiet too: it is an event the run's
+// numbers depend on, not progress (as the --save warning).
+void Notice(const SlamStream& s, ProgressLine& line, const std::string& text) {
+  if (s.quiet) {
+    std::cerr << text << "\n";
+  } else {
+    line.Finish(text);
+  }
+}
+
+// Request of dataset frame `index`; `opens`: the stream's first, with the map, the options and
+// `start` (none: the daemon starts at the identity, or relocalises in a map with content).
+absl::StatusOr<pb::SlamRequest> SlamRequestAt(const SlamStream& s, int index, bool opens,
+                                              const std::optional<SE3>& start) {
+  PLX_ASSIGN_OR_RETURN(pb::SlamRequest request,
+                       TrackingStreamRequest<pb::SlamRequest>(*s.dataset, index, s.encoding,
+                                                              s.map_name, s.wire, start));
+  if (opens && index != 0) {
+    request.set_map(s.map_name);
+    *request.mutable_options() = s.wire;
+    if (start) PoseToProto(*start, request.mutable_initial_pose());
+  }
+  return request;
+}
+
+// One Slam stream over frames first..frames-1, one at a time or at their timestamps; the
+// updates go into `s` and `report` as they come, the records' indices are the dataset's.
+FrameStreamResult RunStream(SlamStream& s, int first, const std::optional<SE3>& start,
+                            SlamReport& report, ProgressLine& line) {
   std::unique_ptr<grpc::ClientContext> context =
       s.client->NewContext(absl::InfiniteDuration(), s.map_name);
   auto stream = s.client->stub().Slam(context.get());
@@ -171,37 +234,137 @@ absl::Status StreamFrames(SlamStream& s, SlamReport& report, ProgressLine& line)
   FrameStream<pb::SlamRequest, pb::SlamUpdate> frames(
       stream.get(), [&] { context->TryCancel(); },
       s.realtime ? FramePacing::Realtime(s.speed) : FramePacing::LockStep(), "an update");
-  s.result = frames.Run(report.frames, {
-      .request = [&](int i) -> absl::StatusOr<pb::SlamRequest> {
-        return TrackingStreamRequest<pb::SlamRequest>(*s.dataset, i, s.encoding, s.map_name,
-                                                      s.wire, s.start_pose);
-      },
-      .timestamp = [&](int i) { return s.dataset->timestamp(i); },
+  return frames.Run(report.frames - first, {
+      .request = [&](int k) { return SlamRequestAt(s, first + k, k == 0, start); },
+      .timestamp = [&](int k) { return s.dataset->timestamp(first + k); },
       .answers = [](const pb::SlamUpdate& u) -> std::optional<FrameAnswer> {
         if (u.done()) return std::nullopt;
         return FrameAnswer{u.timestamp(), u.latency_ms()};
       },
       .on_reply = [&](const pb::SlamUpdate& update, FrameRecord* record) -> absl::Status {
         s.mapping = update.mapping();
-        if (record != nullptr) return TakeUpdate(update, *record, s, report, line);
+        if (record != nullptr) {
+          record->index += first;
+          return TakeUpdate(update, *record, s, report, line);
+        }
         s.done = true;
         s.done_at = absl::Now();
         return absl::OkStatus();
       },
   });
-  const FrameStreamResult& r = s.result;
-  if (!r.local.ok() || !r.problem.ok()) {
-    line.Finish("slam cancelled");
-    return !r.local.ok() ? r.local : r.problem;
+}
+
+// The first frame to send after a reconnect, from `next` (the frame after the last one sent):
+// with --realtime the newest frame due by now on the run's clock (a live camera's frames
+// captured while disconnected are gone), else `next` itself (the replay waited).
+int ResumeFrame(const SlamStream& s, int next, int frames) {
+  if (!s.realtime || next >= frames) return next;
+  const FramePacing pacing = FramePacing::Realtime(s.speed);
+  const double t0 = s.dataset->timestamp(0);
+  const absl::Time now = absl::Now();
+  int k = next;
+  while (k + 1 < frames &&
+         pacing.Due(s.result.started, t0, s.dataset->timestamp(k + 1)) <= now) {
+    ++k;
   }
-  if (!r.finished.ok()) {
-    line.Finish("slam failed");
-    return s.client->ToStatus(r.finished);
+  return k;
+}
+
+// Waits for the daemon (or its replacement) to answer at the address, under the retry
+// policy's backoff begun when the stream broke; the failure to report when it does not.
+absl::Status AwaitDaemon(SlamStream& s, Backoff& backoff, absl::Status failure) {
+  while (true) {
+    if (!backoff.Wait()) {
+      return absl::Status(failure.code(),
+                          absl::StrFormat("%s; no daemon answered within %.1f s "
+                                          "(--retry-seconds %g)",
+                                          failure.message(),
+                                          absl::ToDoubleSeconds(backoff.elapsed()),
+                                          absl::ToDoubleSeconds(s.client->retry().budget)));
+    }
+    failure = s.client->Probe(s.map_name);
+    if (failure.ok()) return absl::OkStatus();
+    if (!IsRetryable(failure, /*idempotent=*/true)) return failure;
   }
-  if (!s.done) {
-    return absl::InternalError("the daemon ended the Slam stream without its done message");
+}
+
+// Streams the frames (the first with the map, the options and the start pose) and collects the
+// updates; a stream cut by a failover is replaced (see the top of this file). The error to
+// report when it went wrong.
+absl::Status StreamFrames(SlamStream& s, SlamReport& report, ProgressLine& line) {
+  Backoff backoff(s.client->retry(), RetryClock::Real());
+  std::optional<SE3> start = s.start_pose;
+  int first = 0;
+  while (true) {
+    s.stream_given.push_back(s.given.size());
+    s.stream_corrections.push_back(s.corrections.size());
+    const int dropped_before = report.dropped;
+    FrameStreamResult r = RunStream(s, first, start, report, line);
+    const int answered = static_cast<int>(r.records.size());
+    const int sent = r.sent;
+    if (first == 0) {
+      s.result = std::move(r);
+    } else {
+      s.result.sent += r.sent;
+      s.result.records.insert(s.result.records.end(), r.records.begin(), r.records.end());
+      if (answered > 0) s.result.last_answer = r.last_answer;
+      s.result.local = r.local;
+      s.result.problem = r.problem;
+      s.result.finished = r.finished;
+    }
+    const FrameStreamResult& last = s.result;  // this stream's statuses and `sent` count
+    if (!last.local.ok() || !last.problem.ok()) {
+      line.Finish("slam cancelled");
+      return !last.local.ok() ? last.local : last.problem;
+    }
+    if (last.finished.ok()) {
+      if (!s.done) {
+        return absl::InternalError("the daemon ended the Slam stream without its done message");
+      }
+      return absl::OkStatus();
+    }
+    const absl::Status failure = s.client->ToStatus(last.finished);
+    // Only a daemon that went away is waited for: a stream it refused or ended with another
+    // code would be refused again (app/retry_policy.h).
+    if (!IsRetryable(failure, /*idempotent=*/true) ||
+        s.client->retry().budget <= absl::ZeroDuration()) {
+      line.Finish("slam failed");
+      return failure;
+    }
+    // Frames written and neither answered nor reported dropped by the daemon are lost.
+    const int lost = sent - answered - (report.dropped - dropped_before);
+    s.frames_lost += std::max(lost, 0);
+    const int next = first + sent;
+    if (next >= report.frames) {
+      // Every frame was sent: nothing to reconnect for. The poses that came back are the
+      // result; the mapping job that would have sent the done message died with the daemon.
+      Notice(s, line, absl::StrFormat(
+          "slam: the daemon went away after the last frame was sent (%s), before its mapping "
+          "job finished: the map has what its last snapshot saved",
+          failure.message()));
+      s.done_at = absl::Now();
+      return absl::OkStatus();
+    }
+    if (!s.broke_at) s.broke_at = absl::Now();
+    backoff.Start();
+    Notice(s, line, absl::StrFormat(
+        "slam: the stream broke with %d of %d frames sent (%s); reconnecting for up to %g s "
+        "(--retry-seconds)",
+        next, report.frames, failure.message(), absl::ToDoubleSeconds(s.client->retry().budget)));
+    PLX_RETURN_IF_ERROR(AwaitDaemon(s, backoff, failure));
+    const int resume = ResumeFrame(s, next, report.frames);
+    s.frames_lost += resume - next;
+    ++s.reconnects;
+    Notice(s, line, absl::StrFormat(
+        "slam: reconnected after %.1f s, going on from frame %d (%d frame(s) lost so far); "
+        "relocalising in map \"%s\"",
+        absl::ToDoubleSeconds(absl::Now() - *s.broke_at), resume, s.frames_lost, s.map_name));
+    // No start pose of its own: a map with content places the camera by its keyframes; the
+    // last pose tracked in it is where the dense attempts begin when the features find
+    // nothing (and where a map lost altogether starts again).
+    start = s.last_in_map;
+    first = resume;
   }
-  return absl::OkStatus();
 }
 
 // The trajectory, then the timings (it is the result, the timings are extra), then --save.
@@ -251,9 +414,21 @@ void PrintRemoteSlamResult(const FlagSet& flags, const SlamDatasetOptions& optio
   report.corrections = static_cast<int>(s.mapping.corrections());
   const double roundtrip_median = Percentile(roundtrip_ms, 0.5);
   const double roundtrip_p95 = Percentile(roundtrip_ms, 0.95);
+  std::string failover;
+  if (s.reconnects > 0) {
+    failover = absl::StrFormat("; %d reconnect(s), %d frame(s) lost in the failover", s.reconnects,
+                               s.frames_lost);
+    if (!std::isnan(s.resume_s)) {
+      absl::StrAppendFormat(&failover, ", tracking again %.1f s after the stream broke",
+                            s.resume_s);
+    }
+  } else if (s.frames_lost > 0) {
+    failover = absl::StrFormat("; %d frame(s) lost when the daemon went away", s.frames_lost);
+  }
   std::string summary = SlamSummaryText(
-      report, absl::StrFormat(" [%s, map \"%s\"; round trip median %.1f ms, p95 %.1f ms]",
-                              s.client->server(), s.map_name, roundtrip_median, roundtrip_p95));
+      report, absl::StrFormat(" [%s, map \"%s\"; round trip median %.1f ms, p95 %.1f ms%s]",
+                              s.client->server(), s.map_name, roundtrip_median, roundtrip_p95,
+                              failover));
   if (saved) {
     absl::StrAppendFormat(&summary,
                           "\nslam: saved \"%s\" in the daemon's data directory: version %d, "
@@ -275,7 +450,10 @@ void PrintRemoteSlamResult(const FlagSet& flags, const SlamDatasetOptions& optio
       .Add("map_keyframes", static_cast<int64_t>(s.mapping.keyframes()))
       .Add("map_version", static_cast<int64_t>(s.mapping.map_version()))
       .AddBool("mapping_finished", s.mapping.finished())
-      .AddBool("saved", saved.has_value());
+      .AddBool("saved", saved.has_value())
+      .Add("reconnects", s.reconnects)
+      .Add("frames_lost_in_failover", s.frames_lost)
+      .Add("failover_resume_s", s.resume_s);
   PrintSlamResult(report, flags.GetSwitch("json"), more);
 }
 
@@ -319,7 +497,8 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
                     .encoding = *encoding,
                     .start_pose = dataset->ground_truth(0),
                     .realtime = options->realtime,
-                    .speed = options->speed};
+                    .speed = options->speed,
+                    .quiet = flags.GetSwitch("quiet")};
   report.started_from_ground_truth = stream.start_pose.has_value();
 
   std::unique_ptr<RemoteClient> client = ConnectOrReport(kCommand, remote, &exit_code);
@@ -327,11 +506,24 @@ int RunRemoteSlam(const RemoteOptions& remote, const std::vector<std::string>& a
   stream.client = client.get();
   ProgressLine line(!flags.GetSwitch("quiet"));
   if (absl::Status s = StreamFrames(stream, report, line); !s.ok()) return ReportError(kCommand, s);
-  // A segment's poses, once it joined the map, in the map's frame (docs/SLAM.md).
-  stream.trajectory = PosesInMainMap(stream.given);
-  // Each pose moved by the corrections after it, as the stream sent them (the daemon's final
-  // keyframe poses are not sent).
-  stream.corrected = FollowCorrections(stream.given, stream.corrections);
+  // Each stream's results on their own (a failover's new stream numbers its segments and
+  // corrections afresh): a segment's poses, once it joined the map, in the map's frame
+  // (docs/SLAM.md), and each pose moved by the corrections after it, as the stream sent them
+  // (the daemon's final keyframe poses are not sent).
+  stream.stream_given.push_back(stream.given.size());
+  stream.stream_corrections.push_back(stream.corrections.size());
+  stream.trajectory.clear();  // TakeUpdate's poses as given
+  for (size_t i = 0; i + 1 < stream.stream_given.size(); ++i) {
+    const std::vector<SlamFrameResult> given(stream.given.begin() + stream.stream_given[i],
+                                             stream.given.begin() + stream.stream_given[i + 1]);
+    const std::vector<SlamCorrection> corrections(
+        stream.corrections.begin() + stream.stream_corrections[i],
+        stream.corrections.begin() + stream.stream_corrections[i + 1]);
+    for (const StampedPose& p : PosesInMainMap(given)) stream.trajectory.push_back(p);
+    for (const StampedPose& p : FollowCorrections(given, corrections)) {
+      stream.corrected.push_back(p);
+    }
+  }
   absl::StatusOr<std::optional<pb::MapInfo>> saved = WriteAndSave(flags, stream, report);
   if (!saved.ok()) return ReportError(kCommand, saved.status());
   ScoreSlamTrajectory(*dataset, stream.trajectory, stream.corrected, *rpe_delta, &report);

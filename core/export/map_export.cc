@@ -21,6 +21,7 @@ absl::StatusOr<MapExport> EncodeMesh(const ExportSpec& spec, const TriangleMesh&
     metadata.source = source;
     metadata.full_triangles = full_faces;
     metadata.lod_error_m = lod_error_m;
+    metadata.region = spec.mesh_options.region;
     absl::StatusOr<GlbMesh> glb = EncodeGlbMesh(mesh, metadata);
     if (!glb.ok()) return glb.status();
     out.bytes = std::move(glb->bytes);
@@ -28,7 +29,7 @@ absl::StatusOr<MapExport> EncodeMesh(const ExportSpec& spec, const TriangleMesh&
     out.faces = glb->faces;
     return out;
   }
-  absl::StatusOr<PlyMesh> ply = EncodePlyMesh(mesh, source);
+  absl::StatusOr<PlyMesh> ply = EncodePlyMesh(mesh, source, spec.mesh_options.region);
   if (!ply.ok()) return ply.status();
   out.bytes = std::move(ply->bytes);
   out.vertices = ply->vertices;
@@ -53,6 +54,9 @@ absl::Status ValidateExportSpec(const ExportSpec& spec) {
     }
     if (spec.lod_triangles != 0) {
       return absl::InvalidArgumentError("lod_triangles: applies to meshes only");
+    }
+    if (spec.mesh_options.region) {
+      return absl::InvalidArgumentError("region: applies to meshes only");
     }
     return absl::OkStatus();
   }

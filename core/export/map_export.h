@@ -34,14 +34,17 @@ inline constexpr int64_t kMaxLodTriangles = kDefaultMaxMeshTriangles;
 struct ExportSpec {
   bool mesh = false;                             // false: points
   float min_density = kDefaultExportMinDensity;  // points only
-  MeshOptions mesh_options;                      // mesh only
+  // Mesh only; its `region` cuts the mesh to a box of the map (the file then records the box:
+  // the GLB's extras, a PLY header comment).
+  MeshOptions mesh_options;
   MeshFileFormat mesh_format = MeshFileFormat::kPly;  // mesh only
   // Mesh only: simplify to at most this many triangles (SimplifyMesh); 0 = the full mesh.
   int64_t lod_triangles = 0;
 };
 
 // InvalidArgument naming the field: lod_triangles negative or over kMaxLodTriangles, a glTF
-// format or a level of detail asked of points, or mesh options ValidateMeshOptions refuses.
+// format, a level of detail or a region (mesh_options.region) asked of points, or mesh options
+// ValidateMeshOptions refuses (a region that is not a finite box with min < max among them).
 absl::Status ValidateExportSpec(const ExportSpec& spec);
 
 struct MapExport {

@@ -129,6 +129,17 @@ tinygltf::Value AssetExtras(const GlbMeshMetadata& metadata, int64_t triangles) 
       static_cast<double>(metadata.full_triangles > 0 ? metadata.full_triangles : triangles));
   plenoxd["lod_error_m"] = tinygltf::Value(metadata.lod_error_m);
   plenoxd["up"] = tinygltf::Value(std::string("+Z"));
+  if (metadata.region) {
+    tinygltf::Value::Array lo, hi;
+    for (int a = 0; a < 3; ++a) {
+      lo.push_back(tinygltf::Value(metadata.region->min[a]));
+      hi.push_back(tinygltf::Value(metadata.region->max[a]));
+    }
+    tinygltf::Value::Object region;
+    region["min"] = tinygltf::Value(std::move(lo));
+    region["max"] = tinygltf::Value(std::move(hi));
+    plenoxd["region"] = tinygltf::Value(std::move(region));
+  }
   tinygltf::Value::Object extras;
   extras["plenoxd"] = tinygltf::Value(std::move(plenoxd));
   return tinygltf::Value(std::move(extras));

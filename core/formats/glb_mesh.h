@@ -22,18 +22,22 @@
 // upright, Blender's importer (which turns glTF's +Y up back into its +Z up) shows it in map
 // coordinates, and a client that anchors the mesh to map poses (Track, Slam) reads the
 // primitive's positions as they are or drops the node's rotation. A map whose world is a
-// camera's frame (a SLAM map started without a pose prior: y down) needs the client's turn.
+// camera's frame (a SLAM map started without a pose prior: y down) needs the client's turn. The
+// frame is that of the map version meshed: after a SLAM loop closure, the corrected one.
 //
 // The asset's extras say what the file is: {"plenoxd": {"source": the map's source text,
 // "triangles": in the file, "full_triangles": before simplification, "lod_error_m": the
-// simplification's error in metres, "up": "+Z"}}.
+// simplification's error in metres, "up": "+Z"}}, and for the mesh of a region of the map
+// (MeshOptions::region) "region": {"min": [x, y, z], "max": [x, y, z]} in map coordinates.
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
+#include "core/geometry/axis_box.h"
 #include "core/geometry/triangle_mesh.h"
 
 namespace plx {
@@ -46,6 +50,7 @@ struct GlbMeshMetadata {
   std::string source;          // the map's source text; invalid UTF-8 bytes become '?'
   int64_t full_triangles = 0;  // before simplification (0: the mesh was not simplified)
   double lod_error_m = 0.0;    // the simplification's error, metres
+  std::optional<AxisBox> region;  // the box the mesh was cut to; unset: the whole map
 };
 
 struct GlbMesh {
@@ -71,6 +76,7 @@ struct GlbMeshInfo {
   // From the asset's plenoxd extras when present (else 0).
   int64_t full_triangles = 0;
   double lod_error_m = 0.0;
+  std::optional<AxisBox> region;  // the extras' region when it has one (six finite numbers)
 };
 
 // How many leading bytes of a GLB ReadGlbMeshInfo needs (the header and the JSON chunk), from

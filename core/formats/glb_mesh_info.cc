@@ -1,8 +1,11 @@
 // ReadGlbMeshInfo: the counts a GLB's JSON chunk declares (core/formats/glb_mesh.h).
 #include <nlohmann/json.hpp>
 
+#include <array>
 #include <cstdint>
 #include <cstring>
+#include <optional>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "core/formats/glb_mesh.h"
@@ -30,6 +33,25 @@ int64_t AccessorCount(const nlohmann::json& gltf, const nlohmann::json& index) {
   if (!accessor.is_object() || !accessor.contains("count")) return -1;
   const nlohmann::json& count = accessor["count"];
   return count.is_number_unsigned() ? static_cast<int64_t>(count.get<uint64_t>()) : -1;
+}
+
+// The box of an extras "region" ({"min": [3 numbers], "max": [3 numbers]}), or none when it is
+// not one.
+std::optional<AxisBox> RegionOf(const nlohmann::json& region) {
+  if (!region.is_object()) return std::nullopt;
+  AxisBox box;
+  const std::pair<const char*, std::array<double, 3>*> corners[] = {{"min", &box.min},
+                                                                     {"max", &box.max}};
+  for (const auto& [key, corner] : corners) {
+    if (!region.contains(key)) return std::nullopt;
+    const nlohmann::json& values = region[key];
+    if (!values.is_array() || values.size() != 3) return std::nullopt;
+    for (int a = 0; a < 3; ++a) {
+      if (!values[a].is_number()) return std::nullopt;
+      (*corner)[a] = values[a].get<double>();
+    }
+  }
+  return box;
 }
 
 }  // namespace
@@ -101,6 +123,7 @@ absl::StatusOr<GlbMeshInfo> ReadGlbMeshInfo(absl::string_view prefix) {
     if (extras->contains("lod_error_m") && (*extras)["lod_error_m"].is_number()) {
       info.lod_error_m = (*extras)["lod_error_m"].get<double>();
     }
+    if (extras->contains("region")) info.region = RegionOf((*extras)["region"]);
   }
   return info;
 }

@@ -4,10 +4,12 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
+#include "core/geometry/axis_box.h"
 #include "core/geometry/triangle_mesh.h"
 
 namespace plx {
@@ -18,9 +20,17 @@ struct PlyMesh {
   int64_t faces = 0;
 };
 
-// `source` goes into the header's comment (the map's source text). InvalidArgument when the
-// mesh's arrays disagree in size or a face names a vertex that does not exist; out of memory is
-// RESOURCE_EXHAUSTED.
-absl::StatusOr<PlyMesh> EncodePlyMesh(const TriangleMesh& mesh, absl::string_view source);
+// How the header names the region of a mesh cut to a box (MeshOptions::region): this, then
+// "xmin ymin zmin xmax ymax zmax" (map coordinates, metres) and a newline.
+inline constexpr char kPlyRegionComment[] = "comment plenoxd region: ";
+
+// That comment line of `box`, every coordinate written exactly (17 significant digits).
+std::string PlyRegionComment(const AxisBox& box);
+
+// `source` goes into the header's comment (the map's source text), and `region`, when set, into
+// a second one (kPlyRegionComment). InvalidArgument when the mesh's arrays disagree in size or
+// a face names a vertex that does not exist; out of memory is RESOURCE_EXHAUSTED.
+absl::StatusOr<PlyMesh> EncodePlyMesh(const TriangleMesh& mesh, absl::string_view source,
+                                      const std::optional<AxisBox>& region = std::nullopt);
 
 }  // namespace plx

@@ -114,22 +114,25 @@ class Backend {
                                  .lambda_sh = lambda_sh});
   }
   absl::Status CountIsoTriangles(const GridView& grid, int64_t first_vertex, int64_t count,
-                                 const IsoSurfaceParams& params, uint8_t* triangles) {
+                                 const IsoSurfaceParams& params, uint8_t* triangles,
+                                 const IsoBrickList& bricks = {}) {
     return Run(CountIsoTrianglesArgs{.grid = grid,
                                      .first_vertex = first_vertex,
                                      .count = count,
                                      .params = params,
-                                     .triangles = triangles});
+                                     .triangles = triangles,
+                                     .bricks = bricks});
   }
   absl::Status EmitIsoTriangles(const GridView& grid, int64_t first_vertex, int64_t count,
                                 const IsoSurfaceParams& params, const int64_t* first_triangle,
-                                int64_t* edge_keys) {
+                                int64_t* edge_keys, const IsoBrickList& bricks = {}) {
     return Run(EmitIsoTrianglesArgs{.grid = grid,
                                     .first_vertex = first_vertex,
                                     .count = count,
                                     .params = params,
                                     .first_triangle = first_triangle,
-                                    .edge_keys = edge_keys});
+                                    .edge_keys = edge_keys,
+                                    .bricks = bricks});
   }
   absl::Status ComputeIsoVertices(const GridView& grid, const int64_t* edge_keys, int64_t count,
                                   const IsoSurfaceParams& params, float* positions, float* normals,

@@ -19,12 +19,16 @@ absl::Status CheckIsoLevel(const IsoSurfaceParams& params) {
   return absl::OkStatus();
 }
 
-// Marching cubes work items: the cells whose lowest corners are stored vertices.
-absl::Status CheckIsoCells(const GridView& grid, int64_t first_vertex, int64_t count) {
-  if (first_vertex < 0 || count > grid.num_vertices() - first_vertex) {
-    return absl::InvalidArgumentError(absl::StrCat("`first_vertex`, `count`: cells [", first_vertex,
-                                                   ", +", count, ") outside the grid's ",
-                                                   grid.num_vertices(), " vertices"));
+// Marching cubes work items: the cells whose lowest corners are stored vertices, or the cells
+// of a brick list (whose slots the kernel checks: a slot outside the grid has no cells).
+absl::Status CheckIsoCells(const GridView& grid, int64_t first_vertex, int64_t count,
+                           const IsoBrickList& bricks) {
+  const bool listed = bricks.slots != nullptr || bricks.count != 0;
+  const int64_t items = listed ? bricks.count * kBrickVertices : grid.num_vertices();
+  if (first_vertex < 0 || count > items - first_vertex) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "`first_vertex`, `count`: cells [", first_vertex, ", +", count, ") outside the ",
+        listed ? "brick list's " : "grid's ", items, listed ? " cells" : " vertices"));
   }
   return absl::OkStatus();
 }
@@ -57,12 +61,12 @@ absl::Status AddTvGradientArgs::Validate() const {
 
 absl::Status CountIsoTrianglesArgs::Validate() const {
   PLX_RETURN_IF_ERROR(CheckIsoLevel(params));
-  return CheckIsoCells(grid, first_vertex, count);
+  return CheckIsoCells(grid, first_vertex, count, bricks);
 }
 
 absl::Status EmitIsoTrianglesArgs::Validate() const {
   PLX_RETURN_IF_ERROR(CheckIsoLevel(params));
-  return CheckIsoCells(grid, first_vertex, count);
+  return CheckIsoCells(grid, first_vertex, count, bricks);
 }
 
 absl::Status ComputeIsoVerticesArgs::Validate() const { return CheckIsoLevel(params); }

@@ -237,8 +237,9 @@ struct AddTvGradientArgs {
   bool Empty() const { return grid.num_vertices() == 0; }
 };
 
-// Marching cubes (core/kernels/marching_cubes.h) on the cells whose lowest corners are stored
-// vertices [first_vertex, first_vertex + count): the triangles each cell makes (`triangles`
+// Marching cubes (core/kernels/marching_cubes.h) on work items [first_vertex, first_vertex +
+// count): without a brick list the cells whose lowest corners are those stored vertices, with
+// one the cells of the listed bricks (IsoBrickList); the triangles each cell makes (`triangles`
 // [count]).
 struct CountIsoTrianglesArgs {
   static constexpr char kName[] = "CountIsoTriangles";
@@ -247,15 +248,17 @@ struct CountIsoTrianglesArgs {
   int64_t count = 0;
   IsoSurfaceParams params;
   uint8_t* triangles = nullptr;
+  IsoBrickList bricks;
 
   template <typename Visit>
   void ForEachArgument(Visit&& visit) const {
     visit(Count("count", count));
     VisitGrid(visit, "grid", grid);
     visit(Read("table", params.table, 1).Of("params"));
+    visit(Read("slots", bricks.slots, bricks.count).Of("bricks"));
     visit(Write("triangles", triangles, count));
   }
-  absl::Status Validate() const;  // a finite level; the cells lie in the grid
+  absl::Status Validate() const;  // a finite level; the cells lie in the grid or the list
   bool Empty() const { return count == 0; }
 };
 
@@ -269,17 +272,19 @@ struct EmitIsoTrianglesArgs {
   IsoSurfaceParams params;
   const int64_t* first_triangle = nullptr;
   int64_t* edge_keys = nullptr;
+  IsoBrickList bricks;  // the same list as the counts'
 
   template <typename Visit>
   void ForEachArgument(Visit&& visit) const {
     visit(Count("count", count));
     VisitGrid(visit, "grid", grid);
     visit(Read("table", params.table, 1).Of("params"));
+    visit(Read("slots", bricks.slots, bricks.count).Of("bricks"));
     visit(Read("first_triangle", first_triangle, count));
     // The total is the caller's (the counts' sum), not in the arguments.
     visit(Write("edge_keys", edge_keys, kUnknownSize).RequiredIf(count > 0));
   }
-  absl::Status Validate() const;  // a finite level; the cells lie in the grid
+  absl::Status Validate() const;  // a finite level; the cells lie in the grid or the list
   bool Empty() const { return count == 0; }
 };
 

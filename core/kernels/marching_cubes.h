@@ -31,7 +31,29 @@ struct IsoSurfaceParams {
   float iso_level = 0.0f;  // density (1/m); a cell corner is inside when its density is above
   MeshColorMode color_mode = MeshColorMode::kDc;
   const MarchingCubesTable* table = nullptr;  // in memory the backend reads
+  // The cells meshed, by their lowest corners' vertex coordinates in the grid's index
+  // (inclusive): a region of the map (core/mesh/iso_surface.h). Cells outside have no
+  // triangles, so the triangles of neighbouring regions never overlap. Everything by default.
+  int32_t cell_min[3] = {INT32_MIN, INT32_MIN, INT32_MIN};
+  int32_t cell_max[3] = {INT32_MAX, INT32_MAX, INT32_MAX};
 };
+
+// Which bricks' cells a marching-cubes call visits. Without a list (slots null), work item i is
+// the cell whose lowest corner is stored vertex i (every brick in slot order). With one, item i
+// is local cell i % 512 of the brick in slot slots[i / 512]: a region's bricks only, so its
+// cost does not grow with the rest of the map. A slot outside the grid has no cells.
+struct IsoBrickList {
+  const int32_t* slots = nullptr;  // [count], in memory the backend reads
+  int64_t count = 0;
+};
+
+// The stored vertex (slot * 512 + local) of work item `item` (see IsoBrickList), or -1.
+PLX_HD int64_t IsoWorkVertex(const GridView& g, const IsoBrickList& bricks, int64_t item) {
+  if (bricks.slots == nullptr) return item;
+  const int64_t slot = bricks.slots[item / kBrickVertices];
+  if (slot < 0 || slot >= g.num_bricks) return -1;
+  return slot * kBrickVertices + item % kBrickVertices;
+}
 
 // Density of vertex (vx, vy, vz), 0 when it is not stored.
 PLX_HD float IsoVertexDensity(const GridView& g, int vx, int vy, int vz) {
@@ -40,15 +62,21 @@ PLX_HD float IsoVertexDensity(const GridView& g, int vx, int vy, int vz) {
 }
 
 // The case (inside-corner mask) of the cell whose lowest corner is stored vertex `vertex`, or
-// -1 when a corner is not stored. `cell` gets the corner's vertex coordinates.
-PLX_HD int IsoCellCase(const GridView& g, int64_t vertex, float iso_level, int cell[3]) {
+// -1 when there is no such vertex (-1), a corner is not stored or the cell is outside the
+// params' cell range. `cell` gets the corner's vertex coordinates.
+PLX_HD int IsoCellCase(const GridView& g, int64_t vertex, const IsoSurfaceParams& p,
+                       int cell[3]) {
+  if (vertex < 0) return -1;
   g.VertexCoords(vertex, cell);
+  for (int a = 0; a < 3; ++a) {
+    if (cell[a] < p.cell_min[a] || cell[a] > p.cell_max[a]) return -1;
+  }
   int mask = 0;
   for (int k = 0; k < 8; ++k) {
     const int64_t slot = g.VertexSlot(cell[0] + (k & 1), cell[1] + ((k >> 1) & 1),
                                       cell[2] + ((k >> 2) & 1));
     if (slot < 0) return -1;
-    if (g.Density(slot) > iso_level) mask |= 1 << k;
+    if (g.Density(slot) > p.iso_level) mask |= 1 << k;
   }
   return mask;
 }

@@ -11,11 +11,12 @@ namespace plx::PLX_BACKEND_NS {
 void Run(const ExecContext& ctx, const CountIsoTrianglesArgs& args) {
   const GridView g = args.grid;
   const IsoSurfaceParams p = args.params;
+  const IsoBrickList bricks = args.bricks;
   const int64_t first_vertex = args.first_vertex;
   uint8_t* const triangles = args.triangles;
   ParallelFor(ctx, args.count, [=] PLX_HD_LAMBDA(int64_t i) {
     int cell[3];
-    const int mask = IsoCellCase(g, first_vertex + i, p.iso_level, cell);
+    const int mask = IsoCellCase(g, IsoWorkVertex(g, bricks, first_vertex + i), p, cell);
     triangles[i] = mask < 0 ? 0 : p.table->triangle_count[mask];
   });
 }
@@ -23,12 +24,13 @@ void Run(const ExecContext& ctx, const CountIsoTrianglesArgs& args) {
 void Run(const ExecContext& ctx, const EmitIsoTrianglesArgs& args) {
   const GridView g = args.grid;
   const IsoSurfaceParams p = args.params;
+  const IsoBrickList bricks = args.bricks;
   const int64_t first_vertex = args.first_vertex;
   const int64_t* const first_triangle = args.first_triangle;
   int64_t* const edge_keys = args.edge_keys;
   ParallelFor(ctx, args.count, [=] PLX_HD_LAMBDA(int64_t i) {
     int cell[3];
-    const int mask = IsoCellCase(g, first_vertex + i, p.iso_level, cell);
+    const int mask = IsoCellCase(g, IsoWorkVertex(g, bricks, first_vertex + i), p, cell);
     if (mask <= 0) return;
     const int n = p.table->triangle_count[mask];
     if (n == 0) return;

@@ -2,8 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <string>
+#include <vector>
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
@@ -49,8 +51,22 @@ void FillMissingNormals(TriangleMesh* mesh) {
   }
 }
 
+// The world lattice's cells (cell c spans voxels [c, c + 1] on each axis) whose centres lie in
+// `box` on one axis: (c + 0.5) * voxel in [lo, hi), i.e. ceil(lo / voxel - 0.5) <= c <=
+// ceil(hi / voxel - 0.5) - 1. Clamped far outside any grid (the box may be any finite size)
+// but well inside int64, so the callers' sums cannot overflow.
+void RegionCellsOnAxis(double lo, double hi, double voxel, int64_t* first, int64_t* last) {
+  constexpr double kFar = 1e15;
+  const double a = std::clamp(std::ceil(lo / voxel - 0.5), -kFar, kFar);
+  const double b = std::clamp(std::ceil(hi / voxel - 0.5) - 1.0, -kFar, kFar);
+  *first = static_cast<int64_t>(a);
+  *last = static_cast<int64_t>(b);
+}
+
 // Slices of bricks through count -> prefix sum -> emit; each triangle's edge keys are turned
 // into vertex indices right away (first appearance order), so only the slice's keys are held.
+// With a region, the slices run over the list of the bricks that hold its cells, and the
+// kernels mesh only the cells whose centres it holds (MeshOptions::region).
 class Extraction {
  public:
   Extraction(const SparseGrid& grid, Backend& backend, const MeshOptions& options)
@@ -59,6 +75,12 @@ class Extraction {
     params_.iso_level = options.iso_level;
     params_.color_mode = options.color_mode;
     params_.table = table_.data();
+    if (options.region) ListRegion(grid, *options.region);
+  }
+
+  // Bricks the slices run over: the grid's, or the region's list.
+  int64_t bricks_to_visit() const {
+    return listed_ ? static_cast<int64_t>(slots_.size()) : view_.num_bricks;
   }
 
   absl::Status Slice(int64_t first_brick, int64_t bricks) {
@@ -66,8 +88,8 @@ class Extraction {
     const int64_t items = bricks * kBrickVertices;
     counts_.resize(static_cast<size_t>(items));
     offsets_.resize(static_cast<size_t>(items));
-    PLX_RETURN_IF_ERROR(
-        backend_.CountIsoTriangles(view_, first_item, items, params_, counts_.data()));
+    PLX_RETURN_IF_ERROR(backend_.CountIsoTriangles(view_, first_item, items, params_,
+                                                   counts_.data(), brick_list()));
     int64_t slice_triangles = 0;
     for (int64_t i = 0; i < items; ++i) {
       offsets_[i] = slice_triangles;
@@ -81,7 +103,7 @@ class Extraction {
     }
     keys_.resize(static_cast<size_t>(3 * slice_triangles));
     PLX_RETURN_IF_ERROR(backend_.EmitIsoTriangles(view_, first_item, items, params_,
-                                                  offsets_.data(), keys_.data()));
+                                                  offsets_.data(), keys_.data(), brick_list()));
     mesh_.triangles.reserve(mesh_.triangles.size() + keys_.size());
     for (int64_t key : keys_) {
       const int32_t next = static_cast<int32_t>(unique_keys_.size());
@@ -102,6 +124,7 @@ class Extraction {
     UnifiedVector<uint8_t>().swap(counts_);
     UnifiedVector<int64_t>().swap(offsets_);
     UnifiedVector<int64_t>().swap(keys_);
+    UnifiedVector<int32_t>().swap(slots_);
     vertex_of_key_ = {};
     const int64_t n = static_cast<int64_t>(unique_keys_.size());
     UnifiedVector<float> positions(3 * n), normals(3 * n);
@@ -128,11 +151,45 @@ class Extraction {
   }
 
  private:
+  IsoBrickList brick_list() const {
+    return listed_ ? IsoBrickList{slots_.data(), static_cast<int64_t>(slots_.size())}
+                   : IsoBrickList{};
+  }
+
+  // The region's cell range into params_ (in the index's vertex coordinates) and the slots of
+  // the bricks holding any of its cells into slots_. One pass over the bricks' coordinates,
+  // a few integer comparisons each: nothing next to meshing them.
+  void ListRegion(const SparseGrid& grid, const AxisBox& box) {
+    listed_ = true;
+    int64_t first[3], last[3];
+    for (int a = 0; a < 3; ++a) {
+      RegionCellsOnAxis(box.min[a], box.max[a], grid.voxel_size(), &first[a], &last[a]);
+      // Index coordinates: the world lattice's less the index's corner.
+      const int64_t corner = int64_t{grid.index_min()[a]} * kBrickEdge;
+      params_.cell_min[a] = static_cast<int32_t>(
+          std::clamp<int64_t>(first[a] - corner, INT32_MIN, INT32_MAX));
+      params_.cell_max[a] = static_cast<int32_t>(
+          std::clamp<int64_t>(last[a] - corner, INT32_MIN, INT32_MAX));
+    }
+    const std::vector<BrickCoord>& coords = grid.brick_coords();
+    for (size_t slot = 0; slot < coords.size(); ++slot) {
+      const int64_t c[3] = {coords[slot].x, coords[slot].y, coords[slot].z};
+      bool inside = true;
+      for (int a = 0; a < 3 && inside; ++a) {
+        // The brick's cells are c * 8 .. c * 8 + 7 of the world lattice.
+        inside = c[a] * kBrickEdge + kBrickEdge - 1 >= first[a] && c[a] * kBrickEdge <= last[a];
+      }
+      if (inside) slots_.push_back(static_cast<int32_t>(slot));
+    }
+  }
+
   const GridView view_;
   Backend& backend_;
   const MeshOptions& options_;
   UnifiedVector<MarchingCubesTable> table_;
   IsoSurfaceParams params_;
+  bool listed_ = false;            // a region: the slices run over slots_
+  UnifiedVector<int32_t> slots_;   // the region's bricks
   UnifiedVector<uint8_t> counts_;
   UnifiedVector<int64_t> offsets_;
   UnifiedVector<int64_t> keys_;
@@ -161,6 +218,7 @@ absl::Status ValidateMeshOptions(const MeshOptions& options) {
       options.color_mode != MeshColorMode::kViewAlongNormal) {
     return absl::InvalidArgumentError("color_mode: unknown");
   }
+  if (options.region) return CheckAxisBox(*options.region, "region");
   return absl::OkStatus();
 }
 
@@ -170,10 +228,10 @@ absl::StatusOr<TriangleMesh> ExtractMesh(const SparseGrid& grid, Backend& backen
   PLX_RETURN_IF_ERROR(ValidateMeshOptions(options));
   return CatchAllocationFailure("extracting the mesh", [&]() -> absl::StatusOr<TriangleMesh> {
     Extraction extraction(grid, backend, options);
-    for (int64_t first = 0; first < grid.num_bricks(); first += kBricksPerSlice) {
+    const int64_t bricks = extraction.bricks_to_visit();
+    for (int64_t first = 0; first < bricks; first += kBricksPerSlice) {
       if (cancelled && cancelled()) return absl::CancelledError("mesh export cancelled");
-      PLX_RETURN_IF_ERROR(
-          extraction.Slice(first, std::min(kBricksPerSlice, grid.num_bricks() - first)));
+      PLX_RETURN_IF_ERROR(extraction.Slice(first, std::min(kBricksPerSlice, bricks - first)));
     }
     if (cancelled && cancelled()) return absl::CancelledError("mesh export cancelled");
     return extraction.Finish();

@@ -6,9 +6,11 @@
 
 #include <cstdint>
 #include <functional>
+#include <optional>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "core/geometry/axis_box.h"
 #include "core/geometry/triangle_mesh.h"
 #include "core/grid/sparse_grid.h"
 #include "core/kernels/backend.h"
@@ -37,9 +39,22 @@ struct MeshOptions {
   bool keep_unobserved = false;
   // More triangles than this fails with RESOURCE_EXHAUSTED before they are all built.
   int64_t max_triangles = kDefaultMaxMeshTriangles;
+  // Only this box of the map (world coordinates, metres), e.g. the room a headset is in; unset
+  // = the whole map. Only the bricks with cells in the box are visited, so the work grows with
+  // the box, not the map. A triangle is kept whole, never clipped: the mesh has the triangles
+  // of the cells whose centres lie in [min, max) on every axis, so it reaches at most half a
+  // voxel past the box, every vertex is one the full mesh has (same position, normal, colour;
+  // only the rare vertex without a density gradient takes its normal from the triangles kept),
+  // and boxes that share a face tile the map: each triangle in exactly one of them, meeting
+  // at shared vertices (without min_component_triangles, which judges the pieces the box cut).
+  // The filters (keep_unobserved, min_component_triangles) and the triangle limit then apply
+  // to the region's mesh. A box with no surface in it gives an empty mesh, not an error:
+  // "nothing mapped here yet" is an answer a client can act on.
+  std::optional<AxisBox> region;
 };
 
-// InvalidArgument naming the field (iso_level, min_component_triangles, max_triangles).
+// InvalidArgument naming the field (iso_level, min_component_triangles, max_triangles,
+// region: CheckAxisBox).
 absl::Status ValidateMeshOptions(const MeshOptions& options);
 
 // The mesh of `grid`. Work is done in slices of bricks; `cancelled` is asked between slices and

@@ -427,6 +427,7 @@ absl::Status SlamCoordinator::CorrectAndRebuild(SlamMapper* mapper) {
     return status;
   }
   main.rebuild = *std::move(rebuild);
+  main.rebuild_refined = false;
   return absl::OkStatus();
 }
 
@@ -449,7 +450,16 @@ absl::StatusOr<SlamStepResult> SlamCoordinator::StepRebuild() {
   // after the swap); finishing steps it until then too.
   const bool trained = !rebuild->has_work() ||
                        p.mapping_iterations >= mapper_options_.rebuild_iteration_share * budget;
-  if (p.pending_keyframes == 0 && trained) return SwapInRebuild();
+  if (p.pending_keyframes == 0 && trained) {
+    if (mapper_options_.rebuild_refines_all && !main.rebuild_refined) {
+      // One bounded step of its own: the swap is the next one, with the refined poses.
+      PLX_RETURN_IF_ERROR(rebuild->RefineAllKeyframes().status());
+      main.rebuild_refined = true;
+      out.stepped = true;
+      return out;
+    }
+    return SwapInRebuild();
+  }
   return out;
 }
 

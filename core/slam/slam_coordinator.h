@@ -224,6 +224,7 @@ class SlamCoordinator {
     bool correction_deferred = false;  // ...and waits for min_keyframes_between_rebuilds
     int rebuilt_at = -1;           // the keyframes when the last rebuild started
     bool step_rebuild_next = false;
+    bool rebuild_refined = false;  // the rebuild's keyframes were aligned to it (once)
     // Guarded by the coordinator's lock (written by the step-runner):
     std::vector<LoopEdge> loops;   // verified and not rejected, in keyframe indices
     std::unique_ptr<SlamMapper> rebuild;  // the map at corrected poses, being built

@@ -110,6 +110,22 @@ absl::Status SlamMapper::AfterStep(std::shared_ptr<const PlenoxelMap> published)
   return absl::OkStatus();
 }
 
+absl::StatusOr<KeyframeRefinementResult> SlamMapper::RefineAllKeyframes() {
+  PLX_RETURN_IF_ERROR(PublishIfChanged());
+  const std::shared_ptr<const PlenoxelMap> map = latest().map;
+  if (map == nullptr) return KeyframeRefinementResult{};
+  KeyframeRefinementOptions all = options_.refinement;
+  all.window = mapping_->keyframes().num_frames();
+  PLX_ASSIGN_OR_RETURN(KeyframeRefinementResult r,
+                       RefineKeyframePoses(*mapping_, *map, *backend_, all));
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    progress_.refined_keyframes += r.refined;
+  }
+  PLX_RETURN_IF_ERROR(AfterStep(nullptr));  // the refined poses
+  return r;
+}
+
 SlamMapVersion SlamMapper::latest() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return latest_;

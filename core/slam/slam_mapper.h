@@ -39,6 +39,12 @@ struct SlamMapperOptions {
   // A map rebuilt at corrected poses replaces the published one once every keyframe is
   // integrated and it has run this share of its iteration budget (it spends the rest after).
   double rebuild_iteration_share = 0.5;
+  // Before it replaces the main mapper, a rebuild aligns every keyframe (not only the
+  // refinement window) to the map it built at the pose graph's poses, with refinement's
+  // tracker and limits: the graph spreads a loop's error along the chain as the odometry's
+  // noise model says, while the images tell where each keyframe really was (docs/SLAM.md,
+  // "Loop closure").
+  bool rebuild_refines_all = true;
 };
 
 absl::Status ValidateSlamMapperOptions(const SlamMapperOptions& options);
@@ -103,6 +109,10 @@ class SlamMapper {
   absl::Status RunToEnd(bool finish);
   // Publishes the current map if anything changed since the last version. Step-runner thread.
   absl::Status PublishIfChanged();
+  // Aligns every keyframe but the first to the newest published version (refinement's
+  // tracker and limits, whatever its window) and moves it; the next steps fit the map to the
+  // new poses. Step-runner.
+  absl::StatusOr<KeyframeRefinementResult> RefineAllKeyframes();
   // True while a step would do something (keyframes queued or iteration budget left).
   // Step-runner thread.
   bool has_work() const;

@@ -18,6 +18,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "core/formats/map_file.h"
 #include "tests/clients/cli_runner.h"
 #include "tests/clients/depthless_dataset.h"
@@ -117,7 +118,7 @@ TEST(PlenoxUsageTest, EveryCommandHelpListsItsFlags) {
       {"synth",
        {"--out", "--frames", "--width", "--height", "--noise", "--noise-seed", "--help"}},
       {"export",
-       {"--map", "--out", "--mesh", "--format", "--lod-triangles", "--min-density",
+       {"--map", "--out", "--mesh", "--format", "--lod-triangles", "--bbox", "--min-density",
         "--iso-level", "--min-component", "--max-triangles", "--keep-unobserved", "--mesh-color",
         "--backend", "--device", "--threads", "--json", "--quiet", "--help"}},
       {"demo",
@@ -338,6 +339,83 @@ TEST_F(PlenoxBadInputTest, ExportFormatAndLevelOfDetailMistakesAreUsageErrors) {
   ExpectFailsCleanly(
       {"export", "--map", *map_, "--out", "x.glb", "--mesh", "--lod-triangles", "20000001"},
       kExitUsage, {"--lod-triangles"}, work);
+}
+
+// --bbox: the triangles of the voxels whose centres are in the box, within half a voxel of it,
+// the file and the JSON naming the box; two boxes sharing a face split the full mesh.
+TEST_F(PlenoxBadInputTest, ExportWritesTheMeshOfABox) {
+  ScopedTempDir work("plenox_export_bbox");
+  const CommandResult full = RunPlenox({"export", "--map", *map_, "--out", "full.glb", "--mesh",
+                                        "--keep-unobserved", "--threads", kThreads, "--json"},
+                                       work.path());
+  ASSERT_EQ(full.exit_code, kExitOk) << full.Describe();
+  const plx::testing::GlbFile whole =
+      plx::testing::ExpectGlbFileMatchingJson(work / "full.glb", full);
+  ASSERT_GT(whole.mesh.num_triangles(), 20);
+  ASSERT_EQ(whole.position_min.size(), 3u);
+  // Split the mesh's extent along x at its middle; the boxes reach a metre past it elsewhere.
+  const double middle = 0.5 * (whole.position_min[0] + whole.position_max[0]);
+  // Written exactly (17 digits), as the JSON's bbox is: the same text comes back.
+  const auto box_text = [](double x0, double y0, double z0, double x1, double y1, double z1) {
+    return absl::StrFormat("%.17g,%.17g,%.17g,%.17g,%.17g,%.17g", x0, y0, z0, x1, y1, z1);
+  };
+  const std::vector<double>& lo = whole.position_min;
+  const std::vector<double>& hi = whole.position_max;
+  const std::string lower = box_text(lo[0] - 1, lo[1] - 1, lo[2] - 1, middle, hi[1] + 1, hi[2] + 1);
+  const std::string upper = box_text(middle, lo[1] - 1, lo[2] - 1, hi[0] + 1, hi[1] + 1, hi[2] + 1);
+  int64_t split = 0;
+  for (const auto& [out, box] : {std::pair<std::string, std::string>{"lower.glb", lower},
+                                 std::pair<std::string, std::string>{"upper.ply", upper}}) {
+    SCOPED_TRACE(out);
+    const CommandResult r = RunPlenox({"export", "--map", *map_, "--out", out, "--mesh",
+                                       "--keep-unobserved", "--bbox", box, "--threads", kThreads,
+                                       "--json"},
+                                      work.path());
+    ASSERT_EQ(r.exit_code, kExitOk) << r.Describe();
+    const FlatJson json = LastLineJson(r);
+    ASSERT_TRUE(json.count("bbox")) << r.Describe();
+    EXPECT_EQ(json.at("bbox").text, box);
+    const plx::TriangleMesh mesh = out == "lower.glb"
+                                  ? plx::testing::ExpectGlbFileMatchingJson(work / out, r).mesh
+                                  : plx::testing::ExpectMeshFileMatchingJson(work / out, r);
+    EXPECT_GT(mesh.num_triangles(), 0);
+    EXPECT_LT(mesh.num_triangles(), whole.mesh.num_triangles());
+    split += mesh.num_triangles();
+    // The map's voxels are 8 cm: half a voxel past the shared face at most.
+    for (int64_t v = 0; v < mesh.num_vertices(); ++v) {
+      const float x = mesh.positions[3 * v];
+      EXPECT_TRUE(out == "lower.glb" ? x <= middle + 0.0401 : x >= middle - 0.0401) << x;
+    }
+  }
+  EXPECT_EQ(split, whole.mesh.num_triangles());
+  EXPECT_THAT(ReadFileToString(work / "upper.ply"),
+              HasSubstr("\ncomment plenoxd region: "));
+
+  const CommandResult text =
+      RunPlenox({"export", "--map", *map_, "--out", "nothing.glb", "--mesh", "--bbox",
+                 "50,50,50,51,51,51", "--threads", kThreads},
+                work.path());
+  ASSERT_EQ(text.exit_code, kExitOk) << text.Describe();
+  EXPECT_THAT(text.out, AllOf(HasSubstr("0 triangles"),
+                              HasSubstr("in the box [50, 50, 50] .. [51, 51, 51]")))
+      << text.Describe();
+}
+
+TEST_F(PlenoxBadInputTest, ABoxThatIsNotSixNumbersOfAFiniteNonEmptyBoxIsAUsageError) {
+  ScopedTempDir work("plenox_export_bbox_bad");
+  ExpectFailsCleanly({"export", "--map", *map_, "--out", "x.ply", "--bbox", "0,0,0,1,1,1"},
+                     kExitUsage, {"--bbox applies to --mesh only"}, work);
+  ExpectFailsCleanly({"export", "--map", *map_, "--out", "x.glb", "--mesh", "--bbox", "0,0,0,1,1"},
+                     kExitUsage, {"--bbox: expected six numbers", "0,0,0,1,1"}, work);
+  ExpectFailsCleanly(
+      {"export", "--map", *map_, "--out", "x.glb", "--mesh", "--bbox", "0,0,0,1,x,1"},
+      kExitUsage, {"--bbox: expected six numbers"}, work);
+  ExpectFailsCleanly(
+      {"export", "--map", *map_, "--out", "x.glb", "--mesh", "--bbox", "0,0,2,1,1,1"},
+      kExitUsage, {"--bbox: min must be below max", "not on z"}, work);
+  ExpectFailsCleanly(
+      {"export", "--map", *map_, "--out", "x.glb", "--mesh", "--bbox", "0,nan,0,1,1,1"},
+      kExitUsage, {"--bbox: coordinates must be finite"}, work);
 }
 
 TEST_F(PlenoxBadInputTest, ExportFlagsOfTheOtherFormatAreUsageErrors) {

@@ -19,6 +19,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "absl/strings/str_format.h"
 #include "app/make_backend.h"
 #include "tests/clients/cli_runner.h"
 #include "tests/clients/mesh_output.h"
@@ -392,6 +393,46 @@ TEST_F(RemoteCliTest, ExportMeshWritesGlbAtALevelOfDetail) {
   EXPECT_LE(plx::testing::ExpectMeshFileMatchingJson(work / "lod.ply", ply).num_triangles(),
             budget);
   EXPECT_EQ(ListTree(work.path()), (std::set<std::string>{"mesh.glb", "lod.glb", "lod.ply"}));
+}
+
+// --bbox through the daemon: the region field, the box's triangles in either format (the file
+// recording the box, which the CLI checks), and an empty box refused before any call.
+TEST_F(RemoteCliTest, ExportMeshOfABoxOfTheMap) {
+  ScopedTempDir work("plenox_remote_bbox");
+  const CommandResult full =
+      Remote({"export", "--map", kMap, "--out", "mesh.glb", "--mesh", "--json"}, work.path());
+  ASSERT_EQ(full.exit_code, kExitOk) << full.Describe();
+  const plx::testing::GlbFile whole =
+      plx::testing::ExpectGlbFileMatchingJson(work / "mesh.glb", full);
+  ASSERT_GT(whole.mesh.num_triangles(), 100);
+  const double middle = 0.5 * (whole.position_min[0] + whole.position_max[0]);
+  const std::string box = absl::StrFormat("-100,-100,-100,%.17g,100,100", middle);
+  int64_t faces = -1;
+  for (const char* out : {"half.glb", "half.ply"}) {
+    SCOPED_TRACE(out);
+    const CommandResult half =
+        Remote({"export", "--map", kMap, "--out", out, "--mesh", "--bbox", box, "--json"},
+               work.path());
+    ASSERT_EQ(half.exit_code, kExitOk) << half.Describe();
+    const plx::TriangleMesh mesh =
+        std::string(out) == "half.glb"
+            ? plx::testing::ExpectGlbFileMatchingJson(work / out, half).mesh
+            : plx::testing::ExpectMeshFileMatchingJson(work / out, half);
+    EXPECT_GT(mesh.num_triangles(), 0);
+    EXPECT_LT(mesh.num_triangles(), whole.mesh.num_triangles());
+    if (faces >= 0) EXPECT_EQ(mesh.num_triangles(), faces) << "the same box in either format";
+    faces = mesh.num_triangles();
+    for (int64_t v = 0; v < mesh.num_vertices(); ++v) {
+      EXPECT_LE(mesh.positions[3 * v], middle + 0.02 + 1e-4);  // half the map's 4 cm voxel
+    }
+    EXPECT_EQ(LastLineJson(half).count("bbox"), 1u) << half.Describe();
+  }
+  const CommandResult refused = Remote(
+      {"export", "--map", kMap, "--out", "x.glb", "--mesh", "--bbox", "0,0,0,1,1,0"},
+      work.path());
+  EXPECT_EQ(refused.exit_code, kExitUsage) << refused.Describe();
+  EXPECT_EQ(ListTree(work.path()),
+            (std::set<std::string>{"mesh.glb", "half.glb", "half.ply"}));
 }
 
 TEST_F(RemoteCliTest, SaveWritesTheMapFileAndLoadReadsItBack) {

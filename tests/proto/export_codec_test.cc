@@ -1,7 +1,7 @@
 // The Export codec (proto/export_codec.h): a request with no options is core's defaults for its
 // format, every field reads into the spec and is written back from it (the glTF format and the
-// level of detail included), a spec survives the round trip, and every refusal is
-// INVALID_ARGUMENT naming its field at core's limits.
+// level of detail and the region included), a spec survives the round trip, and every refusal
+// is INVALID_ARGUMENT naming its field at core's limits.
 #include "proto/export_codec.h"
 
 #include <gmock/gmock.h>
@@ -12,6 +12,7 @@
 #include <functional>
 #include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -39,6 +40,7 @@ ExportSpec ChosenMeshSpec() {
   spec.mesh_options.keep_unobserved = true;
   spec.mesh_options.color_mode = MeshColorMode::kViewAlongNormal;
   spec.lod_triangles = 5000;
+  spec.mesh_options.region = AxisBox{{-1.5, -0.25, 0.0}, {0.125, 2.5, 3.0}};
   return spec;
 }
 
@@ -52,6 +54,7 @@ void ExpectSameSpec(const ExportSpec& got, const ExportSpec& want) {
   EXPECT_EQ(got.mesh_options.color_mode, want.mesh_options.color_mode);
   EXPECT_EQ(got.mesh_format, want.mesh_format);
   EXPECT_EQ(got.lod_triangles, want.lod_triangles);
+  EXPECT_EQ(got.mesh_options.region, want.mesh_options.region);
 }
 
 TEST(ExportCodecTest, AnEmptyRequestIsPointsAtCoresDensity) {
@@ -108,6 +111,13 @@ TEST(ExportCodecTest, EveryFieldIsRead) {
   mesh.set_keep_unobserved(true);
   mesh.set_mesh_color(pb::MESH_COLOR_ALONG_NORMAL);
   mesh.set_lod_triangles(5000);
+  pb::BoundingBox* region = mesh.mutable_region();
+  region->set_min_x(-1.5);
+  region->set_min_y(-0.25);
+  region->set_min_z(0.0);
+  region->set_max_x(0.125);
+  region->set_max_y(2.5);
+  region->set_max_z(3.0);
   const absl::StatusOr<ExportSpec> m = ExportSpecFromProto(mesh);
   ASSERT_TRUE(m.ok()) << m.status();
   ExpectSameSpec(*m, ChosenMeshSpec());
@@ -122,6 +132,13 @@ TEST(ExportCodecTest, EveryFieldIsWritten) {
   EXPECT_TRUE(mesh.keep_unobserved());
   EXPECT_EQ(mesh.mesh_color(), pb::MESH_COLOR_ALONG_NORMAL);
   EXPECT_EQ(mesh.lod_triangles(), 5000u);
+  ASSERT_TRUE(mesh.has_region());
+  EXPECT_EQ(mesh.region().min_x(), -1.5);
+  EXPECT_EQ(mesh.region().min_y(), -0.25);
+  EXPECT_EQ(mesh.region().min_z(), 0.0);
+  EXPECT_EQ(mesh.region().max_x(), 0.125);
+  EXPECT_EQ(mesh.region().max_y(), 2.5);
+  EXPECT_EQ(mesh.region().max_z(), 3.0);
   EXPECT_EQ(mesh.min_density(), 0.0f);  // points only: the daemon refuses it on a mesh
   EXPECT_TRUE(mesh.map().empty());      // the caller's
 
@@ -137,6 +154,7 @@ TEST(ExportCodecTest, EveryFieldIsWritten) {
   EXPECT_FALSE(points.keep_unobserved());
   EXPECT_EQ(points.mesh_color(), pb::MESH_COLOR_DC);
   EXPECT_EQ(points.lod_triangles(), 0u);
+  EXPECT_FALSE(points.has_region());
 
   ExportSpec glb_spec = ChosenMeshSpec();
   glb_spec.mesh_format = MeshFileFormat::kGlb;
@@ -184,6 +202,13 @@ TEST(ExportCodecTest, AnExplicitRequestSurvivesTheRoundTrip) {
   mesh.set_keep_unobserved(true);
   mesh.set_mesh_color(pb::MESH_COLOR_ALONG_NORMAL);
   mesh.set_lod_triangles(10);
+  pb::BoundingBox* region = mesh.mutable_region();
+  region->set_min_x(-1.0);
+  region->set_min_y(-2.0);
+  region->set_min_z(0.1);
+  region->set_max_x(1.0);
+  region->set_max_y(2.0);
+  region->set_max_z(2.9);
   pb::ExportRequest glb = mesh;
   glb.set_format(pb::EXPORT_FORMAT_MESH_GLB);
   pb::ExportRequest points;
@@ -269,6 +294,11 @@ TEST(ExportCodecTest, EveryRefusalNamesItsField) {
          r->set_lod_triangles(100);
        },
        "lod_triangles: applies to formats MESH and MESH_GLB only"},
+      {[&](pb::ExportRequest* r) {
+         points(r);
+         r->mutable_region()->set_max_x(1.0);
+       },
+       "region: applies to formats MESH and MESH_GLB only"},
       // Mesh options out of range.
       {[](pb::ExportRequest* r) { r->set_mesh_color(static_cast<pb::MeshColor>(9)); },
        "mesh_color: unknown value 9"},
@@ -295,6 +325,48 @@ TEST(ExportCodecTest, EveryRefusalNamesItsField) {
     ASSERT_FALSE(spec.ok());
     EXPECT_EQ(spec.status().code(), absl::StatusCode::kInvalidArgument);
     EXPECT_THAT(std::string(spec.status().message()), StartsWith(c.message_start));
+  }
+}
+
+// A box a mesh request names: set, it reaches core as MeshOptions::region; refused unless every
+// coordinate is finite and min < max on every axis (an unset message is the whole map).
+TEST(ExportCodecTest, ARegionIsCoresBoxAndOnlyAFiniteNonEmptyOneIsTaken) {
+  pb::ExportRequest request = MeshRequest();
+  const absl::StatusOr<ExportSpec> whole = ExportSpecFromProto(request);
+  ASSERT_TRUE(whole.ok()) << whole.status();
+  EXPECT_FALSE(whole->mesh_options.region.has_value());
+  EXPECT_FALSE(ExportSpecToProto(*whole).has_region());
+
+  pb::BoundingBox* box = request.mutable_region();
+  box->set_min_x(-3.0);
+  box->set_min_y(-2.5);
+  box->set_min_z(0.0);
+  box->set_max_x(0.0);
+  box->set_max_y(2.5);
+  box->set_max_z(3.0);
+  const absl::StatusOr<ExportSpec> spec = ExportSpecFromProto(request);
+  ASSERT_TRUE(spec.ok()) << spec.status();
+  ASSERT_TRUE(spec->mesh_options.region.has_value());
+  EXPECT_EQ(*spec->mesh_options.region, (AxisBox{{-3.0, -2.5, 0.0}, {0.0, 2.5, 3.0}}));
+
+  constexpr double nan = std::numeric_limits<double>::quiet_NaN();
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  const std::vector<std::pair<std::function<void(pb::BoundingBox*)>, std::string>> bad = {
+      {[](pb::BoundingBox* b) { b->set_max_x(-3.0); }, "region: min must be below max"},
+      {[](pb::BoundingBox* b) { b->set_min_z(4.0); }, "region: min must be below max"},
+      {[&](pb::BoundingBox* b) { b->set_min_y(nan); }, "region: coordinates must be finite"},
+      {[&](pb::BoundingBox* b) { b->set_max_z(inf); }, "region: coordinates must be finite"},
+      // An unset box message (all zero) is empty, not the whole map.
+      {[](pb::BoundingBox* b) { b->Clear(); }, "region: min must be below max"},
+  };
+  for (const auto& [set, message_start] : bad) {
+    pb::ExportRequest refused = request;
+    set(refused.mutable_region());
+    SCOPED_TRACE(refused.ShortDebugString());
+    const absl::StatusOr<ExportSpec> got = ExportSpecFromProto(refused);
+    ASSERT_FALSE(got.ok());
+    EXPECT_EQ(got.status().code(), absl::StatusCode::kInvalidArgument);
+    EXPECT_THAT(std::string(got.status().message()), StartsWith(message_start));
   }
 }
 

@@ -13,6 +13,7 @@
 
 #include <gtest/gtest.h>
 
+#include "absl/strings/str_format.h"
 #include "app/make_backend.h"
 #include "core/formats/map_file.h"
 #include "core/io/image_io.h"
@@ -483,6 +484,62 @@ TEST(ViewerMeshTest, LevelsOfDetailAreBuiltFromTheCachedMesh) {
   web::Viewer capped(&source, web::ThreeJsFiles{}, tight);
   EXPECT_EQ(capped.Handle(GlbRequest("room", 5)).status, 413);
   EXPECT_EQ(capped.Handle(GlbRequest("room", 11)).status, 400) << "over the viewer's limit";
+}
+
+// mesh.glb?bbox=: the mesh of that box alone, built on the device for it (a map whose whole
+// mesh is over the cap may still have a room under it), recorded in the file, cached per box
+// and budget; a bbox that is not six finite numbers with min < max is 400.
+TEST(ViewerMeshTest, ABoxOfTheMapIsBuiltForItselfAndCached) {
+  absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(CachedRoomMapFile());
+  ASSERT_TRUE(map.ok()) << map.status();
+  absl::StatusOr<std::unique_ptr<Backend>> backend = MakeBackend(BackendKind::kCpu, 0, 2);
+  ASSERT_TRUE(backend.ok()) << backend.status();
+  CountingSource source(std::shared_ptr<const PlenoxelMap>(std::move(*map)),
+                        std::move(*backend));
+  web::Viewer viewer(&source, web::ThreeJsFiles{}, web::ViewerOptions{});
+  const web::HttpResponse full = viewer.Handle(GlbRequest("room", 0));
+  ASSERT_EQ(full.status, 200) << full.Body().substr(0, 200);
+  const absl::StatusOr<plx::testing::GlbFile> whole = plx::testing::ReadGlb(full.Body());
+  ASSERT_TRUE(whole.ok()) << whole.status();
+  const double middle = 0.5 * (whole->position_min[0] + whole->position_max[0]);
+  web::HttpRequest half = GlbRequest("room", 0);
+  half.params["bbox"] = absl::StrFormat("-100,-100,-100,%.17g,100,100", middle);
+  const web::HttpResponse answer = viewer.Handle(half);
+  ASSERT_EQ(answer.status, 200) << answer.Body().substr(0, 200);
+  EXPECT_EQ(source.device_calls, 2) << "the box is meshed on the device for itself";
+  const absl::StatusOr<GlbMeshInfo> info = ReadGlbMeshInfo(answer.Body());
+  ASSERT_TRUE(info.ok()) << info.status();
+  EXPECT_GT(info->triangles, 0);
+  EXPECT_LT(info->triangles, whole->mesh.num_triangles());
+  ASSERT_TRUE(info->region.has_value());
+  EXPECT_EQ(info->region->max[0], middle);
+  EXPECT_EQ(viewer.Handle(half).shared_body.get(), answer.shared_body.get()) << "cached";
+  EXPECT_EQ(source.device_calls, 2);
+  // A level of detail of the box: another entry, from another build.
+  half.params["triangles"] = absl::StrCat(info->triangles / 4);
+  const web::HttpResponse lod = viewer.Handle(half);
+  ASSERT_EQ(lod.status, 200);
+  const absl::StatusOr<GlbMeshInfo> lod_info = ReadGlbMeshInfo(lod.Body());
+  ASSERT_TRUE(lod_info.ok()) << lod_info.status();
+  EXPECT_LE(lod_info->triangles, info->triangles / 4);
+  EXPECT_EQ(lod_info->full_triangles, info->triangles);
+
+  // Under the whole map's cap, a box passes where the map is refused (the cap counts the
+  // triangles marching cubes makes, before the unseen ones go: one under the map's served mesh).
+  web::ViewerOptions tight;
+  tight.max_mesh_triangles = whole->mesh.num_triangles() - 1;
+  web::Viewer capped(&source, web::ThreeJsFiles{}, tight);
+  EXPECT_EQ(capped.Handle(GlbRequest("room", 0)).status, 413);
+  half.params["triangles"] = "0";
+  EXPECT_EQ(capped.Handle(half).status, 200);
+
+  for (const char* bad : {"1,2,3", "0,0,0,1,1,x", "0,0,0,1,-1,1", "0,0,0,nan,1,1", ""}) {
+    web::HttpRequest r = GlbRequest("room", 0);
+    r.params["bbox"] = bad;
+    const web::HttpResponse refused = viewer.Handle(r);
+    EXPECT_EQ(refused.status, 400) << bad;
+    EXPECT_NE(refused.Body().find("bbox"), std::string::npos) << refused.Body();
+  }
 }
 
 TEST(MapVersionCacheTest, VariantsOfAVersionAreKeptApartAndDroppedWithIt) {

@@ -10,7 +10,7 @@ was built:
 __version__ is plenoxd's version, the daemon API version this package speaks (API_VERSION).
 """
 
-from . import convert, dataset, trajectory, types
+from . import convert, dataset, glb, trajectory, types
 from ._proto import plenoxd_pb2 as pb
 from .client import (DEFAULT_MAX_MESSAGE_BYTES, Client, MeshExport, Rendering, SlamStream,
                      TrackStream, as_dict, correct_pose, estimate_pose, slam_pose,
@@ -25,5 +25,5 @@ __all__ = [
     "Client", "PlenoxdError", "PlenoxdVersionError", "PlenoxdVersionWarning", "TrackStream",
     "SlamStream", "Rendering", "MeshExport", "DEFAULT_MAX_MESSAGE_BYTES", "API_VERSION",
     "as_dict", "correct_pose", "estimate_pose", "state_name", "slam_pose", "slam_state_name",
-    "convert", "dataset", "trajectory", "types", "pb", "Frame", "Intrinsics", "TumDataset",
+    "convert", "dataset", "glb", "trajectory", "types", "pb", "Frame", "Intrinsics", "TumDataset",
 ]

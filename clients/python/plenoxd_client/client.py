@@ -23,7 +23,7 @@ import os
 import queue
 import threading
 from typing import (Any, Callable, Dict, Generic, Iterable, Iterator, List, Literal, Mapping,
-                    NamedTuple, Optional, Tuple, TypeVar, Union, overload)
+                    NamedTuple, Optional, Sequence, Tuple, TypeVar, Union, overload)
 
 import grpc
 import numpy as np
@@ -33,6 +33,8 @@ from ._proto import health_pb2, health_pb2_grpc
 from ._proto import plenoxd_pb2 as pb
 from ._proto import plenoxd_pb2_grpc as pb_grpc
 from .errors import PlenoxdError, PlenoxdVersionError
+from .retry import RetryPolicy
+from .glb import read_glb_info
 from .types import FrameLike, IntrinsicsLike, Pose, PoseLike
 from .version import API_VERSION, VERSION_CHECKS, check_server_version, version_mismatch
 
@@ -50,10 +52,14 @@ IntegrateOptionsLike = Union[pb.IntegrateOptions, Mapping[str, Any]]
 
 
 class MeshExport(NamedTuple):
-    """What Client.export_mesh wrote: vertex and face counts, file size."""
+    """What Client.export_mesh wrote: vertex and face counts, file size; for a level of detail
+    the full mesh's faces and the simplification's error in metres (a GLB says them; for a PLY
+    full_faces is faces)."""
     vertices: int
     faces: int
     bytes: int
+    full_faces: int = 0
+    lod_error_m: float = 0.0
 
 
 class Rendering(NamedTuple):
@@ -427,12 +433,17 @@ class Client:
     the first call to its API) is not this package's API_VERSION: "warn" (a
     PlenoxdVersionWarning naming both), "error" (every API call raises PlenoxdVersionError) or
     "off". health() and server_info() are never refused: they are how one looks at a daemon.
+    retry_seconds: how long to wait for a daemon that answered before and went away (killed,
+    restarted, failed over): calls safe to repeat are retried on UNAVAILABLE with backoff for
+    up to this long, and slam() streams reconnect and continue their map (0: fail at once;
+    plenoxd_client.retry says which calls and why). `retry`: the RetryPolicy.
     """
 
     def __init__(self, target: str, token: Optional[str] = None,
                  root_certificates: Union[bytes, str, None] = None,
                  max_message_bytes: int = DEFAULT_MAX_MESSAGE_BYTES,
-                 timeout: Optional[float] = None, version_check: str = "warn"):
+                 timeout: Optional[float] = None, version_check: str = "warn",
+                 retry_seconds: float = 30.0):
         if version_check not in VERSION_CHECKS:
             raise ValueError(f"version_check: expected one of {VERSION_CHECKS}, got "
                              f"{version_check!r}")
@@ -443,8 +454,15 @@ class Client:
         self.server_version: Optional[str] = None
         self._version_error: Optional[PlenoxdVersionError] = None
         self._version_lock = threading.Lock()
+        self.retry = RetryPolicy(retry_seconds)
+        # Whether the daemon ever answered: only then is UNAVAILABLE a failover to wait out.
+        self._reached = False
+        # gRPC's own reconnection backoff (1 s growing to 120 s by default) kept within the
+        # policy's, so a retried call finds a restarted daemon soon after it is back.
         options = [("grpc.max_send_message_length", int(max_message_bytes)),
-                   ("grpc.max_receive_message_length", int(max_message_bytes))]
+                   ("grpc.max_receive_message_length", int(max_message_bytes)),
+                   ("grpc.initial_reconnect_backoff_ms", int(self.retry.initial_backoff * 1000)),
+                   ("grpc.max_reconnect_backoff_ms", int(self.retry.max_backoff * 1000))]
         if root_certificates is not None:
             if isinstance(root_certificates, str):
                 with open(root_certificates, "rb") as f:
@@ -482,11 +500,26 @@ class Client:
             self._check_version()
         map_name = getattr(request, "map", None) or getattr(request, "name", None)
         try:
-            return getattr(self._stub, method)(
+            return self._retried(method, lambda: getattr(self._stub, method)(
                 request, metadata=self.metadata_for(map_name),
-                timeout=timeout if timeout is not None else self.timeout)
+                timeout=timeout if timeout is not None else self.timeout))
         except grpc.RpcError as e:
             raise PlenoxdError.from_rpc_error(e, method) from None
+
+    def _retried(self, method: str, call: Callable[[], Any]) -> Any:
+        """call() under the retry policy once the daemon has answered (retry.py)."""
+        def attempt() -> Any:
+            try:
+                result = call()
+            except grpc.RpcError as e:
+                if e.code() != grpc.StatusCode.UNAVAILABLE:
+                    self._reached = True  # the daemon answered, with an error
+                raise
+            self._reached = True
+            return result
+        if not self._reached:
+            return attempt()
+        return self.retry.call(attempt, method)
 
     def wait_ready(self, timeout: float = 10.0) -> None:
         """Blocks until the channel connects, then checks the daemon's version as before a
@@ -553,8 +586,8 @@ class Client:
         """True when the daemon reports SERVING (the standard grpc.health.v1 service; it answers
         without a token)."""
         try:
-            response = self._health.Check(health_pb2.HealthCheckRequest(service=service),
-                                          timeout=timeout)
+            response = self._retried("Health.Check", lambda: self._health.Check(
+                health_pb2.HealthCheckRequest(service=service), timeout=timeout))
         except grpc.RpcError as e:
             raise PlenoxdError.from_rpc_error(e, "Health.Check") from None
         return response.status == health_pb2.HealthCheckResponse.SERVING
@@ -680,7 +713,7 @@ class Client:
     def slam(self, map_name: str, frames: Iterable[FrameLike],
              initial_pose: Optional[PoseLike] = None, options: Optional[SlamOptionsLike] = None,
              lockstep: bool = True, priors: bool = False,
-             fps: Optional[float] = None) -> SlamStream:
+             fps: Optional[float] = None, resume: Optional[bool] = None) -> SlamStream:
         """Online SLAM into map_name (created when it does not exist, bootstrapped when empty,
         extended when it has content): unposed frames in; returns a SlamStream yielding one
         plenoxd.v1.SlamUpdate per frame the server processed (slam_pose(u) for its pose), and
@@ -698,9 +731,17 @@ class Client:
         options: SlamOptions or a dict of its fields (voxel_size, tracking={mode, rays,
         iterations}, kf_translation_m, kf_rotation_deg, kf_unmapped_fraction, kf_interval_s,
         iterations_per_keyframe, rays_per_iteration, max_depth, realtime, deterministic,
-        max_pending_keyframes)."""
+        max_pending_keyframes).
+        resume: reconnect a stream cut by a failover (UNAVAILABLE) within retry_seconds and go
+        on in the same map, relocalising against its saved keyframes (default: when
+        retry_seconds > 0). The stream then also counts `reconnects` and `frames_lost` (taken
+        from `frames` but never answered); plenoxd_client.failover says more."""
         if options is not None:
             _slam_options(options)  # a bad option raises here, before the call starts
+        if resume if resume is not None else self.retry.seconds > 0:
+            from .failover import ResumingSlamStream  # noqa: PLC0415 -- it imports this module
+            return ResumingSlamStream(self, map_name, frames, initial_pose, lockstep, options,
+                                      priors, fps)
         return SlamStream(self, map_name, frames, initial_pose, lockstep, options, priors, fps)
 
     # --- views ---
@@ -738,33 +779,73 @@ class Client:
 
     def export_mesh(self, map_name: str, path: str, iso_level: float = 0.0,
                     min_component_triangles: int = 0, max_triangles: int = 0,
-                    keep_unobserved: bool = False, color: str = "dc") -> MeshExport:
+                    keep_unobserved: bool = False, color: str = "dc", format: str = "ply",
+                    lod_triangles: int = 0,
+                    bbox: Optional[Sequence[float]] = None) -> MeshExport:
         """Writes the map's triangle mesh (marching cubes on the daemon's device) to `path` as
         binary little-endian PLY (vertex x y z nx ny nz red green blue, face vertex_indices),
-        which Open3D, MeshLab and Blender read; the file appears only once complete. Returns
-        MeshExport(vertices, faces, bytes).
+        which Open3D, MeshLab and Blender read, or with format="glb" as binary glTF 2.0
+        (headsets, three.js, Blender; plenoxd_client.glb.read_glb_info reads its counts); the
+        file appears only once complete. Returns MeshExport(vertices, faces, bytes, full_faces,
+        lod_error_m).
 
         iso_level: surface density in 1/m (0 = the daemon's default, 50); min_component_triangles:
         drop connected pieces smaller than this (0 keeps all); max_triangles: fail with
         RESOURCE_EXHAUSTED beyond this (0 = the daemon's limit); keep_unobserved: keep surfaces
         no view saw (the backs of walls); color: "dc" (view-independent) or "normal" (as seen
-        looking along the vertex normal). Bad values: PlenoxdError INVALID_ARGUMENT naming the
-        field."""
+        looking along the vertex normal); lod_triangles: a level of detail, the mesh simplified
+        to at most this many triangles (0 = the full mesh); bbox: (xmin, ymin, zmin, xmax, ymax,
+        zmax) in metres, map coordinates: only that box of the map (the triangles of the voxels
+        whose centres are in it, kept whole; an empty box region gives an empty mesh). Bad
+        values: PlenoxdError INVALID_ARGUMENT naming the field; a daemon whose file does not
+        honour lod_triangles or bbox (older than them): PlenoxdError FAILED_PRECONDITION, and
+        nothing is written."""
         colors = {"dc": pb.MESH_COLOR_DC, "normal": pb.MESH_COLOR_ALONG_NORMAL}
         if color not in colors:
             raise ValueError(f"color: expected 'dc' or 'normal', got {color!r}")
-        data = self._export(pb.ExportRequest(
-            map=map_name, format=pb.EXPORT_FORMAT_MESH, iso_level=iso_level,
+        formats = {"ply": pb.EXPORT_FORMAT_MESH, "glb": pb.EXPORT_FORMAT_MESH_GLB}
+        if format not in formats:
+            raise ValueError(f"format: expected 'ply' or 'glb', got {format!r}")
+        request = pb.ExportRequest(
+            map=map_name, format=formats[format], iso_level=iso_level,
             min_component_triangles=min_component_triangles, max_triangles=max_triangles,
-            keep_unobserved=keep_unobserved, mesh_color=colors[color]))
-        header = data[:data.find(b"end_header\n")].decode("ascii", "replace")
-        counts = dict(line.split()[1:3] for line in header.splitlines()
-                      if line.startswith("element "))
-        temp = f"{path}.tmp.{os.getpid()}.ply"
+            keep_unobserved=keep_unobserved, mesh_color=colors[color],
+            lod_triangles=lod_triangles)
+        if bbox is not None:
+            values = [float(v) for v in bbox]
+            if len(values) != 6:
+                raise ValueError(f"bbox: expected 6 numbers (xmin, ymin, zmin, xmax, ymax, "
+                                 f"zmax), got {len(values)}")
+            request.region.CopyFrom(pb.BoundingBox(
+                min_x=values[0], min_y=values[1], min_z=values[2], max_x=values[3],
+                max_y=values[4], max_z=values[5]))
+        data = self._export(request)
+        if format == "glb":
+            info = read_glb_info(data)
+            result = MeshExport(info.vertices, info.triangles, len(data), info.full_triangles,
+                                info.lod_error_m)
+            has_region = info.region is not None
+        else:
+            header = data[:data.find(b"end_header\n")].decode("ascii", "replace")
+            counts = dict(line.split()[1:3] for line in header.splitlines()
+                          if line.startswith("element "))
+            faces = int(counts.get("face", 0))
+            result = MeshExport(int(counts.get("vertex", 0)), faces, len(data), faces)
+            has_region = "\ncomment plenoxd region: " in header
+        if lod_triangles > 0 and result.faces > lod_triangles:
+            raise PlenoxdError(grpc.StatusCode.FAILED_PRECONDITION,
+                               f"the daemon sent {result.faces} triangles for a level of detail "
+                               f"of at most {lod_triangles}: it is older than lod_triangles",
+                               "Export")
+        if bbox is not None and not has_region:
+            raise PlenoxdError(grpc.StatusCode.FAILED_PRECONDITION,
+                               "the daemon's file does not record the bbox region: it is older "
+                               "than the region field and sent the whole map", "Export")
+        temp = f"{path}.tmp.{os.getpid()}.{format}"
         with open(temp, "wb") as f:
             f.write(data)
         os.replace(temp, path)
-        return MeshExport(int(counts.get("vertex", 0)), int(counts.get("face", 0)), len(data))
+        return result
 
     def _export(self, request: pb.ExportRequest) -> bytes:
         """Every chunk of an Export call, joined."""

@@ -173,6 +173,66 @@ TEST(MapExportTest, ALevelOfDetailKeepsToTheBudgetInEitherFormat) {
   EXPECT_EQ(same->lod_error_m, 0.0);
 }
 
+// The ball split at x = 0 (a lattice plane at its 2 cm voxels): the box's half, about half the
+// triangles, in either format and at a level of detail, and the file says which box it holds.
+TEST(MapExportTest, ARegionIsTheBoxsHalfOfTheMeshAndTheFileRecordsTheBox) {
+  const PlenoxelMap map = BallMap();
+  std::unique_ptr<Backend> backend = MakeCpuBackend(2);
+  ExportSpec spec;
+  spec.mesh = true;
+  spec.mesh_format = MeshFileFormat::kGlb;
+  const absl::StatusOr<MapExport> full = ExportMap(spec, map, *backend);
+  ASSERT_TRUE(full.ok()) << full.status();
+  const AxisBox half{{-1.0, -1.0, -1.0}, {0.0, 1.0, 1.0}};
+  spec.mesh_options.region = half;
+  const absl::StatusOr<MapExport> glb = ExportMap(spec, map, *backend);
+  ASSERT_TRUE(glb.ok()) << glb.status();
+  EXPECT_NEAR(static_cast<double>(glb->faces) / full->faces, 0.5, 0.02);
+  EXPECT_EQ(glb->full_faces, glb->faces);
+  const absl::StatusOr<GlbMeshInfo> info = ReadGlbMeshInfo(glb->bytes);
+  ASSERT_TRUE(info.ok()) << info.status();
+  EXPECT_EQ(info->region, half);
+  const absl::StatusOr<testing::GlbFile> file = testing::ReadGlb(glb->bytes);
+  ASSERT_TRUE(file.ok()) << file.status();
+  EXPECT_EQ(file->mesh.num_triangles(), glb->faces);
+  // Cells with centres below x = 0 end at x = 0: no vertex past the box.
+  ASSERT_EQ(file->position_max.size(), 3u);
+  EXPECT_LE(file->position_max[0], 1e-6);
+  EXPECT_LT(file->position_min[0], -0.29);
+  const absl::StatusOr<GlbMeshInfo> whole = ReadGlbMeshInfo(full->bytes);
+  ASSERT_TRUE(whole.ok()) << whole.status();
+  EXPECT_FALSE(whole->region.has_value());
+
+  spec.mesh_format = MeshFileFormat::kPly;
+  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, *backend);
+  ASSERT_TRUE(ply.ok()) << ply.status();
+  EXPECT_EQ(ply->faces, glb->faces);
+  EXPECT_NE(ply->bytes.find(PlyRegionComment(half)), std::string::npos);
+  EXPECT_EQ(PlyRegionComment(half), "comment plenoxd region: -1 -1 -1 0 1 1\n");
+  const absl::StatusOr<testing::PlyMeshFile> read = testing::ReadPlyMesh(ply->bytes);
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_EQ(read->mesh.triangles, file->mesh.triangles);
+
+  // A level of detail of the region: the region's mesh is the full one it simplifies.
+  spec.lod_triangles = glb->faces / 5;
+  const absl::StatusOr<MapExport> lod = ExportMap(spec, map, *backend);
+  ASSERT_TRUE(lod.ok()) << lod.status();
+  EXPECT_LE(lod->faces, spec.lod_triangles);
+  EXPECT_EQ(lod->full_faces, glb->faces);
+
+  // A box with nothing mapped in it: a valid, empty file that still names its box.
+  spec.lod_triangles = 0;
+  spec.mesh_format = MeshFileFormat::kGlb;
+  spec.mesh_options.region = AxisBox{{2.0, 2.0, 2.0}, {3.0, 3.0, 3.0}};
+  const absl::StatusOr<MapExport> empty = ExportMap(spec, map, *backend);
+  ASSERT_TRUE(empty.ok()) << empty.status();
+  EXPECT_EQ(empty->faces, 0);
+  const absl::StatusOr<GlbMeshInfo> nothing = ReadGlbMeshInfo(empty->bytes);
+  ASSERT_TRUE(nothing.ok()) << nothing.status();
+  EXPECT_EQ(nothing->triangles, 0);
+  EXPECT_EQ(nothing->region, spec.mesh_options.region);
+}
+
 TEST(MapExportTest, SpecsCoreRefusesAreRefusedNamingTheField) {
   const PlenoxelMap map = AlternatingMap(10.0f);
   std::unique_ptr<Backend> backend = MakeCpuBackend(1);
@@ -180,7 +240,12 @@ TEST(MapExportTest, SpecsCoreRefusesAreRefusedNamingTheField) {
     ExportSpec spec;
     const char* field;
   };
-  std::vector<Case> cases(4);
+  std::vector<Case> cases(6);
+  cases[4].spec.mesh_options.region = AxisBox{{0.0, 0.0, 0.0}, {1.0, 1.0, 1.0}};  // of points
+  cases[4].field = "region: applies to meshes only";
+  cases[5].spec.mesh = true;
+  cases[5].spec.mesh_options.region = AxisBox{{0.0, 0.0, 0.0}, {1.0, 1.0, 0.0}};  // flat
+  cases[5].field = "region: min must be below max";
   cases[0].spec.mesh_format = MeshFileFormat::kGlb;  // points as glTF
   cases[0].field = "mesh_format";
   cases[1].spec.lod_triangles = 10;  // points at a level of detail

@@ -284,6 +284,16 @@ TEST(BackendChecksTest, OccupancyTrackingAndMeshArraysAreRequiredWhenUsed) {
   const UnifiedVector<int64_t> first(4, 0);
   ExpectInvalid(backend.EmitIsoTriangles(grid.view(), 0, 4, iso, first.data(), nullptr),
                 "EmitIsoTriangles", "edge_keys");
+  // A brick list (a region's bricks): its slots are required when it counts any, and the cells
+  // asked for lie in it, not in the grid.
+  UnifiedVector<uint8_t> counts(2 * kBrickVertices);
+  ExpectInvalid(backend.CountIsoTriangles(grid.view(), 0, 4, iso, counts.data(),
+                                          IsoBrickList{nullptr, 1}),
+                "CountIsoTriangles", "bricks.slots");
+  const UnifiedVector<int32_t> slots = {1};
+  ExpectInvalid(backend.CountIsoTriangles(grid.view(), 0, 2 * kBrickVertices, iso, counts.data(),
+                                          IsoBrickList{slots.data(), 1}),
+                "CountIsoTriangles", "first_vertex");
   iso.iso_level = -1.0f;
   const absl::Status level = backend.CountIsoTriangles(grid.view(), 0, 0, iso, nullptr);
   EXPECT_EQ(level.code(), absl::StatusCode::kInvalidArgument);

@@ -1,6 +1,7 @@
 // The mesh of a map of the synthetic room against the room's analytic surfaces: precision (mesh
 // vertices within 2 cm of a true surface) and recall (held-out ground-truth points within 2 cm
-// of the mesh), and what the unobserved-surface filter buys.
+// of the mesh), what the unobserved-surface filter buys, and the mesh of a box around half the
+// room (MeshOptions::region).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -14,6 +15,7 @@
 #include "core/mapping/map_dataset.h"
 #include "core/mapping/mapper.h"
 #include "core/mesh/iso_surface.h"
+#include "core/synthetic/synthetic_scene.h"
 #include "tests/synthetic_distance.h"
 #include "tests/synthetic_room.h"
 
@@ -67,16 +69,43 @@ MeshScore Score(const TriangleMesh& mesh, const std::vector<Eigen::Vector3d>& tr
   return score;
 }
 
-// 3 keyframes of the noisy 128 x 96 room at 4 cm voxels (as MapperTest), 60 iterations.
-TEST(SyntheticMeshTest, MeshLiesOnTheRoomsSurfaces) {
-  auto dataset = testing::MakeSyntheticRoom(128, 96, 30, 0.0015, 0.05);
-  ASSERT_NE(dataset, nullptr);
-  std::unique_ptr<Backend> backend = MakeCpuBackend(2);
-  MapperOptions o = MapperOptionsForVoxelSize(0.04f);
-  o.max_iterations = 60;
-  o.batch_size = 4096;
-  auto mapped = MapDataset(*dataset, KeyframeIndices(dataset->size(), 10), o, *backend);
-  ASSERT_TRUE(mapped.ok()) << mapped.status();
+// 3 keyframes of the noisy 128 x 96 room at 4 cm voxels (as MapperTest), 60 iterations: mapped
+// once for the suite's tests.
+class SyntheticMeshTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dataset_ = testing::MakeSyntheticRoom(128, 96, 30, 0.0015, 0.05).release();
+    ASSERT_NE(dataset_, nullptr);
+    backend_ = MakeCpuBackend(2).release();
+    MapperOptions o = MapperOptionsForVoxelSize(0.04f);
+    o.max_iterations = 60;
+    o.batch_size = 4096;
+    auto mapped = MapDataset(*dataset_, KeyframeIndices(dataset_->size(), 10), o, *backend_);
+    ASSERT_TRUE(mapped.ok()) << mapped.status();
+    map_ = mapped->map.release();
+  }
+  static void TearDownTestSuite() {
+    delete map_;
+    delete backend_;
+    delete dataset_;
+    map_ = nullptr;
+    backend_ = nullptr;
+    dataset_ = nullptr;
+  }
+  void SetUp() override { ASSERT_NE(map_, nullptr) << "mapping the room failed"; }
+
+  static InMemoryDataset* dataset_;
+  static Backend* backend_;
+  static PlenoxelMap* map_;
+};
+
+InMemoryDataset* SyntheticMeshTest::dataset_ = nullptr;
+Backend* SyntheticMeshTest::backend_ = nullptr;
+PlenoxelMap* SyntheticMeshTest::map_ = nullptr;
+
+TEST_F(SyntheticMeshTest, MeshLiesOnTheRoomsSurfaces) {
+  const InMemoryDataset* dataset = dataset_;
+  Backend* backend = backend_;
   std::vector<Eigen::Vector3d> truth;
   const PinholeIntrinsics& K = dataset->calibration().pinhole;
   for (int f : HeldOutFrames(dataset->size(), 10)) {
@@ -90,15 +119,15 @@ TEST(SyntheticMeshTest, MeshLiesOnTheRoomsSurfaces) {
       }
     }
   }
-  auto mesh = ExtractMesh(mapped->map->grid, *backend, MeshOptions{});
+  auto mesh = ExtractMesh(map_->grid, *backend, MeshOptions{});
   ASSERT_TRUE(mesh.ok()) << mesh.status();
   MeshOptions keep;
   keep.keep_unobserved = true;
-  auto unfiltered = ExtractMesh(mapped->map->grid, *backend, keep);
+  auto unfiltered = ExtractMesh(map_->grid, *backend, keep);
   ASSERT_TRUE(unfiltered.ok()) << unfiltered.status();
   MeshOptions low;
   low.iso_level = 5.0f;
-  auto thin = ExtractMesh(mapped->map->grid, *backend, low);
+  auto thin = ExtractMesh(map_->grid, *backend, low);
   ASSERT_TRUE(thin.ok()) << thin.status();
 
   const MeshScore s = Score(*mesh, truth), u = Score(*unfiltered, truth), t = Score(*thin, truth);
@@ -114,6 +143,56 @@ TEST(SyntheticMeshTest, MeshLiesOnTheRoomsSurfaces) {
   // The default level beats the point export's 5/m on both counts.
   EXPECT_GT(s.precision, t.precision);
   EXPECT_GT(s.recall, t.recall);
+}
+
+// A box around the room's -y half (y = 0 is a lattice plane at 4 cm voxels, so no cell
+// straddles it; the views look across -x, which holds almost all of what they saw): exactly the
+// full mesh's triangles whose centroids lie below y = 0, and with the box around the +y half
+// the whole mesh.
+TEST_F(SyntheticMeshTest, ABoxAroundHalfTheRoomHoldsThatHalfsTriangles) {
+  const absl::StatusOr<TriangleMesh> full = ExtractMesh(map_->grid, *backend_, MeshOptions{});
+  ASSERT_TRUE(full.ok()) << full.status();
+  const SyntheticScene& room = SyntheticRoom();
+  const double margin = 0.2;  // past the walls, floor and ceiling, where depth noise put them
+  MeshOptions minus_y;
+  minus_y.region = AxisBox{{room.room_min.x() - margin, room.room_min.y() - margin,
+                            room.room_min.z() - margin},
+                           {room.room_max.x() + margin, 0.0, room.room_max.z() + margin}};
+  MeshOptions plus_y;
+  plus_y.region = AxisBox{{room.room_min.x() - margin, 0.0, room.room_min.z() - margin},
+                          {room.room_max.x() + margin, room.room_max.y() + margin,
+                           room.room_max.z() + margin}};
+  const absl::StatusOr<TriangleMesh> half = ExtractMesh(map_->grid, *backend_, minus_y);
+  const absl::StatusOr<TriangleMesh> other = ExtractMesh(map_->grid, *backend_, plus_y);
+  ASSERT_TRUE(half.ok()) << half.status();
+  ASSERT_TRUE(other.ok()) << other.status();
+
+  int64_t expected = 0;  // the full mesh's triangles with centroids below y = 0
+  for (int64_t t = 0; t < full->num_triangles(); ++t) {
+    const int32_t* f = &full->triangles[3 * t];
+    const double y = Vertex(*full, f[0]).y() + Vertex(*full, f[1]).y() + Vertex(*full, f[2]).y();
+    expected += y < 0.0;
+  }
+  const double share = static_cast<double>(half->num_triangles()) / full->num_triangles();
+  std::printf("-y half: %ld of %ld triangles (%.2f), %ld with centroids below y = 0\n",
+              static_cast<long>(half->num_triangles()), static_cast<long>(full->num_triangles()),
+              share, static_cast<long>(expected));
+  // Both halves of the room were seen: the box holds a real share, not all or nothing.
+  EXPECT_GT(share, 0.1);
+  EXPECT_LT(share, 0.9);
+  EXPECT_EQ(half->num_triangles(), expected);
+  EXPECT_EQ(half->num_triangles() + other->num_triangles(), full->num_triangles());
+  // Kept whole, each triangle inside its cell: at most half a voxel past the box, and not past
+  // y = 0 at all (cells with centres below it end there).
+  const AxisBox& box = *minus_y.region;
+  const double slack = 0.5 * map_->grid.voxel_size() + 1e-6;
+  for (int32_t v = 0; v < half->num_vertices(); ++v) {
+    const Eigen::Vector3d p = Vertex(*half, v);
+    for (int a = 0; a < 3; ++a) {
+      ASSERT_GE(p[a], box.min[a] - slack) << "vertex " << v;
+      ASSERT_LE(p[a], box.max[a] + (a == 1 ? 1e-6 : slack)) << "vertex " << v;
+    }
+  }
 }
 
 }  // namespace
