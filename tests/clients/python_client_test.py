@@ -75,16 +75,17 @@ class Failures:
 
 
 class Daemon:
-    """A plenoxd process on 127.0.0.1:<free port>; its log goes to a file."""
+    """A plenoxd process on `listen` (a free port on 127.0.0.1 by default) with `data_dir`
+    (a folder of its own in `work` by default); its log goes to a file."""
 
-    def __init__(self, binary, work, name, extra_args=()):
+    def __init__(self, binary, work, name, extra_args=(), data_dir=None, listen="127.0.0.1:0"):
         self.name = name
-        self.data_dir = os.path.join(work, f"{name}_data")
+        self.data_dir = data_dir or os.path.join(work, f"{name}_data")
         os.makedirs(self.data_dir, exist_ok=True)
         self.log_path = os.path.join(work, f"{name}.log")
         self._log = open(self.log_path, "wb")
         self.proc = subprocess.Popen(
-            [binary, "--listen", "127.0.0.1:0", "--data-dir", self.data_dir, *extra_args],
+            [binary, "--listen", listen, "--data-dir", self.data_dir, *extra_args],
             stdout=subprocess.PIPE, stderr=self._log, text=True)
         lines = queue.Queue()
 
@@ -117,6 +118,12 @@ class Daemon:
         self._log.flush()
         with open(self.log_path, "rb") as f:
             return "\n".join(f.read().decode(errors="replace").splitlines()[-lines:])
+
+    def kill(self):
+        """SIGKILL: no drain, no save."""
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait()
 
     def stop(self, timeout=60.0):
         """SIGTERM; returns the exit code (None if it had to be killed)."""

@@ -18,10 +18,7 @@ interpreter has no grpc/numpy.
 
 import argparse
 import os
-import queue
-import re
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -40,6 +37,9 @@ except ImportError as missing:
 import plenoxd_client
 from plenoxd_client import Client, PlenoxdError, TumDataset, slam_pose
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from python_client_test import Daemon  # noqa: E402  (the same daemon helper)
+
 FRAMES, WIDTH, HEIGHT = 60, 96, 72
 VOXEL_SIZE = 0.04
 KILL_AT_FRAME = 30  # the walk is killed after this many updates, with a snapshot on disk
@@ -52,63 +52,13 @@ def check(failures, condition, what):
     return condition
 
 
-class Daemon:
-    """plenoxd on `listen` with a data directory; its log goes to a file."""
+# The daemons of python_client_test (the same start, port discovery and log), here on one data
+# directory and, for a restart in place, one address: snapshots every 0.5 s, the CPU backend.
+DAEMON_ARGS = ["--snapshot-seconds", "0.5", "--backend", "cpu", "--threads", "2"]
 
-    def __init__(self, binary, work, name, data_dir, listen="127.0.0.1:0"):
-        self.name = name
-        self.log_path = os.path.join(work, f"{name}.log")
-        self._log = open(self.log_path, "wb")
-        self.proc = subprocess.Popen(
-            [binary, "--listen", listen, "--data-dir", data_dir, "--snapshot-seconds", "0.5",
-             "--backend", "cpu", "--threads", "2"],
-            stdout=subprocess.PIPE, stderr=self._log, text=True)
-        lines = queue.Queue()
 
-        def pump():  # keeps draining stdout so the daemon never blocks on a full pipe
-            for line in self.proc.stdout:
-                lines.put(line)
-            lines.put(None)
-
-        threading.Thread(target=pump, daemon=True).start()
-        self.port = None
-        deadline = time.monotonic() + 30.0
-        while self.port is None and time.monotonic() < deadline:
-            try:
-                line = lines.get(timeout=max(0.0, deadline - time.monotonic()))
-            except queue.Empty:
-                break
-            if line is None:
-                break
-            m = re.search(r"plenoxd listening on port (\d+)", line)
-            if m:
-                self.port = int(m.group(1))
-        if self.port is None:
-            self.kill()
-            raise RuntimeError(f"{name}: plenoxd did not report its port; log:\n"
-                               f"{self.log_tail()}")
-        self.target = f"127.0.0.1:{self.port}"
-
-    def log_tail(self, lines=30):
-        self._log.flush()
-        with open(self.log_path, "rb") as f:
-            return "\n".join(f.read().decode(errors="replace").splitlines()[-lines:])
-
-    def kill(self):
-        """SIGKILL: no drain, no save."""
-        if self.proc.poll() is None:
-            self.proc.kill()
-        self.proc.wait()
-
-    def stop(self, timeout=60.0):
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                self.proc.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                self.kill()
-                return None
-        return self.proc.returncode
+def start_daemon(binary, work, name, data_dir, listen="127.0.0.1:0"):
+    return Daemon(binary, work, name, DAEMON_ARGS, data_dir=data_dir, listen=listen)
 
 
 def position_rmse(pairs, groundtruth):
@@ -150,7 +100,7 @@ def main():
         frames = seq[:]
         groundtruth = seq.groundtruth()
 
-        first = Daemon(args.plenoxd, work, "first", data)
+        first = start_daemon(args.plenoxd, work, "first", data)
         daemons.append(first)
         listen = first.target
         client = Client(first.target, retry_seconds=30.0)
@@ -172,7 +122,7 @@ def main():
 
         def restart(after):
             time.sleep(after)
-            restarted.append(Daemon(args.plenoxd, work, f"second{len(restarted)}", data,
+            restarted.append(start_daemon(args.plenoxd, work, f"second{len(restarted)}", data,
                                     listen))
 
         thread = threading.Thread(target=restart, args=(1.5,))
@@ -204,7 +154,7 @@ def main():
                 kill_index = len(updates)
                 # The replacement comes up while the stream waits for it.
                 threading.Thread(target=lambda: third.append(
-                    Daemon(args.plenoxd, work, "third", data, listen))).start()
+                    start_daemon(args.plenoxd, work, "third", data, listen))).start()
         while killed_at is not None and not third and time.monotonic() - killed_at < 30:
             time.sleep(0.1)
         daemons.extend(third)
