@@ -99,6 +99,10 @@ absl::StatusOr<std::unique_ptr<RemoteClient>> RemoteClient::Create(const RemoteO
                    static_cast<int>(absl::ToInt64Milliseconds(client->retry_.initial_backoff)));
   arguments.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS,
                    static_cast<int>(absl::ToInt64Milliseconds(client->retry_.max_backoff)));
+  // A lost connection makes the channel resolve the address again, at most once per this
+  // (30 s by default), and it waits for that (docs/BENCHMARKS.md, "Failover").
+  arguments.SetInt(GRPC_ARG_DNS_MIN_TIME_BETWEEN_RESOLUTIONS_MS,
+                   static_cast<int>(absl::ToInt64Milliseconds(client->retry_.max_backoff)));
   client->channel_ = grpc::CreateCustomChannel(options.server, credentials, arguments);
   if (!client->channel_) {
     return absl::InvalidArgumentError(

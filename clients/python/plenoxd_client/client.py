@@ -462,7 +462,11 @@ class Client:
         options = [("grpc.max_send_message_length", int(max_message_bytes)),
                    ("grpc.max_receive_message_length", int(max_message_bytes)),
                    ("grpc.initial_reconnect_backoff_ms", int(self.retry.initial_backoff * 1000)),
-                   ("grpc.max_reconnect_backoff_ms", int(self.retry.max_backoff * 1000))]
+                   ("grpc.max_reconnect_backoff_ms", int(self.retry.max_backoff * 1000)),
+                   # A lost connection makes the channel resolve the address again, at most
+                   # once per this (30 s by default), and it waits for that resolution.
+                   ("grpc.dns_min_time_between_resolutions_ms",
+                    int(self.retry.max_backoff * 1000))]
         if root_certificates is not None:
             if isinstance(root_certificates, str):
                 with open(root_certificates, "rb") as f:
