@@ -317,6 +317,19 @@ def run_json(label, cmd, timeout, env=None):
     return obj
 
 
+def read_timings(path):
+    """(roundtrip_ms, daemon_ms) lists from `plenox track --timings`."""
+    roundtrip, daemon = [], []
+    with open(path) as f:
+        for line in f:
+            if line.startswith("#") or not line.strip():
+                continue
+            parts = line.split()
+            roundtrip.append(float(parts[2]))
+            daemon.append(float(parts[3]))
+    return roundtrip, daemon
+
+
 def free_port():
     """A free TCP port on 127.0.0.1 (servers in benchmarks listen on loopback only)."""
     with socket.socket() as s:

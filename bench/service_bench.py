@@ -31,25 +31,12 @@ import tempfile
 import time
 
 from bench_common import (REPO, CommandError, CommandLoop, DaemonProcess, git_commit, log,
-                          machine_line, make_synthetic, percentile, render_table, run_json,
-                          set_log_prefix, write_report)
+                          machine_line, make_synthetic, percentile, read_timings, render_table,
+                          run_json, set_log_prefix, write_report)
 
 MAP_NAME = "bench"
 DEFAULT_SCENARIOS = "1:off:raw,1:off:png,4:off:raw,1:on:raw,4:on:raw,slam,slam+live,slam+other"
 SLAM_SCENARIOS = ("slam", "slam+live", "slam+other")
-
-
-def read_timings(path):
-    """(roundtrip_ms, daemon_ms) lists from `plenox track --timings`."""
-    roundtrip, daemon = [], []
-    with open(path) as f:
-        for line in f:
-            if line.startswith("#") or not line.strip():
-                continue
-            parts = line.split()
-            roundtrip.append(float(parts[2]))
-            daemon.append(float(parts[3]))
-    return roundtrip, daemon
 
 
 def start_daemon(plenoxd, plenox, data_dir, log_path, extra_args=()):

@@ -35,8 +35,8 @@ import time
 import urllib.request
 
 from bench_common import (REPO, CommandError, CommandLoop, DaemonProcess, free_port, git_commit,
-                          machine_line, make_synthetic, percentile, run_cmd, set_log_prefix,
-                          write_report)
+                          machine_line, make_synthetic, percentile, read_timings, run_cmd,
+                          set_log_prefix, write_report)
 
 MAP_NAME = "bench"
 
@@ -101,18 +101,6 @@ def integrate_loop(args, daemon, dataset):
     cmd = [args.plenox, "--server", daemon.address, "map", "--dataset", dataset,
            "--every", str(args.every), "--name", MAP_NAME, "--quiet", "--json"]
     return CommandLoop(lambda n: cmd)
-
-
-def read_timings(path):
-    roundtrip, daemon_ms = [], []
-    with open(path) as f:
-        for line in f:
-            if line.startswith("#") or not line.strip():
-                continue
-            parts = line.split()
-            roundtrip.append(float(parts[2]))
-            daemon_ms.append(float(parts[3]))
-    return roundtrip, daemon_ms
 
 
 # ----------------------------------------------------------------------------------------------
