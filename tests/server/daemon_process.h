@@ -18,6 +18,8 @@
 #include <thread>
 #include <vector>
 
+#include "absl/strings/numbers.h"
+
 extern char** environ;
 
 namespace plx::server::testing {
@@ -35,6 +37,20 @@ inline std::string ReadWholeFile(const std::string& path) {
   std::ostringstream s;
   s << in.rdbuf();
   return s.str();
+}
+
+// "metrics on port N" from the stdout (LOG_DIR/plenoxd.out) of a daemon started with
+// --metrics-port; -1 when absent.
+inline int MetricsPort(const std::string& log_dir) {
+  const std::string out = ReadWholeFile(log_dir + "/plenoxd.out");
+  const std::string marker = "metrics on port ";
+  const size_t at = out.find(marker);
+  int port = -1;
+  if (at == std::string::npos) return -1;
+  const size_t end = out.find_first_not_of("0123456789", at + marker.size());
+  return absl::SimpleAtoi(out.substr(at + marker.size(), end - at - marker.size()), &port)
+             ? port
+             : -1;
 }
 
 class DaemonProcess {

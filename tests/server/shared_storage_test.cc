@@ -35,18 +35,6 @@ std::vector<std::string> SharedFlags(const std::string& shared_dir) {
           "--snapshot-seconds", "3", "--threads", "2", "--metrics-port", "0"};
 }
 
-int MetricsPort(const std::string& log_dir) {
-  const std::string out = ReadWholeFile(log_dir + "/plenoxd.out");
-  const std::string marker = "metrics on port ";
-  const size_t at = out.find(marker);
-  int port = -1;
-  if (at == std::string::npos) return -1;
-  const size_t end = out.find_first_not_of("0123456789", at + marker.size());
-  return absl::SimpleAtoi(out.substr(at + marker.size(), end - at - marker.size()), &port)
-             ? port
-             : -1;
-}
-
 double MetricValue(int port, const std::string& name) {
   const std::string text = HttpGet(port, "/metrics");
   const std::string prefix = "\n" + name + " ";

@@ -45,19 +45,6 @@ std::vector<std::string> DaemonFlags(const std::string& data_dir) {
           "--metrics-port", "0"};
 }
 
-// "metrics on port N" from the daemon's first stdout line; -1 when absent.
-int MetricsPort(const std::string& log_dir) {
-  const std::string out = ReadWholeFile(log_dir + "/plenoxd.out");
-  const std::string marker = "metrics on port ";
-  const size_t at = out.find(marker);
-  int port = -1;
-  if (at == std::string::npos) return -1;
-  const size_t end = out.find_first_not_of("0123456789", at + marker.size());
-  return absl::SimpleAtoi(out.substr(at + marker.size(), end - at - marker.size()), &port)
-             ? port
-             : -1;
-}
-
 // The value of an unlabelled metric in a Prometheus text answer (-1: absent).
 double MetricValue(const std::string& text, const std::string& name) {
   const std::string prefix = "\n" + name + " ";
