@@ -27,7 +27,19 @@ packages=(cmake ninja-build g++ pkg-config ccache
           libtinygltf-dev nlohmann-json3-dev libmeshoptimizer-dev
           # The web viewer (plenoxd --viewer, plenox view) runs on Debian's three.js; its
           # browser test loads the page in headless Chromium (WebGL on SwiftShader).
-          libjs-three chromium)
+          libjs-three chromium
+          # The fleet on one machine (scripts/fleet.py, tests/deploy/fleet_test.py): three
+          # replicas behind an HTTP/2 proxy hashing calls on x-plenoxd-map.
+          haproxy
+          # The Kubernetes manifests' render check (tests/deploy/kustomize_test.py) reads them
+          # with PyYAML.
+          python3-yaml)
+# ... and renders them with kubectl kustomize: Debian's kubernetes-client (kubectl 1.20, whose
+# built-in kustomize renders deploy/k8s), unless a kubectl is installed already (another
+# vendor's package, e.g. Google Cloud's, owns /usr/bin/kubectl and would conflict).
+if ! command -v kubectl > /dev/null; then
+  packages+=(kubernetes-client)
+fi
 if [[ "${1:-}" == "--bench" ]]; then
   packages+=(python3-open3d python3-numpy python3-opencv)
 fi

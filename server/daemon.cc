@@ -325,6 +325,8 @@ std::string Daemon::RenderMetrics() const {
   g.leases_held = maps_->leases_held();
   g.lease_losses = maps_->lease_losses();
   g.fenced_saves_refused = maps_->fenced_saves_refused();
+  g.handoffs_given = maps_->handoffs_given();
+  g.handoffs_taken = maps_->handoffs_taken();
   for (const std::shared_ptr<SlamJob>& job : slam_jobs_->Running()) {
     const SlamJobStatus s = job->Status();
     ++g.slam_jobs;

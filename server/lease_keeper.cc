@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <string>
+#include <vector>
 
 #include "server/log.h"
 
@@ -33,6 +34,15 @@ void LeaseKeeper::Loop() {
     for (const MapLeaseEvent& event : maps_->RenewLeases()) {
       LogEvent(event.lost ? "warning" : "error", event.lost ? "lease_lost" : "lease_renew_failed",
                {{"map", event.name}, {"reason", std::string(event.status.message())}});
+    }
+    for (const MapHandoffEvent& event : maps_->HandOffWanted()) {
+      std::vector<LogField> fields = {{"map", event.name},
+                                      {"to", event.to},
+                                      {"version", std::to_string(event.version)},
+                                      {"saved", event.saved ? "true" : "false"}};
+      if (!event.status.ok()) fields.emplace_back("reason", std::string(event.status.message()));
+      LogEvent(event.status.ok() ? "info" : "warning",
+               event.status.ok() ? "handoff_given" : "handoff_failed", fields);
     }
   }
 }

@@ -4,7 +4,10 @@
 // finds the lease taken over drops the map (logged as event=lease_lost, naming the new
 // generation); one that fails for another reason (the volume unreachable) is logged as
 // event=lease_renew_failed and tried again next time. A lease not renewed in time stops the
-// map's saves (the fence refuses them) until a renewal gets through.
+// map's saves (the fence refuses them) until a renewal gets through. After each round of
+// renewals it hands over the maps other daemons asked for and this one no longer uses
+// (MapStore::HandOffWanted; logged as event=handoff_given, or event=handoff_failed when the
+// save failed and the map stays).
 #pragma once
 
 #include <condition_variable>

@@ -45,10 +45,21 @@ absl::Status MapStore::FullError() const {
       absl::StrCat("the daemon holds its maximum of ", options_.max_maps, " maps"));
 }
 
+namespace {
+
+// Calls naming a map while it is being handed over: retryable, and they say where it goes.
+absl::Status MovingError(const std::string& name, const std::string& to) {
+  return absl::UnavailableError(absl::StrCat("map \"", name, "\" is being handed over to daemon ",
+                                             to, " (saved, then released); retry"));
+}
+
+}  // namespace
+
 absl::StatusOr<MapStore::Entry*> MapStore::Find(const std::string& name) {
   auto it = maps_.find(name);
   if (it == maps_.end()) return Missing(name);
   if (!it->second.lost.ok()) return it->second.lost;
+  if (!it->second.moving_to.empty()) return MovingError(name, it->second.moving_to);
   return &it->second;
 }
 
@@ -56,6 +67,7 @@ absl::StatusOr<const MapStore::Entry*> MapStore::Find(const std::string& name) c
   auto it = maps_.find(name);
   if (it == maps_.end()) return Missing(name);
   if (!it->second.lost.ok()) return it->second.lost;
+  if (!it->second.moving_to.empty()) return MovingError(name, it->second.moving_to);
   return &it->second;
 }
 
@@ -140,7 +152,9 @@ absl::StatusOr<MapStatus> MapStore::Create(const std::string& name, float voxel_
   }
   Entry e;
   e.lease_token = token;
+  e.last_call = options_.clock();
   lost_.erase(name);
+  lost_at_.erase(name);
   auto empty = std::make_shared<PlenoxelMap>(voxel_size);
   empty->grid.set_occupancy_fresh();  // empty: nothing to refresh
   e.map = std::move(empty);
@@ -317,6 +331,8 @@ absl::Status MapStore::SaveShared(const std::string& name, uint64_t token,
 }
 
 absl::StatusOr<MapStatus> MapStore::Save(const std::string& name) {
+  // Shared: a call naming a map loads it first, as every other one does.
+  PLX_RETURN_IF_ERROR(HoldShared(name));
   PLX_RETURN_IF_ERROR(SaveNewest(name, /*snapshot=*/false, absl::ZeroDuration()).status());
   return Info(name);
 }
@@ -428,7 +444,10 @@ absl::StatusOr<MapStatus> MapStore::Install(const std::string& name, LoadedFile 
   e.save.MarkClean(e.version);
   e.file = path;
   e.lease_token = lease_token;
+  e.last_call = options_.clock();
+  e.wanted_by.clear();
   lost_.erase(name);
+  lost_at_.erase(name);
   return StatusOf(name, e);
 }
 
@@ -436,12 +455,19 @@ absl::Status MapStore::HoldShared(const std::string& name) {
   if (!options_.shared) return absl::OkStatus();
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    if (maps_.count(name)) return absl::OkStatus();
+    auto it = maps_.find(name);
+    if (it != maps_.end()) {
+      // Every call naming a map passes here: a map its callers still use is not handed over.
+      it->second.last_call = options_.clock();
+      return absl::OkStatus();
+    }
   }
   // Names no file can have are the lookup's to refuse (NotFound), as without shared storage.
   if (!CheckMapName(name, "name").ok()) return absl::OkStatus();
   absl::StatusOr<StoredMapInfo> stored = options_.shared->Stat(name);
-  if (absl::IsNotFound(stored.status())) return absl::OkStatus();
+  // Not stored, but maybe made (and not saved yet) by another daemon: its holder saves it
+  // when it hands it over.
+  if (absl::IsNotFound(stored.status())) return RequestUnsaved(name);
   if (!stored.ok()) return stored.status();
   absl::StatusOr<MapStatus> loaded = LoadShared(name, /*only_if_absent=*/true);
   if (loaded.ok() || IsLeaseLost(loaded.status())) return loaded.status();
@@ -474,13 +500,23 @@ absl::StatusOr<MapStatus> MapStore::LoadShared(const std::string& name, bool onl
   }
   // Only a stored map gets a lease (and lease files) for a load.
   if (held == 0) PLX_RETURN_IF_ERROR(options_.shared->Stat(name).status());
-  absl::StatusOr<LeaseRecord> lease = AcquireLease(*options_.shared, name, options_.holder,
-                                                   held, options_.clock, options_.lease);
+  bool recently_lost = false;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    recently_lost = RecentlyLost(name, options_.clock());
+  }
+  // A map another daemon holds is asked for (handoff), unless this store just lost it.
+  bool handed_over = false;
+  absl::StatusOr<LeaseRecord> lease =
+      held == 0 && !recently_lost
+          ? TakeOrRequestLease(*options_.shared, name, options_.holder, options_.clock,
+                               options_.lease, &handed_over)
+          : AcquireLease(*options_.shared, name, options_.holder, held, options_.clock,
+                         options_.lease);
   if (!lease.ok()) {
-    if (IsLeaseLost(lease.status())) {
-      std::lock_guard<std::mutex> lock(mutex_);
-      DropLost(name, lease.status());
-    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (IsLeaseLost(lease.status())) DropLost(name, lease.status());
+    if (IsHandoffRequested(lease.status())) requested_.insert(name);
     return lease.status();
   }
   // A lease taken for this load alone is given back when the load fails, so another daemon
@@ -499,9 +535,39 @@ absl::StatusOr<MapStatus> MapStore::LoadShared(const std::string& name, bool onl
   {
     std::lock_guard<std::mutex> lock(mutex_);
     installed = Install(name, *std::move(file), *path, lease->token);
+    if (installed.ok()) {
+      requested_.erase(name);
+      if (handed_over) ++handoffs_taken_;
+    }
   }
   if (!installed.ok()) return failed(installed.status());
   return installed;
+}
+
+absl::Status MapStore::RequestUnsaved(const std::string& name) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (RecentlyLost(name, options_.clock())) return absl::OkStatus();
+  }
+  absl::StatusOr<LeaseRecord> lease = options_.shared->ReadLease(name);
+  if (!lease.ok()) return lease.status();
+  // Free or ours: nobody else has it, so it does not exist (the lookup says so).
+  if (LeaseFree(*lease, options_.clock()) || lease->holder == options_.holder) {
+    return absl::OkStatus();
+  }
+  absl::StatusOr<LeaseRecord> asked = RecordHandoffRequest(*options_.shared, name,
+                                                           options_.holder, options_.clock,
+                                                           options_.lease);
+  if (absl::IsFailedPrecondition(asked.status())) return absl::OkStatus();  // freed meanwhile
+  if (!asked.ok()) return asked.status();
+  std::lock_guard<std::mutex> lock(mutex_);
+  requested_.insert(name);
+  return HandoffRequestedError(name, *asked, options_.lease);
+}
+
+bool MapStore::RecentlyLost(const std::string& name, absl::Time now) const {
+  auto it = lost_at_.find(name);
+  return it != lost_at_.end() && now - it->second < 2 * options_.lease.term;
 }
 
 void MapStore::DropLost(const std::string& name, const absl::Status& why) {
@@ -509,6 +575,7 @@ void MapStore::DropLost(const std::string& name, const absl::Status& why) {
   if (it == maps_.end() || !it->second.lost.ok()) return;
   ++lease_losses_;
   lost_[name] = why;
+  lost_at_[name] = options_.clock();
   if (it->second.mapping) {
     it->second.lost = why;
   } else {
@@ -530,7 +597,16 @@ std::vector<MapLeaseEvent> MapStore::RenewLeases() {
   for (const auto& [name, token] : held) {
     absl::StatusOr<LeaseRecord> renewed = AcquireLease(*options_.shared, name, options_.holder,
                                                        token, options_.clock, options_.lease);
-    if (renewed.ok()) continue;
+    if (renewed.ok()) {
+      // A request the record carries, for HandOffWanted.
+      std::lock_guard<std::mutex> lock(mutex_);
+      auto it = maps_.find(name);
+      if (it != maps_.end() && it->second.lease_token == token) {
+        const bool wanted = HandoffPending(*renewed, options_.holder, options_.clock());
+        it->second.wanted_by = wanted ? renewed->wanted_by : std::string();
+      }
+      continue;
+    }
     const bool lost = IsLeaseLost(renewed.status());
     if (lost) {
       std::lock_guard<std::mutex> lock(mutex_);

@@ -20,6 +20,16 @@
 // token the map was taken under when the file is published, so a store whose lease was taken
 // over writes nothing; it then drops the map, and calls naming it get the error that names
 // the new owner's generation until the store can take the lease again.
+//
+// Handoff (core/storage/lease_policy.h, "Handoff"; server/map_store_handoff.cc): a call naming
+// a map another daemon holds records a handoff request and gets UNAVAILABLE (clients retry);
+// the holder's lease keeper calls HandOffWanted, which saves each requested map that is idle
+// (no mapping job, no call naming it for handoff_quiet), drops it and releases its lease,
+// reserved for the requester, whose retry then loads the file. Calls naming a map while it
+// is being handed over get UNAVAILABLE. For two lease terms after this store lost a map to a
+// takeover, calls naming it get the loss (FAILED_PRECONDITION naming the new generation)
+// instead of a request: the new owner took it because this one stalled, and clients should
+// see why.
 #pragma once
 
 #include <condition_variable>
@@ -28,6 +38,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -67,6 +78,15 @@ struct MapLeaseEvent {
   std::string name;
   absl::Status status;
   bool lost = false;
+};
+
+// A map HandOffWanted gave up (status OK) or tried to and kept (the save failed).
+struct MapHandoffEvent {
+  std::string name;
+  std::string to;         // the requester's holder id
+  absl::Status status;
+  uint64_t version = 0;   // the version handed over
+  bool saved = false;     // it had unsaved changes (or no file yet) and was saved first
 };
 
 // Maps are listed as core's MapStatus (core/grid/map_status.h).
@@ -176,6 +196,12 @@ class MapStore {
   // lease they were written under was no longer this store's (nothing was published).
   int64_t lease_losses() const;
   int64_t fenced_saves_refused() const;
+  // Handoff (the lease keeper calls it after RenewLeases, which notes the requests): gives up
+  // every map another daemon asked for that is idle by ShouldHandOff. Returns what it did.
+  std::vector<MapHandoffEvent> HandOffWanted();
+  // Maps given up to a requester, and maps taken that had been released for this store.
+  int64_t handoffs_given() const;
+  int64_t handoffs_taken() const;
 
  private:
   struct Entry {
@@ -192,6 +218,11 @@ class MapStore {
     // Not OK: the lease was taken over while a mapping job held the map; every call gets this
     // until the job ends (EndMapping), then the entry goes.
     absl::Status lost;
+    // Handoff: when a call last named the map (lease clock), the daemon whose request the
+    // last renewal found (empty: none), and, while the map is being handed over, to whom.
+    absl::Time last_call = absl::InfinitePast();
+    std::string wanted_by;
+    std::string moving_to;
   };
   // A map file read, before it joins the store.
   struct LoadedFile {
@@ -236,6 +267,14 @@ class MapStore {
   // The lease of `name` was taken over (mutex_ held): the map goes (or, while a mapping job
   // holds it, turns into a tombstone) and `why` answers calls naming it.
   void DropLost(const std::string& name, const absl::Status& why);
+  // Whether this store lost `name` to a takeover less than two lease terms ago (mutex_ held).
+  bool RecentlyLost(const std::string& name, absl::Time now) const;
+  // Shared storage, `name` not stored: asks its live holder for it (HandoffRequestedError), or
+  // OK when nobody else holds it.
+  absl::Status RequestUnsaved(const std::string& name);
+  // Gives `name` up to its requester (map_store_handoff.cc); nullopt when it no longer
+  // qualifies.
+  std::optional<MapHandoffEvent> HandOff(const std::string& name);
 
   MapStoreOptions options_;
   mutable std::mutex mutex_;
@@ -243,8 +282,12 @@ class MapStore {
   std::set<std::string> file_busy_;    // names whose file an operation is working on
   std::condition_variable file_free_;  // one of them was given back
   std::map<std::string, absl::Status> lost_;  // maps dropped by DropLost, and why
+  std::map<std::string, absl::Time> lost_at_;  // when DropLost dropped them (lease clock)
   int64_t lease_losses_ = 0;
   int64_t fenced_saves_refused_ = 0;
+  std::set<std::string> requested_;  // names this store asked for and has not taken yet
+  int64_t handoffs_given_ = 0;
+  int64_t handoffs_taken_ = 0;
 };
 
 }  // namespace plx::server

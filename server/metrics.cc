@@ -159,6 +159,11 @@ std::string Metrics::Render(const Gauges& g) const {
   counter("plenoxd_fenced_saves_refused_total",
           "Saves refused because the map's lease had passed to another daemon (nothing written).",
           g.fenced_saves_refused);
+  counter("plenoxd_handoffs_given_total",
+          "Maps saved and released for another daemon that asked for them (a ring change).",
+          g.handoffs_given);
+  counter("plenoxd_handoffs_taken_total",
+          "Maps loaded after another daemon released them for this one.", g.handoffs_taken);
   // The HTTP port's bounds at work: a rising refusal or timeout count is a client (or an
   // attacker) the port turned away.
   gauge("plenoxd_http_connections_open", "Open connections to the metrics/viewer port.",

@@ -77,6 +77,10 @@ class Metrics {
     int64_t leases_held = 0;
     int64_t lease_losses = 0;
     int64_t fenced_saves_refused = 0;
+    // Handoffs: maps given up to a daemon that asked for them, and maps taken after their
+    // holder released them for this one.
+    int64_t handoffs_given = 0;
+    int64_t handoffs_taken = 0;
     // One per compute worker: plenoxd_device_info{device, kind, name} 1 and, per device, the
     // tasks queued or running and the streams bound to it.
     struct Device {

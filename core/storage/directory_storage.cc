@@ -27,9 +27,15 @@ constexpr char kStagingMarker[] = ".plx.stage.";
 constexpr int64_t kMaxLeaseBytes = 4096;
 
 std::string LeaseText(const LeaseRecord& r) {
-  return absl::StrCat(kLeaseMagic, "\nholder ", r.holder, "\ntoken ", r.token,
-                      "\nexpires_unix_ns ", absl::ToUnixNanos(r.expires), "\nrevision ",
-                      r.revision, "\n");
+  std::string text = absl::StrCat(kLeaseMagic, "\nholder ", r.holder, "\ntoken ", r.token,
+                                  "\nexpires_unix_ns ", absl::ToUnixNanos(r.expires),
+                                  "\nrevision ", r.revision, "\n");
+  // Only while a handoff is pending; records without these lines have none.
+  if (!r.wanted_by.empty()) {
+    absl::StrAppend(&text, "wanted_by ", r.wanted_by, "\nwanted_until_unix_ns ",
+                    absl::ToUnixNanos(r.wanted_until), "\n");
+  }
+  return text;
 }
 
 absl::StatusOr<LeaseRecord> ParseLease(const std::string& text, const std::string& path) {
@@ -58,6 +64,11 @@ absl::StatusOr<LeaseRecord> ParseLease(const std::string& text, const std::strin
     } else if (key == "revision") {
       revision = absl::SimpleAtoi(value, &r.revision);
       if (!revision) return damaged("revision is not a number");
+    } else if (key == "wanted_by") {
+      r.wanted_by = value;
+    } else if (key == "wanted_until_unix_ns") {
+      if (!absl::SimpleAtoi(value, &ns)) return damaged("wanted_until_unix_ns is not a number");
+      r.wanted_until = absl::FromUnixNanos(ns);
     }
   }
   if (!holder || !token || !expires || !revision) return damaged("a field is missing");

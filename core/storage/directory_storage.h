@@ -3,7 +3,8 @@
 //
 // Per map <name>:
 //   <name>.plx                      the map file (core/formats/map_file.h)
-//   <name>.plx.lease                its lease record (text, replaced atomically by rename)
+//   <name>.plx.lease                its lease record (text, replaced atomically by rename),
+//                                   with a pending handoff request when there is one
 //   <name>.plx.lock                 never replaced; flock(2)ed around every lease swap and
 //                                   every commit, so a check and what it allows are one step
 //   <name>.plx.stage.<writer id>    a new version being written (with SaveMap's own

@@ -85,6 +85,26 @@ absl::StatusOr<LeaseRecord> AcquireLease(MapStorage& storage, const std::string&
                                          const std::function<absl::Time()>& clock,
                                          const LeaseTerms& terms);
 
+// Records `requester`'s handoff request in `name`'s lease record (RequestHandoff, then
+// SwapLease; a lost race is decided again). Returns the record stored, or RequestHandoff's
+// refusal (FAILED_PRECONDITION: free or the requester's own; UNAVAILABLE: reserved for
+// another).
+absl::StatusOr<LeaseRecord> RecordHandoffRequest(MapStorage& storage, const std::string& name,
+                                                 const std::string& requester,
+                                                 const std::function<absl::Time()>& clock,
+                                                 const LeaseTerms& terms);
+
+// Takes `name`'s lease for `holder` like AcquireLease (holding nothing); when another daemon
+// holds it live, records `holder`'s handoff request instead and returns HandoffRequestedError
+// (UNAVAILABLE, IsHandoffRequested). A lease reserved for another requester is UNAVAILABLE
+// too, with nothing stored. `handed_over` (optional): set when the lease taken had been
+// released for `holder`'s own request.
+absl::StatusOr<LeaseRecord> TakeOrRequestLease(MapStorage& storage, const std::string& name,
+                                               const std::string& holder,
+                                               const std::function<absl::Time()>& clock,
+                                               const LeaseTerms& terms,
+                                               bool* handed_over = nullptr);
+
 // Gives `name`'s lease up if `holder` still holds it under `token` (ReleasedLease); OK when
 // it does not (nothing to give up).
 absl::Status ReleaseLease(MapStorage& storage, const std::string& name,

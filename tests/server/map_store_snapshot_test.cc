@@ -16,6 +16,7 @@
 #include "core/formats/map_file.h"
 #include "core/kernels/refresh_occupancy.h"
 #include "server/map_store.h"
+#include "tests/server/published_map.h"
 #include "tests/test_util.h"
 
 namespace plx::server {
@@ -28,13 +29,9 @@ using ::testing::IsEmpty;
 constexpr float kVoxel = 0.05f;
 const absl::Duration kInterval = absl::Seconds(30);
 
-std::shared_ptr<const PlenoxelMap> MapWithBricks(int bricks) {
-  auto map = std::make_shared<PlenoxelMap>(kVoxel);
-  std::vector<BrickCoord> coords;
-  for (int i = 0; i < bricks; ++i) coords.push_back({i, 0, 0});
-  EXPECT_TRUE(map->grid.AllocateBricks(coords, 1.0f).ok());
-  EXPECT_TRUE(RefreshOccupancyIfStale(*MakeCpuBackend(1), *map).ok());
-  return map;
+// A map as a mapping job publishes it (tests/server/published_map.h), at this file's voxel size.
+std::shared_ptr<const PlenoxelMap> MapWithBricks(int bricks, bool refresh = true) {
+  return testing::MapWithBricks(kVoxel, bricks, refresh);
 }
 
 // `count` keyframes along x, every second one with a few features.

@@ -19,6 +19,7 @@
 
 #include "core/cpu/cpu_backend.h"
 #include "core/kernels/refresh_occupancy.h"
+#include "tests/server/published_map.h"
 #include "tests/test_util.h"
 
 namespace plx::server {
@@ -32,16 +33,9 @@ using ::testing::Not;
 
 constexpr float kVoxel = 0.05f;
 
-// A map as a mapping job publishes it: `bricks` bricks in a row, occupancy refreshed.
+// A map as a mapping job publishes it (tests/server/published_map.h), at this file's voxel size.
 std::shared_ptr<const PlenoxelMap> MapWithBricks(int bricks, bool refresh = true) {
-  auto map = std::make_shared<PlenoxelMap>(kVoxel);
-  std::vector<BrickCoord> coords;
-  for (int i = 0; i < bricks; ++i) coords.push_back({i, 0, 0});
-  EXPECT_TRUE(map->grid.AllocateBricks(coords, 1.0f).ok());
-  if (refresh) {
-    EXPECT_TRUE(RefreshOccupancyIfStale(*MakeCpuBackend(1), *map).ok());
-  }
-  return map;
+  return testing::MapWithBricks(kVoxel, bricks, refresh);
 }
 
 int64_t BytesOf(const PlenoxelMap& map) { return map.grid.Memory().total_bytes(); }
@@ -420,17 +414,20 @@ TEST(MapStoreTest, DeleteRemovesOnlyTheStoresOwnFileAndKeepsTheMapWhenItCannot) 
 // Saves run outside the store's lock (test_only_save_delay holds one in the middle): a version
 // published meanwhile is not in the file, so the map stays dirty; a map deleted meanwhile must
 // not come back from the file at the next start (the delete waits for the save writing its
-// file, one operation on a map's file at a time, then removes it).
+// file, one operation on a map's file at a time, then removes it). The save thread is given
+// kSaveStarts to begin before the main thread acts, and the save is held three times that:
+// on a loaded 2-core machine (CI, builds beside it) 100 ms was once not enough to start it.
 TEST(MapStoreTest, WhatHappensDuringASaveIsNotLost) {
+  constexpr auto kSaveStarts = std::chrono::milliseconds(400);
   const std::string dir = plx::testing::MakeTempDir("plx_map_store");
   MapStoreOptions options = InDir(dir);
-  options.test_only_save_delay = absl::Milliseconds(300);
+  options.test_only_save_delay = absl::FromChrono(3 * kSaveStarts);
   MapStore store(options);
   ASSERT_TRUE(store.Create("room", kVoxel).ok());
   ASSERT_TRUE(store.Publish("room", MapWithBricks(1), 1).ok());
   absl::StatusOr<MapStatus> saved;
   std::thread save([&] { saved = store.Save("room"); });
-  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  std::this_thread::sleep_for(kSaveStarts);
   ASSERT_TRUE(store.Publish("room", MapWithBricks(2), 1).ok());
   save.join();
   ASSERT_TRUE(saved.ok()) << saved.status();
@@ -439,10 +436,10 @@ TEST(MapStoreTest, WhatHappensDuringASaveIsNotLost) {
 
   ASSERT_TRUE(store.Create("gone", kVoxel).ok());
   save = std::thread([&] { saved = store.Save("gone"); });
-  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  std::this_thread::sleep_for(kSaveStarts);
   const auto delete_start = std::chrono::steady_clock::now();
   ASSERT_TRUE(store.Delete("gone").ok());
-  EXPECT_GT(std::chrono::steady_clock::now() - delete_start, std::chrono::milliseconds(100))
+  EXPECT_GT(std::chrono::steady_clock::now() - delete_start, kSaveStarts)
       << "the delete waited for the save";
   save.join();
   EXPECT_TRUE(saved.ok()) << saved.status();

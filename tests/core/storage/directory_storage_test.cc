@@ -86,7 +86,10 @@ TEST_F(DirectoryStorageTest, LeaseRecordsRoundTripAndSwapOnlyFromTheRevisionRead
   ASSERT_TRUE(none.ok()) << none.status();
   EXPECT_EQ(none->token, 0u);
   EXPECT_EQ(none->revision, 0u);
-  LeaseRecord next{"A-1-01", 1, now_ + absl::Seconds(12), 0};
+  LeaseRecord next;
+  next.holder = "A-1-01";
+  next.token = 1;
+  next.expires = now_ + absl::Seconds(12);
   absl::StatusOr<LeaseRecord> stored = a_.SwapLease("m", 0, next);
   ASSERT_TRUE(stored.ok()) << stored.status();
   EXPECT_EQ(stored->revision, 1u);
@@ -97,7 +100,10 @@ TEST_F(DirectoryStorageTest, LeaseRecordsRoundTripAndSwapOnlyFromTheRevisionRead
   EXPECT_EQ(seen->expires, now_ + absl::Seconds(12));
   EXPECT_EQ(seen->revision, 1u);
   // B decided on revision 0 (before A's swap): refused, A's record stays.
-  absl::StatusOr<LeaseRecord> stale = b_.SwapLease("m", 0, LeaseRecord{"B-2-02", 1, now_, 0});
+  LeaseRecord late = next;
+  late.holder = "B-2-02";
+  late.expires = now_;
+  absl::StatusOr<LeaseRecord> stale = b_.SwapLease("m", 0, late);
   EXPECT_EQ(stale.status().code(), absl::StatusCode::kAborted) << stale.status();
   EXPECT_EQ(a_.ReadLease("m")->holder, "A-1-01");
 }
