@@ -109,7 +109,17 @@ absl::StatusOr<std::unique_ptr<RemoteClient>> RemoteClient::Create(const RemoteO
         absl::StrCat("--server: cannot create a channel to ", options.server));
   }
   client->stub_ = pb::Plenoxd::NewStub(client->channel_);
+  client->retry_clock_ = std::make_unique<ChannelWaitClock>(client->channel_);
   return client;
+}
+
+void ChannelWaitClock::SleepFor(absl::Duration duration) {
+  const absl::Time until = absl::Now() + duration;
+  if (channel_->GetState(/*try_to_connect=*/true) != GRPC_CHANNEL_READY) {
+    // Returns at once when connected, else when `until` passes.
+    if (channel_->WaitForConnected(absl::ToChronoTime(until))) return;
+  }
+  absl::SleepFor(until - absl::Now());
 }
 
 absl::Status RemoteClient::Unreachable(const std::string& why) const {
@@ -175,7 +185,7 @@ absl::StatusOr<T> RemoteClient::Retried(bool idempotent,
   const absl::Time start = absl::Now();
   int waits = 0;
   absl::StatusOr<T> result = CallWithRetry<T>(
-      retry_, idempotent, call, RetryClock::Real(), [&](const absl::Status& s, int attempt) {
+      retry_, idempotent, call, *retry_clock_, [&](const absl::Status& s, int attempt) {
         waits = attempt;
         NoteRetry(s, attempt);
       });

@@ -64,6 +64,9 @@ class RemoteClient {
   const std::string& server() const { return server_; }
   // --retry-seconds as a policy (budget 0: no retries).
   const RetryOptions& retry() const { return retry_; }
+  // The clock the retry waits run on (ChannelWaitClock): real time, with a wait cut short by
+  // the channel (re)connecting.
+  RetryClock& retry_clock() { return *retry_clock_; }
 
   // One GetMap of `map` with a short deadline and no retry, for a stream that waits for its
   // daemon under a backoff of its own: OK when a daemon answered, with the map or without it
@@ -109,6 +112,24 @@ class RemoteClient {
   RetryOptions retry_;
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<pb::Plenoxd::Stub> stub_;
+  std::unique_ptr<RetryClock> retry_clock_;
+};
+
+// Real time for the retry waits, except that a wait while `channel` is not connected watches
+// it and ends as soon as it is. gRPC learns whether its connection attempts succeed only while
+// something polls the channel: between a call that failed and the next, nothing does but its
+// backup poller, every 5 s, so a daemon back after 1.5 s was found after 7 (docs/BENCHMARKS.md,
+// "Failover"). A channel already connected (a proxy in front answered UNAVAILABLE for the
+// daemon behind it) gets the plain sleep, so the backoff still paces the attempts.
+class ChannelWaitClock final : public RetryClock {
+ public:
+  explicit ChannelWaitClock(std::shared_ptr<grpc::Channel> channel)
+      : channel_(std::move(channel)) {}
+  absl::Time Now() override { return absl::Now(); }
+  void SleepFor(absl::Duration duration) override;
+
+ private:
+  std::shared_ptr<grpc::Channel> channel_;
 };
 
 // For the commands: checks that --server was given, creates the client and connects. On an

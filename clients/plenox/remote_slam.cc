@@ -292,7 +292,7 @@ absl::Status AwaitDaemon(SlamStream& s, Backoff& backoff, absl::Status failure) 
 // updates; a stream cut by a failover is replaced (see the top of this file). The error to
 // report when it went wrong.
 absl::Status StreamFrames(SlamStream& s, SlamReport& report, ProgressLine& line) {
-  Backoff backoff(s.client->retry(), RetryClock::Real());
+  Backoff backoff(s.client->retry(), s.client->retry_clock());
   std::optional<SE3> start = s.start_pose;
   int first = 0;
   while (true) {
