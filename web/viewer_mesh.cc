@@ -107,13 +107,32 @@ absl::StatusOr<std::shared_ptr<const ViewerGlb>> MeshCache::GetGlb(ViewerSource&
   });
 }
 
+namespace {
+
+// A cache variant naming `region`: exact coordinates (17 digits), so two boxes share an entry
+// only when they are the same.
+std::string RegionVariant(const AxisBox& region) {
+  return absl::StrFormat("region %.17g %.17g %.17g %.17g %.17g %.17g", region.min[0],
+                         region.min[1], region.min[2], region.max[0], region.max[1],
+                         region.max[2]);
+}
+
+}  // namespace
+
+absl::StatusOr<std::shared_ptr<const ViewerMesh>> MeshCache::GetRegion(ViewerSource& source,
+                                                                       const std::string& name,
+                                                                       const ViewerMap& map,
+                                                                       const AxisBox& region) {
+  return cache_.Get(name, RegionVariant(region), map.version, [&] {
+    return BuildViewerMesh(source, map, max_triangles_, timeout_, region);
+  });
+}
+
 absl::StatusOr<std::shared_ptr<const ViewerGlb>> MeshCache::GetRegionGlb(
     ViewerSource& source, const std::string& name, const ViewerMap& map, int64_t triangles,
     const AxisBox& region) {
-  // Exact coordinates (17 digits), so two boxes share an entry only when they are the same.
-  const std::string variant = absl::StrFormat(
-      "region %.17g %.17g %.17g %.17g %.17g %.17g, %d triangles", region.min[0], region.min[1],
-      region.min[2], region.max[0], region.max[1], region.max[2], triangles);
+  const std::string variant = absl::StrFormat("%s, %d triangles", RegionVariant(region),
+                                              triangles);
   return glb_cache_.Get(name, variant, map.version,
                         [&]() -> absl::StatusOr<ViewerGlb> {
     absl::StatusOr<ViewerMesh> mesh =

@@ -79,6 +79,13 @@ class MeshCache {
                                                         const std::string& name,
                                                         const ViewerMap& map);
 
+  // The mesh of `region` of the map as PLY, built for the region alone like GetRegionGlb's,
+  // kept in the same cache as Get's per region.
+  absl::StatusOr<std::shared_ptr<const ViewerMesh>> GetRegion(ViewerSource& source,
+                                                              const std::string& name,
+                                                              const ViewerMap& map,
+                                                              const AxisBox& region);
+
   // The mesh of Get as GLB at `triangles` (0: the full mesh). Budgets at or above the mesh's
   // count share one entry (the full mesh).
   absl::StatusOr<std::shared_ptr<const ViewerGlb>> GetGlb(ViewerSource& source,

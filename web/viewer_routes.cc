@@ -147,7 +147,7 @@ HttpResponse Viewer::Api(const HttpRequest& request) {
   if (map == nullptr || map->empty()) return JsonError(400, "map: missing");
   if (map->size() > kMaxMapNameBytes) return JsonError(400, "map: name too long");
   if (endpoint == "points") return Points(*map);
-  if (endpoint == "mesh") return Mesh(*map);
+  if (endpoint == "mesh") return Mesh(request, *map);
   if (endpoint == "mesh.glb") return MeshGlb(request, *map);
   if (endpoint == "trajectory") return Trajectory(*map);
   return Render(request, *map);
@@ -193,26 +193,6 @@ HttpResponse Viewer::Points(const std::string& map) {
                       std::shared_ptr<const std::string>(*cloud, &(*cloud)->ply)};
 }
 
-HttpResponse Viewer::Mesh(const std::string& map) {
-  absl::StatusOr<ViewerMap> latest = source_->Latest(map);
-  if (!latest.ok()) return ErrorResponse(latest.status());
-  absl::StatusOr<std::shared_ptr<const ViewerMesh>> mesh = meshes_.Get(*source_, map, *latest);
-  if (!mesh.ok()) return ErrorResponse(mesh.status());
-  if (!(*mesh)->too_large.empty()) {
-    HttpResponse r = JsonError(413, (*mesh)->too_large);
-    r.headers.push_back({"X-Map-Version", absl::StrCat(latest->version)});
-    return r;
-  }
-  return HttpResponse{200,
-                      "application/octet-stream",
-                      {},
-                      {kNoStore,
-                       {"X-Map-Version", absl::StrCat(latest->version)},
-                       {"X-Vertices", absl::StrCat((*mesh)->vertices)},
-                       {"X-Faces", absl::StrCat((*mesh)->faces)}},
-                      std::shared_ptr<const std::string>(*mesh, &(*mesh)->ply)};
-}
-
 namespace {
 
 // The level of detail a mesh.glb request asks for: `triangles`, absent or 0 for the full mesh.
@@ -232,7 +212,7 @@ absl::StatusOr<int64_t> ParseTriangleBudget(const HttpRequest& request, int64_t 
   return triangles;
 }
 
-// The region a mesh.glb request asks for: `bbox` = "xmin,ymin,zmin,xmax,ymax,zmax" (metres, map
+// The region a mesh or mesh.glb request asks for: `bbox` = "xmin,ymin,zmin,xmax,ymax,zmax" (metres, map
 // coordinates; as `plenox export --bbox` takes it), absent for the whole map.
 absl::StatusOr<std::optional<AxisBox>> ParseRegion(const HttpRequest& request) {
   const std::string* value = request.Param("bbox");
@@ -253,6 +233,30 @@ absl::StatusOr<std::optional<AxisBox>> ParseRegion(const HttpRequest& request) {
 }
 
 }  // namespace
+
+HttpResponse Viewer::Mesh(const HttpRequest& request, const std::string& map) {
+  absl::StatusOr<std::optional<AxisBox>> region = ParseRegion(request);
+  if (!region.ok()) return ErrorResponse(region.status());
+  absl::StatusOr<ViewerMap> latest = source_->Latest(map);
+  if (!latest.ok()) return ErrorResponse(latest.status());
+  absl::StatusOr<std::shared_ptr<const ViewerMesh>> mesh =
+      *region ? meshes_.GetRegion(*source_, map, *latest, **region)
+              : meshes_.Get(*source_, map, *latest);
+  if (!mesh.ok()) return ErrorResponse(mesh.status());
+  if (!(*mesh)->too_large.empty()) {
+    HttpResponse r = JsonError(413, (*mesh)->too_large);
+    r.headers.push_back({"X-Map-Version", absl::StrCat(latest->version)});
+    return r;
+  }
+  return HttpResponse{200,
+                      "application/octet-stream",
+                      {},
+                      {kNoStore,
+                       {"X-Map-Version", absl::StrCat(latest->version)},
+                       {"X-Vertices", absl::StrCat((*mesh)->vertices)},
+                       {"X-Faces", absl::StrCat((*mesh)->faces)}},
+                      std::shared_ptr<const std::string>(*mesh, &(*mesh)->ply)};
+}
 
 HttpResponse Viewer::MeshGlb(const HttpRequest& request, const std::string& map) {
   absl::StatusOr<int64_t> triangles = ParseTriangleBudget(request, options_.max_mesh_triangles);

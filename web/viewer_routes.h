@@ -6,8 +6,10 @@
 //                                 loader
 //   /viewer/api/maps              JSON: the title and the maps (name, version, bricks, ...)
 //   /viewer/api/points?map=M      PLY: M's coloured surface points (web/point_cloud_cache.h)
-//   /viewer/api/mesh?map=M        PLY: M's triangle mesh with normals and colours
-//                                 (web/viewer_mesh.h); 413 over max_mesh_triangles
+//   /viewer/api/mesh?map=M[&bbox=XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX]
+//                                 PLY: M's triangle mesh with normals and colours
+//                                 (web/viewer_mesh.h), of the box alone with bbox (as
+//                                 mesh.glb's below); 413 over max_mesh_triangles
 //   /viewer/api/mesh.glb?map=M[&triangles=N][&bbox=XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX]
 //                                 binary glTF (model/gltf-binary): the same mesh simplified to
 //                                 at most N triangles (a level of detail; absent or 0: the full
@@ -79,7 +81,7 @@ class Viewer {
   HttpResponse Api(const HttpRequest& request);
   HttpResponse Maps();
   HttpResponse Points(const std::string& map);
-  HttpResponse Mesh(const std::string& map);
+  HttpResponse Mesh(const HttpRequest& request, const std::string& map);
   HttpResponse MeshGlb(const HttpRequest& request, const std::string& map);
   HttpResponse Trajectory(const std::string& map);
   HttpResponse Render(const HttpRequest& request, const std::string& map);

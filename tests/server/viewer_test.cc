@@ -486,7 +486,7 @@ TEST(ViewerMeshTest, LevelsOfDetailAreBuiltFromTheCachedMesh) {
   EXPECT_EQ(capped.Handle(GlbRequest("room", 11)).status, 400) << "over the viewer's limit";
 }
 
-// mesh.glb?bbox=: the mesh of that box alone, built on the device for it (a map whose whole
+// mesh.glb?bbox= (and mesh?bbox=, the PLY): the mesh of that box alone, built on the device for it (a map whose whole
 // mesh is over the cap may still have a room under it), recorded in the file, cached per box
 // and budget; a bbox that is not six finite numbers with min < max is 400.
 TEST(ViewerMeshTest, ABoxOfTheMapIsBuiltForItselfAndCached) {
@@ -523,6 +523,23 @@ TEST(ViewerMeshTest, ABoxOfTheMapIsBuiltForItselfAndCached) {
   ASSERT_TRUE(lod_info.ok()) << lod_info.status();
   EXPECT_LE(lod_info->triangles, info->triangles / 4);
   EXPECT_EQ(lod_info->full_triangles, info->triangles);
+
+  // The PLY mesh of the same box: the same triangles as the box's full GLB, its own build,
+  // cached per box.
+  web::HttpRequest ply_half = MeshRequest("room");
+  ply_half.params["bbox"] = half.params["bbox"];
+  const int device_calls = source.device_calls;
+  const web::HttpResponse ply = viewer.Handle(ply_half);
+  ASSERT_EQ(ply.status, 200) << ply.Body().substr(0, 200);
+  const absl::StatusOr<plx::testing::PlyMeshFile> ply_mesh =
+      plx::testing::ReadPlyMesh(ply.Body());
+  ASSERT_TRUE(ply_mesh.ok()) << ply_mesh.status();
+  EXPECT_EQ(ply_mesh->mesh.num_triangles(), info->triangles);
+  EXPECT_EQ(source.device_calls, device_calls + 1);
+  EXPECT_EQ(viewer.Handle(ply_half).shared_body.get(), ply.shared_body.get()) << "cached";
+  EXPECT_EQ(source.device_calls, device_calls + 1);
+  ply_half.params["bbox"] = "0,0,0,1,-1,1";
+  EXPECT_EQ(viewer.Handle(ply_half).status, 400);
 
   // Under the whole map's cap, a box passes where the map is refused (the cap counts the
   // triangles marching cubes makes, before the unseen ones go: one under the map's served mesh).
