@@ -212,8 +212,8 @@ absl::StatusOr<int64_t> ParseTriangleBudget(const HttpRequest& request, int64_t 
   return triangles;
 }
 
-// The region a mesh or mesh.glb request asks for: `bbox` = "xmin,ymin,zmin,xmax,ymax,zmax" (metres, map
-// coordinates; as `plenox export --bbox` takes it), absent for the whole map.
+// The region a mesh or mesh.glb request asks for: `bbox` = "xmin,ymin,zmin,xmax,ymax,zmax"
+// (metres, map coordinates; as `plenox export --bbox` takes it), absent for the whole map.
 absl::StatusOr<std::optional<AxisBox>> ParseRegion(const HttpRequest& request) {
   const std::string* value = request.Param("bbox");
   if (value == nullptr) return std::nullopt;

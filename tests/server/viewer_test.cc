@@ -486,9 +486,10 @@ TEST(ViewerMeshTest, LevelsOfDetailAreBuiltFromTheCachedMesh) {
   EXPECT_EQ(capped.Handle(GlbRequest("room", 11)).status, 400) << "over the viewer's limit";
 }
 
-// mesh.glb?bbox= (and mesh?bbox=, the PLY): the mesh of that box alone, built on the device for it (a map whose whole
-// mesh is over the cap may still have a room under it), recorded in the file, cached per box
-// and budget; a bbox that is not six finite numbers with min < max is 400.
+// mesh.glb?bbox= (and mesh?bbox=, the PLY): the mesh of that box alone, built on the device
+// for it (a map whose whole mesh is over the cap may still have a room under it), recorded in
+// the file, cached per box and budget; a bbox that is not six finite numbers with min < max is
+// 400.
 TEST(ViewerMeshTest, ABoxOfTheMapIsBuiltForItselfAndCached) {
   absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(CachedRoomMapFile());
   ASSERT_TRUE(map.ok()) << map.status();
