@@ -36,7 +36,7 @@ std::string MapStore::PathOf(const std::string& name) const {
 
 absl::Status MapStore::Missing(const std::string& name) const {
   auto lost = lost_.find(name);
-  if (lost != lost_.end()) return lost->second;
+  if (lost != lost_.end()) return lost->second.why;
   return absl::NotFoundError(absl::StrCat("no map named \"", name, "\""));
 }
 
@@ -154,7 +154,6 @@ absl::StatusOr<MapStatus> MapStore::Create(const std::string& name, float voxel_
   e.lease_token = token;
   e.last_call = options_.clock();
   lost_.erase(name);
-  lost_at_.erase(name);
   auto empty = std::make_shared<PlenoxelMap>(voxel_size);
   empty->grid.set_occupancy_fresh();  // empty: nothing to refresh
   e.map = std::move(empty);
@@ -447,7 +446,6 @@ absl::StatusOr<MapStatus> MapStore::Install(const std::string& name, LoadedFile 
   e.last_call = options_.clock();
   e.wanted_by.clear();
   lost_.erase(name);
-  lost_at_.erase(name);
   return StatusOf(name, e);
 }
 
@@ -516,7 +514,6 @@ absl::StatusOr<MapStatus> MapStore::LoadShared(const std::string& name, bool onl
   if (!lease.ok()) {
     std::lock_guard<std::mutex> lock(mutex_);
     if (IsLeaseLost(lease.status())) DropLost(name, lease.status());
-    if (IsHandoffRequested(lease.status())) requested_.insert(name);
     return lease.status();
   }
   // A lease taken for this load alone is given back when the load fails, so another daemon
@@ -535,10 +532,7 @@ absl::StatusOr<MapStatus> MapStore::LoadShared(const std::string& name, bool onl
   {
     std::lock_guard<std::mutex> lock(mutex_);
     installed = Install(name, *std::move(file), *path, lease->token);
-    if (installed.ok()) {
-      requested_.erase(name);
-      if (handed_over) ++handoffs_taken_;
-    }
+    if (installed.ok() && handed_over) ++handoffs_taken_;
   }
   if (!installed.ok()) return failed(installed.status());
   return installed;
@@ -560,22 +554,19 @@ absl::Status MapStore::RequestUnsaved(const std::string& name) {
                                                            options_.lease);
   if (absl::IsFailedPrecondition(asked.status())) return absl::OkStatus();  // freed meanwhile
   if (!asked.ok()) return asked.status();
-  std::lock_guard<std::mutex> lock(mutex_);
-  requested_.insert(name);
   return HandoffRequestedError(name, *asked, options_.lease);
 }
 
 bool MapStore::RecentlyLost(const std::string& name, absl::Time now) const {
-  auto it = lost_at_.find(name);
-  return it != lost_at_.end() && now - it->second < 2 * options_.lease.term;
+  auto it = lost_.find(name);
+  return it != lost_.end() && now - it->second.at < 2 * options_.lease.term;
 }
 
 void MapStore::DropLost(const std::string& name, const absl::Status& why) {
   auto it = maps_.find(name);
   if (it == maps_.end() || !it->second.lost.ok()) return;
   ++lease_losses_;
-  lost_[name] = why;
-  lost_at_[name] = options_.clock();
+  lost_[name] = LostMap{why, options_.clock()};
   if (it->second.mapping) {
     it->second.lost = why;
   } else {

@@ -272,6 +272,9 @@ class MapStore {
   // Shared storage, `name` not stored: asks its live holder for it (HandoffRequestedError), or
   // OK when nobody else holds it.
   absl::Status RequestUnsaved(const std::string& name);
+  // Whether `e` is a map another daemon asked for that may go now: held, not already moving,
+  // and idle by ShouldHandOff (mutex_ held).
+  bool HandOffDue(const Entry& e, absl::Time now) const;
   // Gives `name` up to its requester (map_store_handoff.cc); nullopt when it no longer
   // qualifies.
   std::optional<MapHandoffEvent> HandOff(const std::string& name);
@@ -281,11 +284,14 @@ class MapStore {
   std::map<std::string, Entry> maps_;
   std::set<std::string> file_busy_;    // names whose file an operation is working on
   std::condition_variable file_free_;  // one of them was given back
-  std::map<std::string, absl::Status> lost_;  // maps dropped by DropLost, and why
-  std::map<std::string, absl::Time> lost_at_;  // when DropLost dropped them (lease clock)
+  // Maps dropped by DropLost: why, and when by the lease clock.
+  struct LostMap {
+    absl::Status why;
+    absl::Time at;
+  };
+  std::map<std::string, LostMap> lost_;
   int64_t lease_losses_ = 0;
   int64_t fenced_saves_refused_ = 0;
-  std::set<std::string> requested_;  // names this store asked for and has not taken yet
   int64_t handoffs_given_ = 0;
   int64_t handoffs_taken_ = 0;
 };

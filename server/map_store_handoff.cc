@@ -19,10 +19,7 @@ std::vector<MapHandoffEvent> MapStore::HandOffWanted() {
     std::lock_guard<std::mutex> lock(mutex_);
     const absl::Time now = options_.clock();
     for (const auto& [name, e] : maps_) {
-      if (e.lost.ok() && e.lease_token != 0 && !e.wanted_by.empty() && e.moving_to.empty() &&
-          ShouldHandOff(e.mapping, e.last_call, now, options_.lease)) {
-        due.push_back(name);
-      }
+      if (HandOffDue(e, now)) due.push_back(name);
     }
   }
   for (const std::string& name : due) {
@@ -30,6 +27,11 @@ std::vector<MapHandoffEvent> MapStore::HandOffWanted() {
     if (event.has_value()) events.push_back(*std::move(event));
   }
   return events;
+}
+
+bool MapStore::HandOffDue(const Entry& e, absl::Time now) const {
+  return e.lost.ok() && e.lease_token != 0 && !e.wanted_by.empty() && e.moving_to.empty() &&
+         ShouldHandOff(e.mapping, e.last_call, now, options_.lease);
 }
 
 std::optional<MapHandoffEvent> MapStore::HandOff(const std::string& name) {
@@ -46,10 +48,7 @@ std::optional<MapHandoffEvent> MapStore::HandOff(const std::string& name) {
     if (it == maps_.end()) return std::nullopt;
     Entry& e = it->second;
     // Decided again under the turn: a call or a mapping job may have come meanwhile.
-    if (!e.lost.ok() || e.lease_token == 0 || e.wanted_by.empty() || !e.moving_to.empty() ||
-        !ShouldHandOff(e.mapping, e.last_call, options_.clock(), options_.lease)) {
-      return std::nullopt;
-    }
+    if (!HandOffDue(e, options_.clock())) return std::nullopt;
     // From here on calls naming the map get UNAVAILABLE (Find), and no mapping job can start,
     // so the version saved below is the last one.
     e.moving_to = e.wanted_by;

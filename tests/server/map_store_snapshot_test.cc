@@ -114,7 +114,9 @@ TEST_F(MapStoreSnapshotTest, KeyframesAndTheVersionNumberComeBackAtTheNextStart)
     EXPECT_EQ(a.timestamp, b.timestamp);
     EXPECT_EQ(a.pose.translation(), b.pose.translation());
     ASSERT_EQ(a.features == nullptr, b.features == nullptr);
-    if (a.features != nullptr) EXPECT_EQ(a.features->descriptors, b.features->descriptors);
+    if (a.features != nullptr) {
+      EXPECT_EQ(a.features->descriptors, b.features->descriptors);
+    }
   }
   // The numbers go on from there.
   EXPECT_EQ(restarted.Publish("room", MapWithBricks(1), 0, nullptr).value_or(0), 4u);
