@@ -232,6 +232,13 @@ absl::StatusOr<std::optional<AxisBox>> ParseRegion(const HttpRequest& request) {
   return box;
 }
 
+// A mesh (PLY or GLB) of `version` over the triangle cap: 413 with the reason.
+HttpResponse MeshTooLarge(const std::string& why, uint64_t version) {
+  HttpResponse r = JsonError(413, why);
+  r.headers.push_back({"X-Map-Version", absl::StrCat(version)});
+  return r;
+}
+
 }  // namespace
 
 HttpResponse Viewer::Mesh(const HttpRequest& request, const std::string& map) {
@@ -243,11 +250,7 @@ HttpResponse Viewer::Mesh(const HttpRequest& request, const std::string& map) {
       *region ? meshes_.GetRegion(*source_, map, *latest, **region)
               : meshes_.Get(*source_, map, *latest);
   if (!mesh.ok()) return ErrorResponse(mesh.status());
-  if (!(*mesh)->too_large.empty()) {
-    HttpResponse r = JsonError(413, (*mesh)->too_large);
-    r.headers.push_back({"X-Map-Version", absl::StrCat(latest->version)});
-    return r;
-  }
+  if (!(*mesh)->too_large.empty()) return MeshTooLarge((*mesh)->too_large, latest->version);
   return HttpResponse{200,
                       "application/octet-stream",
                       {},
@@ -269,11 +272,7 @@ HttpResponse Viewer::MeshGlb(const HttpRequest& request, const std::string& map)
       *region ? meshes_.GetRegionGlb(*source_, map, *latest, *triangles, **region)
               : meshes_.GetGlb(*source_, map, *latest, *triangles);
   if (!glb.ok()) return ErrorResponse(glb.status());
-  if (!(*glb)->too_large.empty()) {
-    HttpResponse r = JsonError(413, (*glb)->too_large);
-    r.headers.push_back({"X-Map-Version", absl::StrCat(latest->version)});
-    return r;
-  }
+  if (!(*glb)->too_large.empty()) return MeshTooLarge((*glb)->too_large, latest->version);
   return HttpResponse{200,
                       kGlbMediaType,
                       {},
