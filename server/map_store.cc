@@ -315,6 +315,7 @@ absl::StatusOr<SaveOutcome> MapStore::SaveNewest(const std::string& name, bool s
   (*e)->save.SaveFinished(saved.ok(), absl::Now(), retry_after);
   PLX_RETURN_IF_ERROR(saved);
   (*e)->file = path;
+  out.status = StatusOf(name, **e);
   return out;
 }
 
@@ -332,8 +333,9 @@ absl::Status MapStore::SaveShared(const std::string& name, uint64_t token,
 absl::StatusOr<MapStatus> MapStore::Save(const std::string& name) {
   // Shared: a call naming a map loads it first, as every other one does.
   PLX_RETURN_IF_ERROR(HoldShared(name));
-  PLX_RETURN_IF_ERROR(SaveNewest(name, /*snapshot=*/false, absl::ZeroDuration()).status());
-  return Info(name);
+  PLX_ASSIGN_OR_RETURN(SaveOutcome outcome,
+                       SaveNewest(name, /*snapshot=*/false, absl::ZeroDuration()));
+  return outcome.status;
 }
 
 absl::StatusOr<SaveOutcome> MapStore::Snapshot(const std::string& name,

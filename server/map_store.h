@@ -117,6 +117,9 @@ struct SaveOutcome {
   int keyframes = 0;
   int64_t bytes = 0;      // the file's size
   absl::Duration took;    // writing it (after waiting for the file)
+  // The map as the save left it, taken under the store's lock before the file's turn ends (a
+  // delete waiting for the turn may remove the map right after).
+  MapStatus status;
 };
 
 class MapStore {

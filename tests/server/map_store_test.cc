@@ -414,9 +414,10 @@ TEST(MapStoreTest, DeleteRemovesOnlyTheStoresOwnFileAndKeepsTheMapWhenItCannot) 
 // Saves run outside the store's lock (test_only_save_delay holds one in the middle): a version
 // published meanwhile is not in the file, so the map stays dirty; a map deleted meanwhile must
 // not come back from the file at the next start (the delete waits for the save writing its
-// file, one operation on a map's file at a time, then removes it). The save thread is given
-// kSaveStarts to begin before the main thread acts, and the save is held three times that:
-// on a loaded 2-core machine (CI, builds beside it) 100 ms was once not enough to start it.
+// file, one operation on a map's file at a time, then removes it), and the save still answers
+// with the map as it saved it (taken before the delete's turn, not looked up after it). The
+// save thread is given kSaveStarts to begin before the main thread acts, and the save is held
+// three times that, so a loaded 2-core machine still runs them in that order.
 TEST(MapStoreTest, WhatHappensDuringASaveIsNotLost) {
   constexpr auto kSaveStarts = std::chrono::milliseconds(400);
   const std::string dir = plx::testing::MakeTempDir("plx_map_store");
