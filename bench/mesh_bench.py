@@ -145,7 +145,7 @@ def score_lod(args, name, map_path, work, exported, truth, views, intr):
     (scored) and as GLB (sized), and the full mesh's GLB for comparison."""
     budget = max(1, int(round(args.lod_fraction * exported["faces"])))
     base = [args.plenox, "export", "--map", map_path, "--mesh", "--iso-level",
-            repr(args.iso_level), "--json"]
+            repr(args.iso_level), "--mesh-surface", args.surfaces.split(",")[0], "--json"]
     paths = {k: os.path.join(work, k) for k in ("lod.ply", "lod.glb", "full.glb")}
     began = time.monotonic()
     lod = run_json("%s plenox export LOD" % name,
@@ -187,6 +187,11 @@ def main():
     p.add_argument("--lod-fraction", type=float, default=0.1,
                    help="also score the level of detail at this fraction of the triangles "
                         "(0 = off)")
+    p.add_argument("--surfaces", default="observed,density",
+                   help="plenox's mesh surfaces to score (--mesh-surface), comma-separated; "
+                        "the first is the one the level of detail uses")
+    p.add_argument("--map", help="score the meshes of this map file (made by plenox map with "
+                                 "the same --every) instead of mapping again")
     p.add_argument("--no-peer", action="store_true", help="skip the Open3D TSDF mesh")
     p.add_argument("--timeout", type=float, default=1800)
     p.add_argument("--out", help="also write the report here")
@@ -217,26 +222,36 @@ def main():
         if args.time_budget is not None:
             cmd += ["--time-budget", repr(args.time_budget)]
         try:
-            mapped = run_json("%s plenox map" % name, cmd, args.timeout)
-            began = time.monotonic()
-            exported = run_json("%s plenox export" % name,
-                                [args.plenox, "export", "--map", map_path, "--out", mesh_path,
-                                 "--mesh", "--iso-level", repr(args.iso_level), "--json"],
-                                args.timeout)
-            export_s = time.monotonic() - began
+            if args.map:
+                map_path, mapped = args.map, {}
+            else:
+                mapped = run_json("%s plenox map" % name, cmd, args.timeout)
         except CommandError as exc:
             sys.exit(str(exc))
-        ours = o3d.io.read_triangle_mesh(mesh_path)
-        if len(ours.triangles) != exported["faces"]:
-            sys.exit("Open3D read %d triangles, plenox wrote %d"
-                     % (len(ours.triangles), exported["faces"]))
-        s = score(ours, truth, views, intr)
-        s["seconds"] = export_s
-        s["notes"] = "map %.0f s, %d iterations" % (mapped.get("seconds", 0),
-                                                    mapped.get("iterations", 0))
-        rows.append(("plenox (ours)", s))
-        log("ours: %s" % s)
-        if args.lod_fraction > 0:
+        surfaces = [x for x in args.surfaces.split(",") if x]
+        exported = None
+        for surface in surfaces:
+            began = time.monotonic()
+            try:
+                result = run_json("%s plenox export (%s)" % (name, surface),
+                                  [args.plenox, "export", "--map", map_path, "--out", mesh_path,
+                                   "--mesh", "--mesh-surface", surface, "--iso-level",
+                                   repr(args.iso_level), "--json"], args.timeout)
+            except CommandError as exc:
+                sys.exit(str(exc))
+            export_s = time.monotonic() - began
+            exported = exported or result
+            ours = o3d.io.read_triangle_mesh(mesh_path)
+            if len(ours.triangles) != result["faces"]:
+                sys.exit("Open3D read %d triangles, plenox wrote %d"
+                         % (len(ours.triangles), result["faces"]))
+            s = score(ours, truth, views, intr)
+            s["seconds"] = export_s
+            s["notes"] = ("map %.0f s, %d iterations" % (mapped["seconds"], mapped["iterations"])
+                          if mapped else "map %s" % os.path.basename(map_path))
+            rows.append(("plenox (ours), %s surface" % surface, s))
+            log("ours (%s): %s" % (surface, s))
+        if args.lod_fraction > 0 and exported is not None:
             rows.append(("plenox LOD %g %%" % (100 * args.lod_fraction),
                          score_lod(args, name, map_path, work, exported, truth, views, intr)))
             log("lod: %s" % rows[-1][1])

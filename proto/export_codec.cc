@@ -17,6 +17,7 @@ const char* MeshFieldSetOnPoints(const pb::ExportRequest& request) {
   if (request.mesh_color() != 0) return "mesh_color";
   if (request.lod_triangles() != 0) return "lod_triangles";
   if (request.has_region()) return "region";
+  if (request.mesh_surface() != pb::MESH_SURFACE_AUTO) return "mesh_surface";
   return nullptr;
 }
 
@@ -90,6 +91,21 @@ absl::StatusOr<ExportSpec> ExportSpecFromProto(const pb::ExportRequest& request)
     spec.mesh_format = request.format() == pb::EXPORT_FORMAT_MESH_GLB ? MeshFileFormat::kGlb
                                                                        : MeshFileFormat::kPly;
     spec.lod_triangles = static_cast<int64_t>(request.lod_triangles());
+    switch (request.mesh_surface()) {
+      case pb::MESH_SURFACE_AUTO:
+        spec.mesh_surface = MeshSurface::kAuto;
+        break;
+      case pb::MESH_SURFACE_OBSERVED:
+        spec.mesh_surface = MeshSurface::kObserved;
+        break;
+      case pb::MESH_SURFACE_DENSITY:
+        spec.mesh_surface = MeshSurface::kDensity;
+        break;
+      default:
+        return absl::InvalidArgumentError(
+            absl::StrCat("mesh_surface: unknown value ", request.mesh_surface(),
+                         " (AUTO, OBSERVED or DENSITY)"));
+    }
     return spec;
   }
   if (const char* mesh_field = MeshFieldSetOnPoints(request); mesh_field != nullptr) {
@@ -118,6 +134,10 @@ pb::ExportRequest ExportSpecToProto(const ExportSpec& spec) {
                              ? pb::MESH_COLOR_ALONG_NORMAL
                              : pb::MESH_COLOR_DC);
   request.set_lod_triangles(static_cast<uint64_t>(spec.lod_triangles));
+  request.set_mesh_surface(spec.mesh_surface == MeshSurface::kObserved ? pb::MESH_SURFACE_OBSERVED
+                           : spec.mesh_surface == MeshSurface::kDensity
+                               ? pb::MESH_SURFACE_DENSITY
+                               : pb::MESH_SURFACE_AUTO);
   if (o.region) {
     pb::BoundingBox* r = request.mutable_region();
     r->set_min_x(o.region->min[0]);

@@ -18,7 +18,7 @@ absl::StatusOr<web::ViewerMap> DaemonViewerSource::Latest(const std::string& nam
   if (latest->map == nullptr) {
     return absl::NotFoundError("map \"" + name + "\" has no published version yet");
   }
-  return web::ViewerMap{latest->map, latest->version};
+  return web::ViewerMap{latest->map, latest->version, latest->keyframes};
 }
 
 absl::StatusOr<web::ViewerTrajectories> DaemonViewerSource::Trajectories(

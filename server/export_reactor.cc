@@ -42,8 +42,10 @@ ExportReactor::ExportReactor(DaemonState* state, grpc::CallbackServerContext* co
               }
               // A call cancelled while exporting stops within a few bricks (or after the
               // simplification step that runs).
-              absl::StatusOr<MapExport> file = ExportMap(
-                  spec, *map.map, *backend, [this] { return context_->IsCancelled(); });
+              static const MapKeyframes kNone;
+              absl::StatusOr<MapExport> file =
+                  ExportMap(spec, *map.map, map.keyframes ? *map.keyframes : kNone, *backend,
+                            [this] { return context_->IsCancelled(); });
               if (!file.ok()) {
                 Done(file.status());
                 return;

@@ -7,6 +7,7 @@
 #include "absl/strings/str_format.h"
 #include "core/formats/glb_mesh.h"
 #include "core/formats/ply_mesh.h"
+#include "core/export/map_export.h"
 #include "core/mesh/iso_surface.h"
 #include "core/mesh/mesh_simplify.h"
 
@@ -19,14 +20,18 @@ absl::StatusOr<ViewerMesh> BuildViewerMesh(ViewerSource& source, const ViewerMap
     return absl::InvalidArgumentError(
         absl::StrCat("max_mesh_triangles: must be > 0, got ", max_triangles));
   }
-  MeshOptions options;  // the Export RPC's defaults: iso-level 50/m, DC colours, seen faces
+  // The Export RPC's defaults: the observed surface when the version has keyframes (else the
+  // density's at 50/m), DC colours, seen faces.
+  MeshOptions options;
   options.max_triangles = max_triangles;
   options.region = region;
   if (absl::Status s = ValidateMeshOptions(options); !s.ok()) return s;
   absl::StatusOr<TriangleMesh> mesh = absl::UnknownError("not built");
   const absl::Status ran = source.RunOnDevice(
       [&](Backend& backend, const std::function<bool()>& cancelled) {
-        mesh = ExtractMesh(map.map->grid, backend, options, cancelled);
+        static const MapKeyframes kNone;
+        mesh = ExtractMapMesh(*map.map, map.keyframes ? *map.keyframes : kNone,
+                              MeshSurface::kAuto, backend, options, cancelled);
         return mesh.status();
       },
       timeout);

@@ -19,6 +19,7 @@
 #include "core/geometry/intrinsics.h"
 #include "core/geometry/se3.h"
 #include "core/grid/map_status.h"
+#include "core/formats/map_keyframe.h"
 #include "core/grid/plenoxel_map.h"
 #include "core/kernels/backend.h"
 
@@ -28,6 +29,8 @@ namespace plx::web {
 struct ViewerMap {
   std::shared_ptr<const PlenoxelMap> map;
   uint64_t version = 0;
+  // The version's keyframes (their poses make the observed surface's mesh); null: none.
+  std::shared_ptr<const MapKeyframes> keyframes;
 };
 
 // One camera (a Slam stream) on a map: where it is now and the way it came, thinned to a bounded

@@ -153,15 +153,17 @@ void AddBackendFlags(FlagSet& flags) {
 }
 
 std::unique_ptr<PlenoxelMap> LoadMapOrReport(const std::string& command, const FlagSet& flags,
-                                             Backend& backend, int* exit_code) {
-  absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(flags.GetString("map"));
-  absl::Status status = map.status();
-  if (status.ok()) status = RefreshOccupancyIfStale(backend, **map);
+                                             Backend& backend, int* exit_code,
+                                             MapFileState* state) {
+  absl::StatusOr<LoadedMapFile> file = LoadMapFile(flags.GetString("map"));
+  absl::Status status = file.status();
+  if (status.ok()) status = RefreshOccupancyIfStale(backend, *file->map);
   if (!status.ok()) {
     *exit_code = ReportError(command, status);
     return nullptr;
   }
-  return *std::move(map);
+  if (state != nullptr) *state = std::move(file->state);
+  return std::move(file->map);
 }
 
 std::unique_ptr<Backend> BackendFromFlagsOrReport(const std::string& command,

@@ -13,6 +13,7 @@
 #include "app/flags.h"
 #include "core/kernels/backend.h"
 #include "core/datasets/dataset.h"
+#include "core/formats/map_file.h"
 #include "core/mapping/mapper.h"
 #include "core/slam/slam_session.h"
 #include "core/tracking/tracker.h"
@@ -116,9 +117,11 @@ void AddBackendFlags(FlagSet& flags);
 // backend cannot be made (--backend cuda in a build without CUDA or on a machine without the
 // device). Call it before any long work so such errors come at once.
 // The map file of --map, with exact occupancy for `backend` (readers need it; see
-// core/kernels/refresh_occupancy.h); null after reporting the error (exit code 1).
+// core/kernels/refresh_occupancy.h); null after reporting the error (exit code 1). With
+// `state`, the file's keyframes and version number go there.
 std::unique_ptr<PlenoxelMap> LoadMapOrReport(const std::string& command, const FlagSet& flags,
-                                             Backend& backend, int* exit_code);
+                                             Backend& backend, int* exit_code,
+                                             MapFileState* state = nullptr);
 
 // `default_threads`: the CPU backend's threads when --threads is not given (0: all cores).
 std::unique_ptr<Backend> BackendFromFlagsOrReport(const std::string& command,

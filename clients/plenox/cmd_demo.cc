@@ -82,7 +82,11 @@ int RunDemo(const std::vector<std::string>& args) {
   if (!mapped.ok()) return ReportError("demo", mapped.status());
   line.Finish(MappingSummaryText(mapped->summary) + " [" + BackendText(*backend) + "]");
   const std::string map_path = (out / "map.plx").string();
-  if (absl::Status s = SaveMap(*mapped->map, map_path); !s.ok()) return ReportError("demo", s);
+  MapFileState state;
+  state.keyframes = mapped->keyframes;  // their poses make the observed surface's mesh
+  if (absl::Status s = SaveMap(*mapped->map, state, map_path); !s.ok()) {
+    return ReportError("demo", s);
+  }
 
   const std::vector<int> held_out = HeldOutFrames(dataset->size(), *every);
   MapEvalOptions eval_options;

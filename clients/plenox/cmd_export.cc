@@ -21,7 +21,8 @@ int RunExport(const std::vector<std::string>& args) {
   FlagSet flags("plenox export",
                 "Writes a map as a coloured point cloud (binary little-endian PLY, one point per\n"
                 "voxel vertex on the surface of the density field) or, with --mesh, a triangle\n"
-                "mesh (marching cubes on the density field) with normals and vertex colours: as\n"
+                "mesh with normals and vertex colours (marching cubes on the surface the map's\n"
+                "keyframes saw, or on the density field: --mesh-surface): as\n"
                 "PLY (MeshLab, Open3D, Blender) or, with --format glb or an --out ending in\n"
                 ".glb, as binary glTF 2.0 (headsets, three.js, Blender, game engines).\n"
                 "--lod-triangles N simplifies the mesh to at most N triangles (a level of\n"
@@ -39,10 +40,12 @@ int RunExport(const std::vector<std::string>& args) {
   if (absl::Status s = CheckOutputDirectory(out); !s.ok()) return ReportError(kCommand, s);
   std::unique_ptr<Backend> backend = BackendFromFlagsOrReport(kCommand, flags, &exit_code);
   if (!backend) return exit_code;
-  std::unique_ptr<PlenoxelMap> map = LoadMapOrReport(kCommand, flags, *backend, &exit_code);
+  MapFileState state;
+  std::unique_ptr<PlenoxelMap> map =
+      LoadMapOrReport(kCommand, flags, *backend, &exit_code, &state);
   if (!map) return exit_code;
 
-  absl::StatusOr<MapExport> file = ExportMap(*spec, *map, *backend);
+  absl::StatusOr<MapExport> file = ExportMap(*spec, *map, state.keyframes, *backend);
   if (!file.ok()) return ReportError(kCommand, file.status());
   if (absl::Status s = WriteFileAtomically(out, file->bytes, "export"); !s.ok()) {
     return ReportError(kCommand, s);

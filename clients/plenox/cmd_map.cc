@@ -48,7 +48,9 @@ int RunMap(const std::vector<std::string>& args) {
   if (!result.ok()) return ReportError("map", result.status());
   line.Finish(MappingSummaryText(result->summary) + " [" + BackendText(*backend) + "]");
 
-  if (absl::Status s = SaveMap(*result->map, out); !s.ok()) return ReportError("map", s);
+  MapFileState state;
+  state.keyframes = std::move(result->keyframes);  // for the observed surface's mesh
+  if (absl::Status s = SaveMap(*result->map, state, out); !s.ok()) return ReportError("map", s);
 
   const MappingSummary& sum = result->summary;
   const double seconds = result->load_s + sum.allocation_s + sum.optimization_s;

@@ -30,10 +30,11 @@ namespace {
 class FileViewerSource final : public web::ViewerSource {
  public:
   FileViewerSource(std::string name, std::string file, std::shared_ptr<const PlenoxelMap> map,
-                   std::unique_ptr<Backend> backend)
+                   std::shared_ptr<const MapKeyframes> keyframes, std::unique_ptr<Backend> backend)
       : name_(std::move(name)),
         file_(std::move(file)),
         map_(std::move(map)),
+        keyframes_(std::move(keyframes)),
         backend_(std::move(backend)) {}
 
   std::string Title() const override { return "plenox view " + file_; }
@@ -46,7 +47,7 @@ class FileViewerSource final : public web::ViewerSource {
 
   absl::StatusOr<web::ViewerMap> Latest(const std::string& name) const override {
     if (name != name_) return absl::NotFoundError(absl::StrCat("no map \"", name, "\""));
-    return web::ViewerMap{map_, 1};
+    return web::ViewerMap{map_, 1, keyframes_};
   }
 
   absl::StatusOr<web::ViewerTrajectories> Trajectories(const std::string& name) const override {
@@ -72,6 +73,7 @@ class FileViewerSource final : public web::ViewerSource {
   const std::string name_;
   const std::string file_;
   const std::shared_ptr<const PlenoxelMap> map_;
+  const std::shared_ptr<const MapKeyframes> keyframes_;
   std::timed_mutex backend_mutex_;
   const std::unique_ptr<Backend> backend_;
 };
@@ -111,7 +113,9 @@ int RunView(const std::vector<std::string>& raw_args) {
   if (!three.ok()) return ReportError("view", three.status());
   std::unique_ptr<Backend> backend = BackendFromFlagsOrReport("view", flags, &exit_code);
   if (!backend) return exit_code;
-  std::unique_ptr<PlenoxelMap> map = LoadMapOrReport("view", flags, *backend, &exit_code);
+  MapFileState state;
+  std::unique_ptr<PlenoxelMap> map =
+      LoadMapOrReport("view", flags, *backend, &exit_code, &state);
   if (!map) return exit_code;
 
   // SIGINT and SIGTERM are taken by sigwait below; blocked before the server's threads start
@@ -125,7 +129,9 @@ int RunView(const std::vector<std::string>& raw_args) {
   const std::string file = flags.GetString("map");
   const std::string name = std::filesystem::path(file).stem().string();
   FileViewerSource source(name.empty() ? "map" : name, file,
-                          std::shared_ptr<const PlenoxelMap>(std::move(map)), std::move(backend));
+                          std::shared_ptr<const PlenoxelMap>(std::move(map)),
+                          std::make_shared<const MapKeyframes>(std::move(state.keyframes)),
+                          std::move(backend));
   web::Viewer viewer(&source, std::move(*three), web::ViewerOptions{});
   web::HttpServerOptions http;
   http.host = flags.GetString("host");

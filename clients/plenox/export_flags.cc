@@ -93,6 +93,11 @@ void AddExportFlags(FlagSet& flags) {
            absl::StrCat("mesh: fail rather than build a full mesh of more triangles (0 = ",
                         kDefaultMaxMeshTriangles, ", also the most allowed)"),
            "0")
+      .Add("mesh-surface", "auto|observed|density",
+           "mesh: the surface the map's keyframes saw (rendered from their poses, fused; "
+           "no back faces, nothing unseen), or the density's iso-surface; auto: observed when "
+           "the map has keyframes",
+           "auto")
       .AddSwitch("keep-unobserved",
                  "mesh: keep surfaces no view saw (e.g. the backs of walls)")
       .Add("mesh-color", "dc|normal",
@@ -119,6 +124,10 @@ absl::StatusOr<ExportSpec> ExportSpecFromFlags(const FlagSet& flags) {
   }
   absl::StatusOr<MeshFileFormat> format = MeshFormatFromFlags(flags, spec.mesh);
   if (!format.ok()) return format.status();
+  absl::StatusOr<MeshSurface> surface = MeshSurfaceFromName(flags.GetString("mesh-surface"));
+  if (!surface.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("--mesh-surface: ", surface.status().message()));
+  }
   if (!spec.mesh) {
     const char* mesh_flag = *iso != 0                    ? "--iso-level"
                             : *components != 0           ? "--min-component"
@@ -127,6 +136,7 @@ absl::StatusOr<ExportSpec> ExportSpecFromFlags(const FlagSet& flags) {
                             : flags.IsSet("bbox")        ? "--bbox"
                             : flags.GetSwitch("keep-unobserved") ? "--keep-unobserved"
                             : color != "dc"              ? "--mesh-color"
+                            : *surface != MeshSurface::kAuto ? "--mesh-surface"
                                                          : nullptr;
     if (mesh_flag != nullptr) {
       return absl::InvalidArgumentError(absl::StrCat(mesh_flag, " applies to --mesh only"));
@@ -149,6 +159,7 @@ absl::StatusOr<ExportSpec> ExportSpecFromFlags(const FlagSet& flags) {
     o.region = *box;
   }
   spec.mesh_format = *format;
+  spec.mesh_surface = *surface;
   spec.lod_triangles = *lod_triangles;
   return spec;
 }

@@ -6,6 +6,7 @@
 #include "core/formats/glb_mesh.h"
 #include "core/formats/ply_mesh.h"
 #include "core/mesh/mesh_simplify.h"
+#include "core/mesh/observed_surface.h"
 
 namespace plx {
 namespace {
@@ -39,11 +40,45 @@ absl::StatusOr<MapExport> EncodeMesh(const ExportSpec& spec, const TriangleMesh&
 
 }  // namespace
 
+const char* MeshSurfaceName(MeshSurface surface) {
+  switch (surface) {
+    case MeshSurface::kAuto:
+      return "auto";
+    case MeshSurface::kObserved:
+      return "observed";
+    case MeshSurface::kDensity:
+      return "density";
+  }
+  return "unknown";
+}
+
+absl::StatusOr<MeshSurface> MeshSurfaceFromName(absl::string_view name) {
+  for (MeshSurface s : {MeshSurface::kAuto, MeshSurface::kObserved, MeshSurface::kDensity}) {
+    if (name == MeshSurfaceName(s)) return s;
+  }
+  return absl::InvalidArgumentError(absl::StrCat(
+      "expected auto, observed or density, got \"", name.substr(0, 100), "\""));
+}
+
+absl::StatusOr<TriangleMesh> ExtractMapMesh(const PlenoxelMap& map, const MapKeyframes& keyframes,
+                                            MeshSurface surface, Backend& backend,
+                                            const MeshOptions& options,
+                                            const std::function<bool()>& cancelled) {
+  const bool observed = surface == MeshSurface::kObserved ||
+                        (surface == MeshSurface::kAuto && !keyframes.empty());
+  if (observed) return ExtractObservedMesh(map, keyframes, backend, options, {}, cancelled);
+  return ExtractMesh(map.grid, backend, options, cancelled);
+}
+
 absl::Status ValidateExportSpec(const ExportSpec& spec) {
   if (spec.lod_triangles < 0 || spec.lod_triangles > kMaxLodTriangles) {
     return absl::InvalidArgumentError(absl::StrCat("lod_triangles: must be in [0, ",
                                                    kMaxLodTriangles, "] (0 = the full mesh), got ",
                                                    spec.lod_triangles));
+  }
+  if (spec.mesh_surface != MeshSurface::kAuto && spec.mesh_surface != MeshSurface::kObserved &&
+      spec.mesh_surface != MeshSurface::kDensity) {
+    return absl::InvalidArgumentError("mesh_surface: unknown");
   }
   if (spec.mesh_format != MeshFileFormat::kPly && spec.mesh_format != MeshFileFormat::kGlb) {
     return absl::InvalidArgumentError("mesh_format: unknown");
@@ -58,13 +93,17 @@ absl::Status ValidateExportSpec(const ExportSpec& spec) {
     if (spec.mesh_options.region) {
       return absl::InvalidArgumentError("region: applies to meshes only");
     }
+    if (spec.mesh_surface != MeshSurface::kAuto) {
+      return absl::InvalidArgumentError("mesh_surface: applies to meshes only");
+    }
     return absl::OkStatus();
   }
   return ValidateMeshOptions(spec.mesh_options);
 }
 
 absl::StatusOr<MapExport> ExportMap(const ExportSpec& spec, const PlenoxelMap& map,
-                                    Backend& backend, const std::function<bool()>& cancelled) {
+                                    const MapKeyframes& keyframes, Backend& backend,
+                                    const std::function<bool()>& cancelled) {
   if (absl::Status s = ValidateExportSpec(spec); !s.ok()) return s;
   if (!spec.mesh) {
     absl::StatusOr<PlyExport> points = ExportSurfacePointsPly(map, spec.min_density, cancelled);
@@ -74,7 +113,8 @@ absl::StatusOr<MapExport> ExportMap(const ExportSpec& spec, const PlenoxelMap& m
     out.vertices = points->points;
     return out;
   }
-  absl::StatusOr<TriangleMesh> mesh = ExtractMesh(map.grid, backend, spec.mesh_options, cancelled);
+  absl::StatusOr<TriangleMesh> mesh =
+      ExtractMapMesh(map, keyframes, spec.mesh_surface, backend, spec.mesh_options, cancelled);
   if (!mesh.ok()) return mesh.status();
   const int64_t full_faces = mesh->num_triangles();
   if (spec.lod_triangles == 0 || full_faces <= spec.lod_triangles) {

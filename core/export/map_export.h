@@ -12,12 +12,38 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "core/formats/map_keyframe.h"
 #include "core/formats/ply_export.h"
 #include "core/grid/plenoxel_map.h"
 #include "core/kernels/backend.h"
 #include "core/mesh/iso_surface.h"
 
 namespace plx {
+
+// Which surface a mesh is of.
+enum class MeshSurface {
+  // The observed surface when the map has keyframes, else the density iso-surface.
+  kAuto,
+  // What the keyframes saw, once (core/mesh/observed_surface.h); needs the map's keyframes.
+  kObserved,
+  // The density's iso-surface at MeshOptions::iso_level (core/mesh/iso_surface.h): back faces
+  // behind walls where the unobserved filter misses them, and every floater.
+  kDensity,
+};
+
+// "auto", "observed", "density": the names flags, URLs and messages use.
+const char* MeshSurfaceName(MeshSurface surface);
+// InvalidArgument "expected auto, observed or density, got \"...\"".
+absl::StatusOr<MeshSurface> MeshSurfaceFromName(absl::string_view name);
+
+// The mesh of `map` on the surface `surface` names (kAuto resolved by `keyframes`): the one
+// choice that the export and the viewer share. FailedPrecondition for kObserved without
+// keyframes; otherwise ExtractObservedMesh's or ExtractMesh's errors.
+absl::StatusOr<TriangleMesh> ExtractMapMesh(const PlenoxelMap& map, const MapKeyframes& keyframes,
+                                            MeshSurface surface, Backend& backend,
+                                            const MeshOptions& options,
+                                            const std::function<bool()>& cancelled = nullptr);
 
 // How a mesh is written.
 enum class MeshFileFormat {
@@ -37,6 +63,7 @@ struct ExportSpec {
   // Mesh only; its `region` cuts the mesh to a box of the map (the file then records the box:
   // the GLB's extras, a PLY header comment).
   MeshOptions mesh_options;
+  MeshSurface mesh_surface = MeshSurface::kAuto;  // mesh only
   MeshFileFormat mesh_format = MeshFileFormat::kPly;  // mesh only
   // Mesh only: simplify to at most this many triangles (SimplifyMesh); 0 = the full mesh.
   int64_t lod_triangles = 0;
@@ -62,8 +89,11 @@ struct MapExport {
 // stops it with CANCELLED. RESOURCE_EXHAUSTED out of memory or over the mesh's triangle limit
 // (checked on the full mesh, before simplification); INVALID_ARGUMENT for a spec that
 // ValidateExportSpec refuses.
+// `keyframes` are the map's (the map file's, or the daemon's for the version): the observed
+// surface is made from them; empty, a mesh is the density surface unless the spec names the
+// observed one (FailedPrecondition).
 absl::StatusOr<MapExport> ExportMap(const ExportSpec& spec, const PlenoxelMap& map,
-                                    Backend& backend,
+                                    const MapKeyframes& keyframes, Backend& backend,
                                     const std::function<bool()>& cancelled = nullptr);
 
 }  // namespace plx

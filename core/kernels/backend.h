@@ -73,6 +73,16 @@ class Backend {
                              .num_frames = num_frames,
                              .params = params});
   }
+  absl::Status ObserveSurface(const GridView& grid, const IsoBrickList& bricks,
+                              const TrainingFrameView* frames, int num_frames,
+                              const FusionParams& params, float* value) {
+    return Run(ObserveSurfaceArgs{.grid = grid,
+                                  .bricks = bricks,
+                                  .frames = frames,
+                                  .num_frames = num_frames,
+                                  .params = params,
+                                  .value = value});
+  }
   absl::Status RefreshOccupancy(const GridView& grid, const GridWriteView& write,
                                 const int64_t* active_blocks, int64_t count, float threshold) {
     return Run(RefreshOccupancyArgs{.grid = grid,

@@ -30,18 +30,22 @@ struct FusionParams {
   float max_depth = 10.0f;
 };
 
-struct VertexFusion {
-  float density;
+// The projective truncated signed distance of a point, averaged over the frames that see it:
+// what both fusion (a density step) and the observed surface of a mesh (its zero crossing,
+// core/mesh/observed_surface.h) are made of.
+struct ProjectiveTsdf {
+  float tsdf;    // metres, positive in front of the surface; valid when weight > 0
+  float weight;  // summed observation weights; 0: no frame measured depth in front of or at it
   float color[3];
-  bool observed;        // some keyframe measured depth in front of or at the vertex
-  bool color_observed;  // some keyframe saw the vertex near its surface
+  float color_count;  // observations within the colour band; colour valid when > 0
 };
 
-PLX_HD VertexFusion FuseVertex(const Vec3f& p, const TrainingFrameView* frames, int num_frames,
-                               const FusionParams& params) {
+// Without colour (kWithColor false) the frames' colour images are not read and may be null.
+template <bool kWithColor = true>
+PLX_HD ProjectiveTsdf AverageProjectiveTsdf(const Vec3f& p, const TrainingFrameView* frames,
+                                            int num_frames, const FusionParams& params) {
   float sdf_sum = 0.0f, sdf_count = 0.0f, tsdf_scale_sum = 0.0f;
-  float color_sum[3] = {0.0f, 0.0f, 0.0f};
-  float color_count = 0.0f;
+  ProjectiveTsdf out{0.0f, 0.0f, {0.0f, 0.0f, 0.0f}, 0.0f};
   for (int f = 0; f < num_frames; ++f) {
     const CameraView& cam = frames[f].camera;
     const RigidTransformf& T = cam.world_T_camera;
@@ -67,23 +71,40 @@ PLX_HD VertexFusion FuseVertex(const Vec3f& p, const TrainingFrameView* frames, 
     sdf_sum += weight * (sdf < truncation ? sdf : truncation) / truncation;
     sdf_count += weight;
     tsdf_scale_sum += weight * truncation;
-    if (fabsf(sdf) < params.color_band + sigma) {
+    if (kWithColor && fabsf(sdf) < params.color_band + sigma) {
       const float* c = frames[f].color + 3 * pixel;
-      color_sum[0] += c[0];
-      color_sum[1] += c[1];
-      color_sum[2] += c[2];
-      color_count += 1.0f;
+      out.color[0] += c[0];
+      out.color[1] += c[1];
+      out.color[2] += c[2];
+      out.color_count += 1.0f;
     }
   }
-  VertexFusion out{0.0f, {0.5f, 0.5f, 0.5f}, sdf_count > 0.0f, color_count > 0.0f};
+  out.weight = sdf_count;
+  if (sdf_count > 0.0f) out.tsdf = sdf_sum / sdf_count * (tsdf_scale_sum / sdf_count);
+  if (out.color_count > 0.0f) {
+    for (int c = 0; c < 3; ++c) out.color[c] /= out.color_count;
+  }
+  return out;
+}
+
+struct VertexFusion {
+  float density;
+  float color[3];
+  bool observed;        // some keyframe measured depth in front of or at the vertex
+  bool color_observed;  // some keyframe saw the vertex near its surface
+};
+
+PLX_HD VertexFusion FuseVertex(const Vec3f& p, const TrainingFrameView* frames, int num_frames,
+                               const FusionParams& params) {
+  const ProjectiveTsdf t = AverageProjectiveTsdf(p, frames, num_frames, params);
+  VertexFusion out{0.0f, {0.5f, 0.5f, 0.5f}, t.weight > 0.0f, t.color_count > 0.0f};
   if (out.observed) {
-    const float tsdf = sdf_sum / sdf_count * (tsdf_scale_sum / sdf_count);  // metres
-    float occupancy = 0.5f - tsdf / params.ramp;
+    float occupancy = 0.5f - t.tsdf / params.ramp;
     occupancy = occupancy < 0.0f ? 0.0f : (occupancy > 1.0f ? 1.0f : occupancy);
     out.density = params.sigma_max * occupancy;
   }
   if (out.color_observed) {
-    for (int c = 0; c < 3; ++c) out.color[c] = color_sum[c] / color_count;
+    for (int c = 0; c < 3; ++c) out.color[c] = t.color[c];
   }
   return out;
 }

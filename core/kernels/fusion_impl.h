@@ -4,6 +4,7 @@
 
 #include "core/kernels/depth_fusion.h"
 #include "core/kernels/kernel_types.h"
+#include "core/kernels/marching_cubes.h"
 
 namespace plx::PLX_BACKEND_NS {
 
@@ -23,6 +24,24 @@ void Run(const ExecContext& ctx, const FuseDepthArgs& args) {
     float* sh = w.Sh(vertex);
     for (int j = 0; j < kShCoeffCount; ++j) sh[j] = 0.0f;
     for (int c = 0; c < 3; ++c) sh[c * kShBasisCount] = ShDcForColor(f.color[c]);
+  });
+}
+
+void Run(const ExecContext& ctx, const ObserveSurfaceArgs& args) {
+  const GridView g = args.grid;
+  const IsoBrickList bricks = args.bricks;
+  const FusionParams p = args.params;
+  const TrainingFrameView* const frames = args.frames;
+  const int num_frames = args.num_frames;
+  float* const value = args.value;
+  ParallelFor(ctx, bricks.count * kBrickVertices, [=] PLX_HD_LAMBDA(int64_t i) {
+    const int64_t vertex = IsoWorkVertex(g, bricks, i);
+    if (vertex < 0) return;
+    int v[3];
+    g.VertexCoords(vertex, v);
+    const ProjectiveTsdf t =
+        AverageProjectiveTsdf<false>(g.VertexPosition(v[0], v[1], v[2]), frames, num_frames, p);
+    value[vertex] = t.weight > 0.0f ? -t.tsdf : kIsoNoValue;
   });
 }
 

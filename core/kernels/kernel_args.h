@@ -136,6 +136,37 @@ struct FuseDepthArgs {
   absl::Status Validate() const;  // the vertices lie in the grid
 };
 
+// The observed surface's field (core/mesh/observed_surface.h) at the vertices of the bricks
+// listed (work item i: local vertex i % 512 of the brick in slot bricks.slots[i / 512]):
+// value[slot * 512 + local] = -tsdf (metres, positive inside) averaged over `frames` (depth
+// images rendered from the map; their colour pointers may be null), or kIsoNoValue where no
+// frame observed the vertex. `value` holds every vertex of the grid; those of unlisted bricks
+// are left as they are.
+struct ObserveSurfaceArgs {
+  static constexpr char kName[] = "ObserveSurface";
+  GridView grid{};
+  IsoBrickList bricks;
+  const TrainingFrameView* frames = nullptr;
+  int num_frames = 0;
+  FusionParams params;
+  float* value = nullptr;
+
+  template <typename Visit>
+  void ForEachArgument(Visit&& visit) const {
+    visit(Count("num_frames", num_frames));
+    VisitGrid(visit, "grid", grid);
+    visit(Read("slots", bricks.slots, bricks.count).Of("bricks"));
+    visit(Read("frames", frames, num_frames));
+    // Only the depth images are read (no colour: the mesh's colours are the map's SH).
+    for (int f = 0; frames != nullptr && f < num_frames; ++f) {
+      const int64_t pixels = int64_t{frames[f].camera.width} * frames[f].camera.height;
+      visit(Read("depth", frames[f].depth, pixels).Of("frames[]"));
+    }
+    visit(Write("value", value, grid.num_vertices()));
+  }
+  bool Empty() const { return bricks.count == 0; }
+};
+
 // Recomputes the cell occupancy bits of the `count` active blocks listed (index positions) from
 // the current densities.
 struct RefreshOccupancyArgs {
@@ -321,6 +352,6 @@ using KernelArgs =
     std::variant<RenderPixelsArgs, MappingForwardBackwardArgs, RmsPropStepArgs, FuseDepthArgs,
                  RefreshOccupancyArgs, ComputeTrackingTermsArgs, ReduceTrackingTermsArgs,
                  ResampleGridArgs, AddTvGradientArgs, CountIsoTrianglesArgs, EmitIsoTrianglesArgs,
-                 ComputeIsoVerticesArgs>;
+                 ComputeIsoVerticesArgs, ObserveSurfaceArgs>;
 
 }  // namespace plx

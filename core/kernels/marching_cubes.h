@@ -22,6 +22,14 @@
 
 namespace plx {
 
+// Marching cubes reads a field in the grid's layout through a GridView's density tables: the
+// density itself, or the observed surface's signed field (core/mesh/observed_surface.h). A
+// vertex holding this value has none (no view observed it): cells with such a corner have no
+// surface, like cells with an unstored corner. Far below any finite density or distance a map
+// holds, and tested with a comparison, not isnan, so fast-math builds keep the test.
+inline constexpr float kIsoNoValue = -3.0e38f;
+PLX_HD bool IsoHasValue(float v) { return v > kIsoNoValue; }
+
 enum class MeshColorMode : int {
   kDc = 0,           // the view-independent SH term (as the point export)
   kViewAlongNormal,  // the colour a camera looking at the vertex against its normal would see
@@ -76,7 +84,9 @@ PLX_HD int IsoCellCase(const GridView& g, int64_t vertex, const IsoSurfaceParams
     const int64_t slot = g.VertexSlot(cell[0] + (k & 1), cell[1] + ((k >> 1) & 1),
                                       cell[2] + ((k >> 2) & 1));
     if (slot < 0) return -1;
-    if (g.Density(slot) > p.iso_level) mask |= 1 << k;
+    const float value = g.Density(slot);
+    if (!IsoHasValue(value)) return -1;
+    if (value > p.iso_level) mask |= 1 << k;
   }
   return mask;
 }
@@ -103,15 +113,20 @@ PLX_HD int64_t IsoCellEdgeKey(const GridView& g, const int cell[3], int e) {
   return IsoEdgeKey(g, low, CubeEdgeAxis(e));
 }
 
-// Central-difference density gradient at vertex v (per voxel; only its direction is used).
+// Central-difference density gradient at vertex v (per voxel; only its direction is used). A
+// neighbour without a value (kIsoNoValue) makes it one-sided: the vertex's own value stands in.
 PLX_HD Vec3f IsoVertexGradient(const GridView& g, const int v[3]) {
+  const float centre = IsoVertexDensity(g, v[0], v[1], v[2]);
   float d[3];
   for (int a = 0; a < 3; ++a) {
     int lo[3] = {v[0], v[1], v[2]}, hi[3] = {v[0], v[1], v[2]};
     lo[a] -= 1;
     hi[a] += 1;
-    d[a] = 0.5f * (IsoVertexDensity(g, hi[0], hi[1], hi[2]) -
-                   IsoVertexDensity(g, lo[0], lo[1], lo[2]));
+    float up = IsoVertexDensity(g, hi[0], hi[1], hi[2]);
+    float down = IsoVertexDensity(g, lo[0], lo[1], lo[2]);
+    if (!IsoHasValue(up)) up = centre;
+    if (!IsoHasValue(down)) down = centre;
+    d[a] = 0.5f * (up - down);
   }
   return {d[0], d[1], d[2]};
 }

@@ -4,6 +4,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
+#include "core/mapping/map_keyframes_of.h"
 
 namespace plx {
 
@@ -46,6 +47,7 @@ absl::StatusOr<MapDatasetResult> MapDataset(
     return true;
   }));
   if (cancelled) return absl::CancelledError("mapping cancelled");
+  result.keyframes = MapKeyframesOf(mapper.training_set());
   result.map = mapper.ReleaseMap();
   result.map->source = absl::StrCat(dataset.name(), ": ", keyframes.size(), " keyframes");
   return result;

@@ -8,6 +8,7 @@
 
 #include "absl/status/statusor.h"
 #include "core/datasets/dataset.h"
+#include "core/formats/map_keyframe.h"
 #include "core/grid/plenoxel_map.h"
 #include "core/kernels/backend.h"
 #include "core/mapping/mapper.h"
@@ -23,6 +24,7 @@ struct MapDatasetProgress {
 
 struct MapDatasetResult {
   std::unique_ptr<PlenoxelMap> map;
+  MapKeyframes keyframes;  // the keyframes as the map file keeps them (poses, intrinsics)
   MappingSummary summary;
   double load_s = 0.0;
 };

@@ -69,10 +69,11 @@ void RegionCellsOnAxis(double lo, double hi, double voxel, int64_t* first, int64
 // kernels mesh only the cells whose centres it holds (MeshOptions::region).
 class Extraction {
  public:
-  Extraction(const SparseGrid& grid, Backend& backend, const MeshOptions& options)
-      : view_(grid.view()), backend_(backend), options_(options), table_(1) {
+  Extraction(const SparseGrid& grid, const GridView& field, float level, Backend& backend,
+             const MeshOptions& options)
+      : view_(field), backend_(backend), options_(options), table_(1) {
     BuildMarchingCubesTable(table_.data());
-    params_.iso_level = options.iso_level;
+    params_.iso_level = level;
     params_.color_mode = options.color_mode;
     params_.table = table_.data();
     if (options.region) ListRegion(grid, *options.region);
@@ -171,16 +172,8 @@ class Extraction {
       params_.cell_max[a] = static_cast<int32_t>(
           std::clamp<int64_t>(last[a] - corner, INT32_MIN, INT32_MAX));
     }
-    const std::vector<BrickCoord>& coords = grid.brick_coords();
-    for (size_t slot = 0; slot < coords.size(); ++slot) {
-      const int64_t c[3] = {coords[slot].x, coords[slot].y, coords[slot].z};
-      bool inside = true;
-      for (int a = 0; a < 3 && inside; ++a) {
-        // The brick's cells are c * 8 .. c * 8 + 7 of the world lattice.
-        inside = c[a] * kBrickEdge + kBrickEdge - 1 >= first[a] && c[a] * kBrickEdge <= last[a];
-      }
-      if (inside) slots_.push_back(static_cast<int32_t>(slot));
-    }
+    const std::vector<int32_t> slots = BricksWithCellsIn(grid, box);
+    slots_.assign(slots.begin(), slots.end());
   }
 
   const GridView view_;
@@ -199,6 +192,25 @@ class Extraction {
 };
 
 }  // namespace
+
+std::vector<int32_t> BricksWithCellsIn(const SparseGrid& grid, const AxisBox& box) {
+  int64_t first[3], last[3];
+  for (int a = 0; a < 3; ++a) {
+    RegionCellsOnAxis(box.min[a], box.max[a], grid.voxel_size(), &first[a], &last[a]);
+  }
+  std::vector<int32_t> slots;
+  const std::vector<BrickCoord>& coords = grid.brick_coords();
+  for (size_t slot = 0; slot < coords.size(); ++slot) {
+    const int64_t c[3] = {coords[slot].x, coords[slot].y, coords[slot].z};
+    bool inside = true;
+    for (int a = 0; a < 3 && inside; ++a) {
+      // The brick's cells are c * 8 .. c * 8 + 7 of the world lattice.
+      inside = c[a] * kBrickEdge + kBrickEdge - 1 >= first[a] && c[a] * kBrickEdge <= last[a];
+    }
+    if (inside) slots.push_back(static_cast<int32_t>(slot));
+  }
+  return slots;
+}
 
 absl::Status ValidateMeshOptions(const MeshOptions& options) {
   if (!(std::isfinite(options.iso_level) && options.iso_level > 0.0f)) {
@@ -225,9 +237,19 @@ absl::Status ValidateMeshOptions(const MeshOptions& options) {
 absl::StatusOr<TriangleMesh> ExtractMesh(const SparseGrid& grid, Backend& backend,
                                          const MeshOptions& options,
                                          const std::function<bool()>& cancelled) {
+  return ExtractFieldMesh(grid, grid.view(), options.iso_level, backend, options, cancelled);
+}
+
+absl::StatusOr<TriangleMesh> ExtractFieldMesh(const SparseGrid& grid, const GridView& field,
+                                              float level, Backend& backend,
+                                              const MeshOptions& options,
+                                              const std::function<bool()>& cancelled) {
   PLX_RETURN_IF_ERROR(ValidateMeshOptions(options));
+  if (!std::isfinite(level)) {
+    return absl::InvalidArgumentError(absl::StrCat("level: must be finite, got ", level));
+  }
   return CatchAllocationFailure("extracting the mesh", [&]() -> absl::StatusOr<TriangleMesh> {
-    Extraction extraction(grid, backend, options);
+    Extraction extraction(grid, field, level, backend, options);
     const int64_t bricks = extraction.bricks_to_visit();
     for (int64_t first = 0; first < bricks; first += kBricksPerSlice) {
       if (cancelled && cancelled()) return absl::CancelledError("mesh export cancelled");

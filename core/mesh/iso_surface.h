@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <functional>
 #include <optional>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -53,6 +54,10 @@ struct MeshOptions {
   std::optional<AxisBox> region;
 };
 
+// The slots of the bricks of `grid` holding a cell whose centre lies in `box` (the bricks a
+// region's mesh visits, MeshOptions::region), in slot order.
+std::vector<int32_t> BricksWithCellsIn(const SparseGrid& grid, const AxisBox& box);
+
 // InvalidArgument naming the field (iso_level, min_component_triangles, max_triangles,
 // region: CheckAxisBox).
 absl::Status ValidateMeshOptions(const MeshOptions& options);
@@ -64,5 +69,15 @@ absl::Status ValidateMeshOptions(const MeshOptions& options);
 absl::StatusOr<TriangleMesh> ExtractMesh(const SparseGrid& grid, Backend& backend,
                                          const MeshOptions& options,
                                          const std::function<bool()>& cancelled = nullptr);
+
+// The mesh of another field in `grid`'s layout at `level` (a cell corner is inside when its
+// value is above it): `field` is grid's view with the field's per-brick tables as its density
+// (SparseGrid::ViewOf), so colours still come from the grid's SH. Vertices holding
+// kIsoNoValue have no value; cells touching one have no surface. ExtractMesh is this with the
+// density at options.iso_level; here options.iso_level is not used (but still validated).
+absl::StatusOr<TriangleMesh> ExtractFieldMesh(const SparseGrid& grid, const GridView& field,
+                                              float level, Backend& backend,
+                                              const MeshOptions& options,
+                                              const std::function<bool()>& cancelled = nullptr);
 
 }  // namespace plx

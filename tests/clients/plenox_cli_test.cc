@@ -119,8 +119,8 @@ TEST(PlenoxUsageTest, EveryCommandHelpListsItsFlags) {
        {"--out", "--frames", "--width", "--height", "--noise", "--noise-seed", "--help"}},
       {"export",
        {"--map", "--out", "--mesh", "--format", "--lod-triangles", "--bbox", "--min-density",
-        "--iso-level", "--min-component", "--max-triangles", "--keep-unobserved", "--mesh-color",
-        "--backend", "--device", "--threads", "--json", "--quiet", "--help"}},
+        "--iso-level", "--min-component", "--max-triangles", "--mesh-surface", "--keep-unobserved",
+        "--mesh-color", "--backend", "--device", "--threads", "--json", "--quiet", "--help"}},
       {"demo",
        {"--out", "--frames", "--width", "--height", "--no-noise", "--noise-seed", "--voxel-size",
         "--iterations", "--seed", "--every", "--backend", "--device", "--threads", "--json",
@@ -426,6 +426,11 @@ TEST_F(PlenoxBadInputTest, ExportFlagsOfTheOtherFormatAreUsageErrors) {
                      kExitUsage, {"--min-density"}, work);
   ExpectFailsCleanly({"export", "--map", *map_, "--out", "x.ply", "--mesh", "--mesh-color", "red"},
                      kExitUsage, {"--mesh-color"}, work);
+  ExpectFailsCleanly({"export", "--map", *map_, "--out", "x.ply", "--mesh-surface", "density"},
+                     kExitUsage, {"--mesh-surface", "--mesh"}, work);
+  ExpectFailsCleanly(
+      {"export", "--map", *map_, "--out", "x.ply", "--mesh", "--mesh-surface", "seen"},
+      kExitUsage, {"--mesh-surface", "observed"}, work);
   ExpectFailsCleanly({"export", "--map", "missing.plx", "--out", "x.ply", "--mesh"}, kExitFailure,
                      {"missing.plx"}, work);
 }

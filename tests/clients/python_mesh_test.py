@@ -148,6 +148,20 @@ def main():
                            f"the halves split the full mesh: {halves[0]} + {halves[1]} = "
                            f"{full.faces} triangles ({100 * share:.0f} % below the middle)")
 
+            # plenox map keeps the keyframes in the file, so the default is the surface they
+            # saw; the density's has the backs of walls besides, so more triangles.
+            density_path = os.path.join(work, "room_density.glb")
+            density = client.export_mesh("room", density_path, format="glb", surface="density")
+            observed = client.export_mesh("room", density_path, format="glb", surface="observed")
+            failures.check(observed.faces == full.faces and density.faces > full.faces,
+                           f"surface: the default is the observed one ({observed.faces} = "
+                           f"{full.faces} triangles), the density's has more ({density.faces})")
+            try:
+                client.export_mesh("room", density_path, surface="seen")
+                failures.check(False, "an unknown surface raises ValueError")
+            except ValueError as e:
+                failures.check("surface" in str(e), "an unknown surface raises ValueError")
+
             empty_path = os.path.join(work, "nowhere.glb")
             empty = client.export_mesh("room", empty_path, format="glb",
                                        bbox=(50, 50, 50, 51, 51, 51))

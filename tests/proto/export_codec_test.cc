@@ -41,6 +41,7 @@ ExportSpec ChosenMeshSpec() {
   spec.mesh_options.color_mode = MeshColorMode::kViewAlongNormal;
   spec.lod_triangles = 5000;
   spec.mesh_options.region = AxisBox{{-1.5, -0.25, 0.0}, {0.125, 2.5, 3.0}};
+  spec.mesh_surface = MeshSurface::kDensity;
   return spec;
 }
 
@@ -55,6 +56,7 @@ void ExpectSameSpec(const ExportSpec& got, const ExportSpec& want) {
   EXPECT_EQ(got.mesh_format, want.mesh_format);
   EXPECT_EQ(got.lod_triangles, want.lod_triangles);
   EXPECT_EQ(got.mesh_options.region, want.mesh_options.region);
+  EXPECT_EQ(got.mesh_surface, want.mesh_surface);
 }
 
 TEST(ExportCodecTest, AnEmptyRequestIsPointsAtCoresDensity) {
@@ -118,9 +120,19 @@ TEST(ExportCodecTest, EveryFieldIsRead) {
   region->set_max_x(0.125);
   region->set_max_y(2.5);
   region->set_max_z(3.0);
+  mesh.set_mesh_surface(pb::MESH_SURFACE_DENSITY);
   const absl::StatusOr<ExportSpec> m = ExportSpecFromProto(mesh);
   ASSERT_TRUE(m.ok()) << m.status();
   ExpectSameSpec(*m, ChosenMeshSpec());
+
+  mesh.set_mesh_surface(static_cast<pb::MeshSurface>(7));
+  const absl::StatusOr<ExportSpec> unknown = ExportSpecFromProto(mesh);
+  EXPECT_EQ(unknown.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(unknown.status().message().find("mesh_surface"), std::string::npos);
+  points.set_mesh_surface(pb::MESH_SURFACE_OBSERVED);
+  const absl::StatusOr<ExportSpec> on_points = ExportSpecFromProto(points);
+  EXPECT_EQ(on_points.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(on_points.status().message().find("mesh_surface"), std::string::npos);
 }
 
 TEST(ExportCodecTest, EveryFieldIsWritten) {

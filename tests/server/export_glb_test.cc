@@ -46,7 +46,7 @@ class ExportGlbTest : public ::testing::Test {
   }
   // The same export in-process, from the map file the daemon loaded.
   static MapExport InProcess(uint64_t lod_triangles) {
-    absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(CachedRoomMapFile());
+    absl::StatusOr<LoadedMapFile> map = LoadMapFile(CachedRoomMapFile());
     EXPECT_TRUE(map.ok()) << map.status();
     if (!map.ok()) return {};
     std::unique_ptr<Backend> backend = MakeCpuBackend(2);
@@ -54,7 +54,8 @@ class ExportGlbTest : public ::testing::Test {
     spec.mesh = true;
     spec.mesh_format = MeshFileFormat::kGlb;
     spec.lod_triangles = static_cast<int64_t>(lod_triangles);
-    absl::StatusOr<MapExport> file = ExportMap(spec, **map, *backend);
+    absl::StatusOr<MapExport> file =
+        ExportMap(spec, *map->map, map->state.keyframes, *backend);
     EXPECT_TRUE(file.ok()) << file.status();
     return file.ok() ? *file : MapExport{};
   }

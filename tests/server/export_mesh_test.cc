@@ -9,6 +9,7 @@
 #include "core/formats/map_file.h"
 #include "core/formats/ply_mesh.h"
 #include "core/mesh/iso_surface.h"
+#include "core/mesh/observed_surface.h"
 #include "tests/ply_mesh_reader.h"
 #include "tests/server/daemon_fixture.h"
 
@@ -46,16 +47,33 @@ TEST_F(ExportMeshTest, TheDaemonsMeshIsTheEnginesMesh) {
   const grpc::Status s = Run(request, &bytes);
   ASSERT_TRUE(s.ok()) << Describe(s);
 
-  absl::StatusOr<std::unique_ptr<PlenoxelMap>> map = LoadMap(CachedRoomMapFile());
-  ASSERT_TRUE(map.ok()) << map.status();
+  // The map the daemon integrated keeps its keyframes, so the default is their observed
+  // surface; DENSITY asks for the density's. Each is the engine's to the byte.
+  absl::StatusOr<LoadedMapFile> file = LoadMapFile(CachedRoomMapFile());
+  ASSERT_TRUE(file.ok()) << file.status();
+  ASSERT_FALSE(file->state.keyframes.empty());
+  const PlenoxelMap& map = *file->map;
   std::unique_ptr<Backend> backend = MakeCpuBackend(2);
   MeshOptions options;
   options.min_component_triangles = 20;
-  absl::StatusOr<TriangleMesh> mesh = ExtractMesh((*map)->grid, *backend, options);
+  absl::StatusOr<TriangleMesh> mesh =
+      ExtractObservedMesh(map, file->state.keyframes, *backend, options);
   ASSERT_TRUE(mesh.ok()) << mesh.status();
-  absl::StatusOr<PlyMesh> ply = EncodePlyMesh(*mesh, (*map)->source);
+  absl::StatusOr<PlyMesh> ply = EncodePlyMesh(*mesh, map.source);
   ASSERT_TRUE(ply.ok()) << ply.status();
   EXPECT_EQ(bytes, ply->bytes);
+
+  pb::ExportRequest density_request = request;
+  density_request.set_mesh_surface(pb::MESH_SURFACE_DENSITY);
+  std::string density_bytes;
+  const grpc::Status d = Run(density_request, &density_bytes);
+  ASSERT_TRUE(d.ok()) << Describe(d);
+  absl::StatusOr<TriangleMesh> density = ExtractMesh(map.grid, *backend, options);
+  ASSERT_TRUE(density.ok()) << density.status();
+  absl::StatusOr<PlyMesh> density_ply = EncodePlyMesh(*density, map.source);
+  ASSERT_TRUE(density_ply.ok()) << density_ply.status();
+  EXPECT_EQ(density_bytes, density_ply->bytes);
+  EXPECT_GT(density->num_triangles(), mesh->num_triangles());  // the backs of walls
 
   absl::StatusOr<plx::testing::PlyMeshFile> read = plx::testing::ReadPlyMesh(bytes);
   ASSERT_TRUE(read.ok()) << read.status();

@@ -808,7 +808,8 @@ class Client:
                     min_component_triangles: int = 0, max_triangles: int = 0,
                     keep_unobserved: bool = False, color: str = "dc", format: str = "ply",
                     lod_triangles: int = 0,
-                    bbox: Optional[Sequence[float]] = None) -> MeshExport:
+                    bbox: Optional[Sequence[float]] = None,
+                    surface: str = "auto") -> MeshExport:
         """Writes the map's triangle mesh (marching cubes on the daemon's device) to `path` as
         binary little-endian PLY (vertex x y z nx ny nz red green blue, face vertex_indices),
         which Open3D, MeshLab and Blender read, or with format="glb" as binary glTF 2.0
@@ -823,7 +824,11 @@ class Client:
         looking along the vertex normal); lod_triangles: a level of detail, the mesh simplified
         to at most this many triangles (0 = the full mesh); bbox: (xmin, ymin, zmin, xmax, ymax,
         zmax) in metres, map coordinates: only that box of the map (the triangles of the voxels
-        whose centres are in it, kept whole; an empty box region gives an empty mesh). Bad
+        whose centres are in it, kept whole; an empty box region gives an empty mesh);
+        surface: "observed" (what the map's keyframes saw, once: no back faces, nothing
+        unseen), "density" (the density's iso-surface at iso_level) or "auto" (observed when
+        the map has keyframes; an observed surface of a map without them is
+        FAILED_PRECONDITION). Bad
         values: PlenoxdError INVALID_ARGUMENT naming the field; a daemon whose file does not
         honour lod_triangles or bbox (older than them): PlenoxdError FAILED_PRECONDITION, and
         nothing is written."""
@@ -833,11 +838,16 @@ class Client:
         formats = {"ply": pb.EXPORT_FORMAT_MESH, "glb": pb.EXPORT_FORMAT_MESH_GLB}
         if format not in formats:
             raise ValueError(f"format: expected 'ply' or 'glb', got {format!r}")
+        surfaces = {"auto": pb.MESH_SURFACE_AUTO, "observed": pb.MESH_SURFACE_OBSERVED,
+                    "density": pb.MESH_SURFACE_DENSITY}
+        if surface not in surfaces:
+            raise ValueError(
+                f"surface: expected 'auto', 'observed' or 'density', got {surface!r}")
         request = pb.ExportRequest(
             map=map_name, format=formats[format], iso_level=iso_level,
             min_component_triangles=min_component_triangles, max_triangles=max_triangles,
             keep_unobserved=keep_unobserved, mesh_color=colors[color],
-            lod_triangles=lod_triangles)
+            lod_triangles=lod_triangles, mesh_surface=surfaces[surface])
         if bbox is not None:
             values = [float(v) for v in bbox]
             if len(values) != 6:

@@ -66,7 +66,7 @@ TEST(MapExportTest, PointsAreTheSurfacePointsAtTheSpecsDensity) {
   std::unique_ptr<Backend> backend = MakeCpuBackend(1);
   ExportSpec spec;
   spec.min_density = 2.0f;
-  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, *backend);
+  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, MapKeyframes(), *backend);
   ASSERT_TRUE(ply.ok()) << ply.status();
   const absl::StatusOr<PlyExport> direct = ExportSurfacePointsPly(map, 2.0f);
   ASSERT_TRUE(direct.ok()) << direct.status();
@@ -75,7 +75,8 @@ TEST(MapExportTest, PointsAreTheSurfacePointsAtTheSpecsDensity) {
   EXPECT_EQ(ply->bytes, direct->bytes);
 
   // The default threshold (5/m) is above every vertex of this map.
-  const absl::StatusOr<MapExport> by_default = ExportMap(ExportSpec(), map, *backend);
+  const absl::StatusOr<MapExport> by_default =
+      ExportMap(ExportSpec(), map, MapKeyframes(), *backend);
   ASSERT_TRUE(by_default.ok()) << by_default.status();
   EXPECT_EQ(by_default->vertices, 0);
 }
@@ -87,7 +88,7 @@ TEST(MapExportTest, AMeshIsTheEnginesMeshWithTheMapsSource) {
   spec.mesh = true;
   spec.mesh_options.iso_level = 5.0f;
   spec.mesh_options.keep_unobserved = true;  // the SH are 0: no view saw anything
-  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, *backend);
+  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, MapKeyframes(), *backend);
   ASSERT_TRUE(ply.ok()) << ply.status();
 
   const absl::StatusOr<TriangleMesh> mesh = ExtractMesh(map.grid, *backend, spec.mesh_options);
@@ -102,7 +103,7 @@ TEST(MapExportTest, AMeshIsTheEnginesMeshWithTheMapsSource) {
 
   // The options are the spec's: without keep_unobserved nothing is left.
   spec.mesh_options.keep_unobserved = false;
-  const absl::StatusOr<MapExport> observed_only = ExportMap(spec, map, *backend);
+  const absl::StatusOr<MapExport> observed_only = ExportMap(spec, map, MapKeyframes(), *backend);
   ASSERT_TRUE(observed_only.ok()) << observed_only.status();
   EXPECT_EQ(observed_only->faces, 0);
 }
@@ -112,10 +113,10 @@ TEST(MapExportTest, GlbIsTheSameMeshAsPly) {
   std::unique_ptr<Backend> backend = MakeCpuBackend(2);
   ExportSpec spec;
   spec.mesh = true;
-  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, *backend);
+  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, MapKeyframes(), *backend);
   ASSERT_TRUE(ply.ok()) << ply.status();
   spec.mesh_format = MeshFileFormat::kGlb;
-  const absl::StatusOr<MapExport> glb = ExportMap(spec, map, *backend);
+  const absl::StatusOr<MapExport> glb = ExportMap(spec, map, MapKeyframes(), *backend);
   ASSERT_TRUE(glb.ok()) << glb.status();
   EXPECT_GT(glb->faces, 5000);
   EXPECT_EQ(glb->faces, ply->faces);
@@ -137,10 +138,10 @@ TEST(MapExportTest, ALevelOfDetailKeepsToTheBudgetInEitherFormat) {
   std::unique_ptr<Backend> backend = MakeCpuBackend(2);
   ExportSpec spec;
   spec.mesh = true;
-  const absl::StatusOr<MapExport> full = ExportMap(spec, map, *backend);
+  const absl::StatusOr<MapExport> full = ExportMap(spec, map, MapKeyframes(), *backend);
   ASSERT_TRUE(full.ok()) << full.status();
   spec.lod_triangles = full->faces / 10;
-  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, *backend);
+  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, MapKeyframes(), *backend);
   ASSERT_TRUE(ply.ok()) << ply.status();
   EXPECT_LE(ply->faces, spec.lod_triangles);
   EXPECT_GT(ply->faces, spec.lod_triangles * 9 / 10);
@@ -150,7 +151,7 @@ TEST(MapExportTest, ALevelOfDetailKeepsToTheBudgetInEitherFormat) {
   EXPECT_GT(ply->lod_error_m, 0.0);
   EXPECT_LT(ply->lod_error_m, 0.01);
   spec.mesh_format = MeshFileFormat::kGlb;
-  const absl::StatusOr<MapExport> glb = ExportMap(spec, map, *backend);
+  const absl::StatusOr<MapExport> glb = ExportMap(spec, map, MapKeyframes(), *backend);
   ASSERT_TRUE(glb.ok()) << glb.status();
   EXPECT_EQ(glb->faces, ply->faces);
   EXPECT_EQ(glb->lod_error_m, ply->lod_error_m);
@@ -167,7 +168,7 @@ TEST(MapExportTest, ALevelOfDetailKeepsToTheBudgetInEitherFormat) {
   }
   // A budget at or above the mesh's size is the full mesh.
   spec.lod_triangles = full->faces;
-  const absl::StatusOr<MapExport> same = ExportMap(spec, map, *backend);
+  const absl::StatusOr<MapExport> same = ExportMap(spec, map, MapKeyframes(), *backend);
   ASSERT_TRUE(same.ok()) << same.status();
   EXPECT_EQ(same->faces, full->faces);
   EXPECT_EQ(same->lod_error_m, 0.0);
@@ -181,11 +182,11 @@ TEST(MapExportTest, ARegionIsTheBoxsHalfOfTheMeshAndTheFileRecordsTheBox) {
   ExportSpec spec;
   spec.mesh = true;
   spec.mesh_format = MeshFileFormat::kGlb;
-  const absl::StatusOr<MapExport> full = ExportMap(spec, map, *backend);
+  const absl::StatusOr<MapExport> full = ExportMap(spec, map, MapKeyframes(), *backend);
   ASSERT_TRUE(full.ok()) << full.status();
   const AxisBox half{{-1.0, -1.0, -1.0}, {0.0, 1.0, 1.0}};
   spec.mesh_options.region = half;
-  const absl::StatusOr<MapExport> glb = ExportMap(spec, map, *backend);
+  const absl::StatusOr<MapExport> glb = ExportMap(spec, map, MapKeyframes(), *backend);
   ASSERT_TRUE(glb.ok()) << glb.status();
   EXPECT_NEAR(static_cast<double>(glb->faces) / full->faces, 0.5, 0.02);
   EXPECT_EQ(glb->full_faces, glb->faces);
@@ -204,7 +205,7 @@ TEST(MapExportTest, ARegionIsTheBoxsHalfOfTheMeshAndTheFileRecordsTheBox) {
   EXPECT_FALSE(whole->region.has_value());
 
   spec.mesh_format = MeshFileFormat::kPly;
-  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, *backend);
+  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, MapKeyframes(), *backend);
   ASSERT_TRUE(ply.ok()) << ply.status();
   EXPECT_EQ(ply->faces, glb->faces);
   EXPECT_NE(ply->bytes.find(PlyRegionComment(half)), std::string::npos);
@@ -215,7 +216,7 @@ TEST(MapExportTest, ARegionIsTheBoxsHalfOfTheMeshAndTheFileRecordsTheBox) {
 
   // A level of detail of the region: the region's mesh is the full one it simplifies.
   spec.lod_triangles = glb->faces / 5;
-  const absl::StatusOr<MapExport> lod = ExportMap(spec, map, *backend);
+  const absl::StatusOr<MapExport> lod = ExportMap(spec, map, MapKeyframes(), *backend);
   ASSERT_TRUE(lod.ok()) << lod.status();
   EXPECT_LE(lod->faces, spec.lod_triangles);
   EXPECT_EQ(lod->full_faces, glb->faces);
@@ -224,7 +225,7 @@ TEST(MapExportTest, ARegionIsTheBoxsHalfOfTheMeshAndTheFileRecordsTheBox) {
   spec.lod_triangles = 0;
   spec.mesh_format = MeshFileFormat::kGlb;
   spec.mesh_options.region = AxisBox{{2.0, 2.0, 2.0}, {3.0, 3.0, 3.0}};
-  const absl::StatusOr<MapExport> empty = ExportMap(spec, map, *backend);
+  const absl::StatusOr<MapExport> empty = ExportMap(spec, map, MapKeyframes(), *backend);
   ASSERT_TRUE(empty.ok()) << empty.status();
   EXPECT_EQ(empty->faces, 0);
   const absl::StatusOr<GlbMeshInfo> nothing = ReadGlbMeshInfo(empty->bytes);
@@ -240,7 +241,12 @@ TEST(MapExportTest, SpecsCoreRefusesAreRefusedNamingTheField) {
     ExportSpec spec;
     const char* field;
   };
-  std::vector<Case> cases(6);
+  std::vector<Case> cases(8);
+  cases[6].spec.mesh_surface = MeshSurface::kDensity;  // of points
+  cases[6].field = "mesh_surface: applies to meshes only";
+  cases[7].spec.mesh = true;
+  cases[7].spec.mesh_surface = static_cast<MeshSurface>(9);
+  cases[7].field = "mesh_surface: unknown";
   cases[4].spec.mesh_options.region = AxisBox{{0.0, 0.0, 0.0}, {1.0, 1.0, 1.0}};  // of points
   cases[4].field = "region: applies to meshes only";
   cases[5].spec.mesh = true;
@@ -257,7 +263,7 @@ TEST(MapExportTest, SpecsCoreRefusesAreRefusedNamingTheField) {
   cases[3].spec.lod_triangles = kMaxLodTriangles + 1;
   cases[3].field = "lod_triangles";
   for (const Case& c : cases) {
-    const absl::StatusOr<MapExport> r = ExportMap(c.spec, map, *backend);
+    const absl::StatusOr<MapExport> r = ExportMap(c.spec, map, MapKeyframes(), *backend);
     EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument) << c.field;
     EXPECT_NE(r.status().message().find(c.field), std::string::npos) << r.status();
   }
@@ -270,9 +276,33 @@ TEST(MapExportTest, ACancelledExportOfEitherFormIsCancelled) {
     SCOPED_TRACE(mesh ? "mesh" : "points");
     ExportSpec spec;
     spec.mesh = mesh;
-    const absl::StatusOr<MapExport> ply = ExportMap(spec, map, *backend, [] { return true; });
+    const absl::StatusOr<MapExport> ply =
+        ExportMap(spec, map, MapKeyframes(), *backend, [] { return true; });
     EXPECT_EQ(ply.status().code(), absl::StatusCode::kCancelled) << ply.status();
   }
+}
+
+// The observed surface needs the map's keyframes: asked for without them it is refused, and
+// the automatic choice falls back to the density's surface.
+TEST(MapExportTest, TheObservedSurfaceWithoutKeyframesIsAFailedPrecondition) {
+  const PlenoxelMap map = AlternatingMap(10.0f);
+  std::unique_ptr<Backend> backend = MakeCpuBackend(1);
+  ExportSpec spec;
+  spec.mesh = true;
+  spec.mesh_surface = MeshSurface::kObserved;
+  const absl::StatusOr<MapExport> observed = ExportMap(spec, map, MapKeyframes(), *backend);
+  EXPECT_EQ(observed.status().code(), absl::StatusCode::kFailedPrecondition)
+      << observed.status();
+  EXPECT_NE(observed.status().message().find("no keyframes"), std::string::npos);
+  spec.mesh_surface = MeshSurface::kAuto;
+  const absl::StatusOr<MapExport> automatic = ExportMap(spec, map, MapKeyframes(), *backend);
+  spec.mesh_surface = MeshSurface::kDensity;
+  const absl::StatusOr<MapExport> density = ExportMap(spec, map, MapKeyframes(), *backend);
+  ASSERT_TRUE(automatic.ok()) << automatic.status();
+  ASSERT_TRUE(density.ok()) << density.status();
+  EXPECT_EQ(automatic->bytes, density->bytes);
+  EXPECT_EQ(MeshSurfaceFromName("observed").value(), MeshSurface::kObserved);
+  EXPECT_EQ(MeshSurfaceFromName("seen").status().code(), absl::StatusCode::kInvalidArgument);
 }
 
 TEST(MapExportTest, MeshOptionsCoreRefusesAreRefused) {
@@ -281,7 +311,7 @@ TEST(MapExportTest, MeshOptionsCoreRefusesAreRefused) {
   ExportSpec spec;
   spec.mesh = true;
   spec.mesh_options.max_triangles = 0;
-  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, *backend);
+  const absl::StatusOr<MapExport> ply = ExportMap(spec, map, MapKeyframes(), *backend);
   EXPECT_EQ(ply.status().code(), absl::StatusCode::kInvalidArgument) << ply.status();
   EXPECT_NE(ply.status().message().find("max_triangles"), std::string::npos) << ply.status();
 }

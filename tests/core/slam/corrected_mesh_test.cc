@@ -38,7 +38,7 @@ struct MeshFit {
 MeshFit FitOfExportedMesh(const PlenoxelMap& map, Backend& backend) {
   ExportSpec spec;
   spec.mesh = true;
-  const absl::StatusOr<MapExport> file = ExportMap(spec, map, backend);
+  const absl::StatusOr<MapExport> file = ExportMap(spec, map, MapKeyframes(), backend);
   EXPECT_TRUE(file.ok()) << file.status();
   if (!file.ok()) return {};
   const absl::StatusOr<testing::PlyMeshFile> ply = testing::ReadPlyMesh(file->bytes);

@@ -1,0 +1,125 @@
+#include "core/mesh/observed_surface.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "core/common/allocation_guard.h"
+#include "core/common/status_macros.h"
+#include "core/common/unified_allocator.h"
+#include "core/geometry/kernel_camera.h"
+#include "core/kernels/depth_fusion.h"
+#include "core/render/render_view.h"
+
+namespace plx {
+namespace {
+
+// The keyframe's camera at `scale` of its resolution: pixel coordinates (centres at u + 0.5)
+// scale with the image, so the focal lengths and principal point scale by the same factors.
+PinholeIntrinsics ScaledIntrinsics(const PinholeIntrinsics& k, double scale) {
+  PinholeIntrinsics out = k;
+  out.width = std::max(1, static_cast<int>(std::lround(k.width * scale)));
+  out.height = std::max(1, static_cast<int>(std::lround(k.height * scale)));
+  const double sx = static_cast<double>(out.width) / k.width;
+  const double sy = static_cast<double>(out.height) / k.height;
+  out.fx = k.fx * sx;
+  out.cx = k.cx * sx;
+  out.fy = k.fy * sy;
+  out.cy = k.cy * sy;
+  return out;
+}
+
+// The bricks whose vertices the field needs: every brick, or for a region the bricks of the
+// region's cells and of their neighbours two voxels out (a cell's far corners and the
+// central-difference normals at them reach that far).
+UnifiedVector<int32_t> FieldBricks(const SparseGrid& grid, const MeshOptions& options) {
+  UnifiedVector<int32_t> slots;
+  if (!options.region) {
+    slots.resize(static_cast<size_t>(grid.num_bricks()));
+    for (int64_t s = 0; s < grid.num_bricks(); ++s) slots[s] = static_cast<int32_t>(s);
+    return slots;
+  }
+  AxisBox box = *options.region;
+  const double margin = 2.0 * grid.voxel_size();
+  for (int a = 0; a < 3; ++a) {
+    box.min[a] -= margin;
+    box.max[a] += margin;
+  }
+  const std::vector<int32_t> listed = BricksWithCellsIn(grid, box);
+  slots.assign(listed.begin(), listed.end());
+  return slots;
+}
+
+}  // namespace
+
+absl::Status ValidateObservedSurfaceOptions(const ObservedSurfaceOptions& options) {
+  if (!(options.render_scale > 0.0 && options.render_scale <= 1.0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("render_scale: must be in (0, 1], got ", options.render_scale));
+  }
+  if (!(options.truncation_voxels >= 1.0f && std::isfinite(options.truncation_voxels))) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "truncation_voxels: must be finite and >= 1, got ", options.truncation_voxels));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<TriangleMesh> ExtractObservedMesh(const PlenoxelMap& map,
+                                                 const MapKeyframes& keyframes, Backend& backend,
+                                                 const MeshOptions& options,
+                                                 const ObservedSurfaceOptions& surface,
+                                                 const std::function<bool()>& cancelled) {
+  PLX_RETURN_IF_ERROR(ValidateMeshOptions(options));
+  PLX_RETURN_IF_ERROR(ValidateObservedSurfaceOptions(surface));
+  if (keyframes.empty()) {
+    return absl::FailedPreconditionError(
+        "the map has no keyframes, so what they observed is unknown (a map file from before "
+        "format version 2, or one saved without them); use the density surface");
+  }
+  const SparseGrid& grid = map.grid;
+  return CatchAllocationFailure("extracting the observed surface",
+                                [&]() -> absl::StatusOr<TriangleMesh> {
+    // Each keyframe's surface depth as the map renders it; only the depth is kept.
+    std::vector<DepthImage> depths;
+    depths.reserve(keyframes.size());
+    UnifiedVector<TrainingFrameView> frames(keyframes.size());
+    RenderViewOptions render_options;
+    render_options.cancelled = cancelled;
+    for (size_t i = 0; i < keyframes.size(); ++i) {
+      if (cancelled && cancelled()) return absl::CancelledError("mesh export cancelled");
+      const PinholeIntrinsics k = ScaledIntrinsics(keyframes[i].intrinsics, surface.render_scale);
+      PLX_ASSIGN_OR_RETURN(RenderedView view,
+                           RenderView(backend, map, keyframes[i].pose, k, render_options));
+      depths.push_back(std::move(view.z_depth));
+      frames[i].camera = ToKernelCamera(keyframes[i].pose, k);
+      frames[i].color = nullptr;
+      frames[i].depth = depths.back().data.data();
+    }
+
+    // A fixed truncation, not the sensor's noise model: the rendered depth is the optimised
+    // map's, and a band grown with range (3 sigma: 12 cm at 5 m) only adds the fringes that
+    // a keyframe's view puts behind foreground edges (docs/BENCHMARKS.md, "observed surface").
+    FusionParams params;
+    params.min_truncation = surface.truncation_voxels * grid.voxel_size();
+    params.truncation_sigmas = 0.0f;
+    UnifiedVector<float> values(static_cast<size_t>(grid.num_vertices()), kIsoNoValue);
+    UnifiedVector<const float*> tables(static_cast<size_t>(grid.num_bricks()));
+    for (int64_t s = 0; s < grid.num_bricks(); ++s) {
+      tables[s] = values.data() + s * kBrickVertices;
+    }
+    const UnifiedVector<int32_t> slots = FieldBricks(grid, options);
+    if (cancelled && cancelled()) return absl::CancelledError("mesh export cancelled");
+    PLX_RETURN_IF_ERROR(backend.ObserveSurface(
+        grid.view(), IsoBrickList{slots.data(), static_cast<int64_t>(slots.size())},
+        frames.data(), static_cast<int>(frames.size()), params, values.data()));
+    depths.clear();
+
+    // The field is -tsdf: positive inside, so the surface is its level 0.
+    const GridView field = grid.ViewOf<float>(tables.data(), grid.view().brick_sh);
+    return ExtractFieldMesh(grid, field, 0.0f, backend, options, cancelled);
+  });
+}
+
+}  // namespace plx
