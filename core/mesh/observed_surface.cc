@@ -31,6 +31,19 @@ PinholeIntrinsics ScaledIntrinsics(const PinholeIntrinsics& k, double scale) {
   return out;
 }
 
+// options.render_scale, or the smaller scale at which all of `keyframes` render in
+// options.max_rendered_pixels (pixels shrink with the square of the scale).
+double RenderScaleWithinBudget(const MapKeyframes& keyframes,
+                               const ObservedSurfaceOptions& options) {
+  double pixels = 0.0;
+  for (const MapKeyframe& k : keyframes) {
+    pixels += static_cast<double>(k.intrinsics.width) * k.intrinsics.height;
+  }
+  const double scaled = pixels * options.render_scale * options.render_scale;
+  if (scaled <= static_cast<double>(options.max_rendered_pixels)) return options.render_scale;
+  return options.render_scale * std::sqrt(options.max_rendered_pixels / scaled);
+}
+
 // The bricks whose vertices the field needs: every brick, or for a region the bricks of the
 // region's cells and of their neighbours two voxels out (a cell's far corners and the
 // central-difference normals at them reach that far).
@@ -58,6 +71,10 @@ absl::Status ValidateObservedSurfaceOptions(const ObservedSurfaceOptions& option
   if (!(options.render_scale > 0.0 && options.render_scale <= 1.0)) {
     return absl::InvalidArgumentError(
         absl::StrCat("render_scale: must be in (0, 1], got ", options.render_scale));
+  }
+  if (options.max_rendered_pixels <= 0) {
+    return absl::InvalidArgumentError(absl::StrCat("max_rendered_pixels: must be > 0, got ",
+                                                   options.max_rendered_pixels));
   }
   if (!(options.truncation_voxels >= 1.0f && std::isfinite(options.truncation_voxels))) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -87,9 +104,10 @@ absl::StatusOr<TriangleMesh> ExtractObservedMesh(const PlenoxelMap& map,
     UnifiedVector<TrainingFrameView> frames(keyframes.size());
     RenderViewOptions render_options;
     render_options.cancelled = cancelled;
+    const double scale = RenderScaleWithinBudget(keyframes, surface);
     for (size_t i = 0; i < keyframes.size(); ++i) {
       if (cancelled && cancelled()) return absl::CancelledError("mesh export cancelled");
-      const PinholeIntrinsics k = ScaledIntrinsics(keyframes[i].intrinsics, surface.render_scale);
+      const PinholeIntrinsics k = ScaledIntrinsics(keyframes[i].intrinsics, scale);
       PLX_ASSIGN_OR_RETURN(RenderedView view,
                            RenderView(backend, map, keyframes[i].pose, k, render_options));
       depths.push_back(std::move(view.z_depth));

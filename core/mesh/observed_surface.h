@@ -18,6 +18,7 @@
 // TSDF's of the same frames, docs/BENCHMARKS.md), so the mesh follows what the map learned.
 #pragma once
 
+#include <cstdint>
 #include <functional>
 
 #include "absl/status/statusor.h"
@@ -34,6 +35,11 @@ struct ObservedSurfaceOptions {
   // a 640x480 keyframe's pixel spans 4 mm at 1 m, well below a voxel; rendering is most of the
   // work, so this sets the cost.
   double render_scale = 1.0;
+  // Bounds the work of a map with many keyframes (a long SLAM session): when rendering every
+  // keyframe at render_scale would pass this many pixels in all, they are all rendered at the
+  // smaller scale that keeps to it, so every view still carves its free space. About 60
+  // keyframes of 640x480 at full size.
+  int64_t max_rendered_pixels = 20'000'000;
   // Truncation of the signed distance, in voxels, at every range. Vertices further behind
   // every view's surface than this have no value. Thin is better, down to where grazing views
   // start leaving holes: on teddy 3 voxels gave F-score 0.520, 2 gave 0.537, 1.5 0.546 but
@@ -41,7 +47,8 @@ struct ObservedSurfaceOptions {
   float truncation_voxels = 2.0f;
 };
 
-// InvalidArgument naming the field (render_scale in (0, 1], truncation_voxels >= 1).
+// InvalidArgument naming the field (render_scale in (0, 1], max_rendered_pixels > 0,
+// truncation_voxels >= 1).
 absl::Status ValidateObservedSurfaceOptions(const ObservedSurfaceOptions& options);
 
 // The observed surface's mesh of `map` as seen from `keyframes` (their poses and intrinsics).

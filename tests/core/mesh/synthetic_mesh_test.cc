@@ -236,6 +236,33 @@ TEST_F(SyntheticMeshTest, TheObservedSurfaceNeedsKeyframes) {
       ExtractObservedMesh(*map_, *keyframes_, *backend_, MeshOptions{}, coarse);
   EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument) << bad.status();
   EXPECT_NE(bad.status().message().find("render_scale"), std::string::npos) << bad.status();
+  ObservedSurfaceOptions no_budget;
+  no_budget.max_rendered_pixels = 0;
+  const absl::StatusOr<TriangleMesh> refused =
+      ExtractObservedMesh(*map_, *keyframes_, *backend_, MeshOptions{}, no_budget);
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kInvalidArgument) << refused.status();
+  EXPECT_NE(refused.status().message().find("max_rendered_pixels"), std::string::npos);
+}
+
+// A pixel budget below the keyframes' size renders them all smaller: still the room's surface
+// (coarser views: a little less of it), not an error and not a subset of the views.
+TEST_F(SyntheticMeshTest, APixelBudgetRendersTheKeyframesSmaller) {
+  const std::vector<Eigen::Vector3d> truth = HeldOutPoints();
+  ObservedSurfaceOptions budget;
+  const PinholeIntrinsics& k = (*keyframes_)[0].intrinsics;
+  budget.max_rendered_pixels = static_cast<int64_t>(keyframes_->size()) * k.width * k.height / 4;
+  const absl::StatusOr<TriangleMesh> full =
+      ExtractObservedMesh(*map_, *keyframes_, *backend_, MeshOptions{});
+  const absl::StatusOr<TriangleMesh> half =
+      ExtractObservedMesh(*map_, *keyframes_, *backend_, MeshOptions{}, budget);
+  ASSERT_TRUE(full.ok()) << full.status();
+  ASSERT_TRUE(half.ok()) << half.status();
+  const MeshScore f = Score(*full, truth), h = Score(*half, truth);
+  std::printf("full-size views: precision %.3f recall %.3f; half-size: %.3f %.3f\n",
+              f.precision, f.recall, h.precision, h.recall);
+  EXPECT_NE(half->num_triangles(), full->num_triangles());  // the budget took effect
+  EXPECT_GT(h.precision, 0.85);
+  EXPECT_GT(h.recall, f.recall - 0.05);
 }
 
 // A box around the room's -y half (y = 0 is a lattice plane at 4 cm voxels, so no cell
