@@ -37,9 +37,10 @@ struct ObservedSurfaceOptions {
   double render_scale = 1.0;
   // Bounds the work of a map with many keyframes (a long SLAM session): when rendering every
   // keyframe at render_scale would pass this many pixels in all, they are all rendered at the
-  // smaller scale that keeps to it, so every view still carves its free space. About 60
-  // keyframes of 640x480 at full size.
-  int64_t max_rendered_pixels = 20'000'000;
+  // smaller scale that keeps to it, so every view still carves its free space. About 40
+  // keyframes of 640x480 at full size: rendering them takes about 20 s on 2 CPU cores
+  // (infinitam_teddy's SLAM map: 26 keyframes, 14 s), inside the viewer's 60 s for a mesh.
+  int64_t max_rendered_pixels = 12'000'000;
   // Truncation of the signed distance, in voxels, at every range. Vertices further behind
   // every view's surface than this have no value. Thin is better, down to where grazing views
   // start leaving holes: on teddy 3 voxels gave F-score 0.520, 2 gave 0.537, 1.5 0.546 but
