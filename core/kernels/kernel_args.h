@@ -162,7 +162,7 @@ struct ObserveSurfaceArgs {
       const int64_t pixels = int64_t{frames[f].camera.width} * frames[f].camera.height;
       visit(Read("depth", frames[f].depth, pixels).Of("frames[]"));
     }
-    visit(Write("value", value, grid.num_vertices()));
+    visit(Write("value", value, grid.num_vertices()).RequiredIf(bricks.count > 0));
   }
   bool Empty() const { return bricks.count == 0; }
 };

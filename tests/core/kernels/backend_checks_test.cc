@@ -314,6 +314,9 @@ TEST(BackendChecksTest, CallsWithNothingToDoDoNotReachTheBackend) {
   EXPECT_TRUE(
       backend.ComputeIsoVertices(grid.view(), nullptr, 0, iso, nullptr, nullptr, nullptr, nullptr)
           .ok());
+  EXPECT_TRUE(
+      backend.ObserveSurface(grid.view(), IsoBrickList{}, nullptr, 0, FusionParams{}, nullptr)
+          .ok());
   EXPECT_TRUE(backend.launches.empty());
 }
 
@@ -365,7 +368,7 @@ std::vector<std::pair<std::string, std::vector<std::string>>> AllKernelLabels(
 
 TEST(KernelArgsTest, EveryKernelListsEachArgumentOnce) {
   const auto kernels = AllKernelLabels(std::make_index_sequence<std::variant_size_v<KernelArgs>>());
-  ASSERT_EQ(kernels.size(), 12u);
+  ASSERT_EQ(kernels.size(), 13u);
   std::set<std::string> names;
   for (const auto& [kernel, labels] : kernels) {
     EXPECT_TRUE(names.insert(kernel).second) << kernel;
