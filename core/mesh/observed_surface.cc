@@ -31,6 +31,34 @@ PinholeIntrinsics ScaledIntrinsics(const PinholeIntrinsics& k, double scale) {
   return out;
 }
 
+// False only when no point of `box` can be in the keyframe's view: every corner behind the
+// camera or beyond the fused depth, or every corner in front and past one image border (a box
+// straddling the camera plane counts as seen). A region's mesh renders only the keyframes that
+// may see it, so its cost follows the box.
+bool KeyframeMaySee(const MapKeyframe& keyframe, const AxisBox& box, float max_depth) {
+  const SE3 camera_T_world = keyframe.pose.Inverse();
+  const PinholeIntrinsics& k = keyframe.intrinsics;
+  int behind = 0, beyond = 0, left = 0, right = 0, above = 0, below = 0;
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3d world(c & 1 ? box.max[0] : box.min[0], c & 2 ? box.max[1] : box.min[1],
+                                c & 4 ? box.max[2] : box.min[2]);
+    const Eigen::Vector3d p = camera_T_world * world;
+    if (p.z() <= 0.0) {
+      ++behind;
+      continue;
+    }
+    beyond += p.z() > max_depth;
+    const double u = k.fx * p.x() / p.z() + k.cx, v = k.fy * p.y() / p.z() + k.cy;
+    left += u < 0.0;
+    right += u >= k.width;
+    above += v < 0.0;
+    below += v >= k.height;
+  }
+  if (behind == 8 || beyond == 8) return false;
+  if (behind > 0) return true;
+  return left < 8 && right < 8 && above < 8 && below < 8;
+}
+
 // options.render_scale, or the smaller scale at which all of `keyframes` render in
 // options.max_rendered_pixels (pixels shrink with the square of the scale).
 double RenderScaleWithinBudget(const MapKeyframes& keyframes,
@@ -47,6 +75,16 @@ double RenderScaleWithinBudget(const MapKeyframes& keyframes,
 // The bricks whose vertices the field needs: every brick, or for a region the bricks of the
 // region's cells and of their neighbours two voxels out (a cell's far corners and the
 // central-difference normals at them reach that far).
+AxisBox FieldBox(const SparseGrid& grid, const AxisBox& region) {
+  AxisBox box = region;
+  const double margin = 2.0 * grid.voxel_size();
+  for (int a = 0; a < 3; ++a) {
+    box.min[a] -= margin;
+    box.max[a] += margin;
+  }
+  return box;
+}
+
 UnifiedVector<int32_t> FieldBricks(const SparseGrid& grid, const MeshOptions& options) {
   UnifiedVector<int32_t> slots;
   if (!options.region) {
@@ -54,13 +92,7 @@ UnifiedVector<int32_t> FieldBricks(const SparseGrid& grid, const MeshOptions& op
     for (int64_t s = 0; s < grid.num_bricks(); ++s) slots[s] = static_cast<int32_t>(s);
     return slots;
   }
-  AxisBox box = *options.region;
-  const double margin = 2.0 * grid.voxel_size();
-  for (int a = 0; a < 3; ++a) {
-    box.min[a] -= margin;
-    box.max[a] += margin;
-  }
-  const std::vector<int32_t> listed = BricksWithCellsIn(grid, box);
+  const std::vector<int32_t> listed = BricksWithCellsIn(grid, FieldBox(grid, *options.region));
   slots.assign(listed.begin(), listed.end());
   return slots;
 }
@@ -98,28 +130,37 @@ absl::StatusOr<TriangleMesh> ExtractObservedMesh(const PlenoxelMap& map,
   const SparseGrid& grid = map.grid;
   return CatchAllocationFailure("extracting the observed surface",
                                 [&]() -> absl::StatusOr<TriangleMesh> {
+    // A fixed truncation, not the sensor's noise model: the rendered depth is the optimised
+    // map's, and a band grown with range (3 sigma: 12 cm at 5 m) only adds the fringes that
+    // a keyframe's view puts behind foreground edges (docs/BENCHMARKS.md, "Surfaces seen
+    // once").
+    FusionParams params;
+    // The keyframes that may see the field's bricks: all of them for the whole map.
+    MapKeyframes seeing;
+    for (const MapKeyframe& k : keyframes) {
+      if (!options.region ||
+          KeyframeMaySee(k, FieldBox(grid, *options.region), params.max_depth)) {
+        seeing.push_back(k);
+      }
+    }
     // Each keyframe's surface depth as the map renders it; only the depth is kept.
     std::vector<DepthImage> depths;
-    depths.reserve(keyframes.size());
-    UnifiedVector<TrainingFrameView> frames(keyframes.size());
+    depths.reserve(seeing.size());
+    UnifiedVector<TrainingFrameView> frames(seeing.size());
     RenderViewOptions render_options;
     render_options.cancelled = cancelled;
-    const double scale = RenderScaleWithinBudget(keyframes, surface);
-    for (size_t i = 0; i < keyframes.size(); ++i) {
+    const double scale = RenderScaleWithinBudget(seeing, surface);
+    for (size_t i = 0; i < seeing.size(); ++i) {
       if (cancelled && cancelled()) return absl::CancelledError("mesh export cancelled");
-      const PinholeIntrinsics k = ScaledIntrinsics(keyframes[i].intrinsics, scale);
+      const PinholeIntrinsics k = ScaledIntrinsics(seeing[i].intrinsics, scale);
       PLX_ASSIGN_OR_RETURN(RenderedView view,
-                           RenderView(backend, map, keyframes[i].pose, k, render_options));
+                           RenderView(backend, map, seeing[i].pose, k, render_options));
       depths.push_back(std::move(view.z_depth));
-      frames[i].camera = ToKernelCamera(keyframes[i].pose, k);
+      frames[i].camera = ToKernelCamera(seeing[i].pose, k);
       frames[i].color = nullptr;
       frames[i].depth = depths.back().data.data();
     }
 
-    // A fixed truncation, not the sensor's noise model: the rendered depth is the optimised
-    // map's, and a band grown with range (3 sigma: 12 cm at 5 m) only adds the fringes that
-    // a keyframe's view puts behind foreground edges (docs/BENCHMARKS.md, "observed surface").
-    FusionParams params;
     params.min_truncation = surface.truncation_voxels * grid.voxel_size();
     params.truncation_sigmas = 0.0f;
     UnifiedVector<float> values(static_cast<size_t>(grid.num_vertices()), kIsoNoValue);
