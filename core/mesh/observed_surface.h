@@ -56,9 +56,10 @@ absl::Status ValidateObservedSurfaceOptions(const ObservedSurfaceOptions& option
 // options.iso_level is not used; region, filters, colours and the triangle limit apply as in
 // ExtractMesh. For a region only the keyframes that may see it are rendered (and the field is
 // made for its bricks only), so the work follows the box; boxes tile the whole map's surface
-// exactly as long as the pixel budget does not shrink the views of one and not the other. FailedPrecondition when `keyframes` is empty (the caller then falls back to the
-// density surface, or says the map has no keyframes); otherwise errors as ExtractMesh's, and
-// CANCELLED when `cancelled` returns true (asked between keyframes and between mesh slices).
+// exactly as long as the pixel budget does not shrink the views of one and not the other.
+// FailedPrecondition when `keyframes` is empty (the caller then falls back to the density
+// surface, or says the map has no keyframes); otherwise errors as ExtractMesh's, and CANCELLED
+// when `cancelled` returns true (asked between keyframes and between mesh slices).
 absl::StatusOr<TriangleMesh> ExtractObservedMesh(
     const PlenoxelMap& map, const MapKeyframes& keyframes, Backend& backend,
     const MeshOptions& options, const ObservedSurfaceOptions& surface = {},
