@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -61,11 +62,11 @@ bool KeyframeMaySee(const MapKeyframe& keyframe, const AxisBox& box, float max_d
 
 // options.render_scale, or the smaller scale at which all of `keyframes` render in
 // options.max_rendered_pixels (pixels shrink with the square of the scale).
-double RenderScaleWithinBudget(const MapKeyframes& keyframes,
+double RenderScaleWithinBudget(const std::vector<const MapKeyframe*>& keyframes,
                                const ObservedSurfaceOptions& options) {
   double pixels = 0.0;
-  for (const MapKeyframe& k : keyframes) {
-    pixels += static_cast<double>(k.intrinsics.width) * k.intrinsics.height;
+  for (const MapKeyframe* k : keyframes) {
+    pixels += static_cast<double>(k->intrinsics.width) * k->intrinsics.height;
   }
   const double scaled = pixels * options.render_scale * options.render_scale;
   if (scaled <= static_cast<double>(options.max_rendered_pixels)) return options.render_scale;
@@ -136,12 +137,11 @@ absl::StatusOr<TriangleMesh> ExtractObservedMesh(const PlenoxelMap& map,
     // once").
     FusionParams params;
     // The keyframes that may see the field's bricks: all of them for the whole map.
-    MapKeyframes seeing;
+    std::vector<const MapKeyframe*> seeing;
+    const std::optional<AxisBox> box =
+        options.region ? std::optional<AxisBox>(FieldBox(grid, *options.region)) : std::nullopt;
     for (const MapKeyframe& k : keyframes) {
-      if (!options.region ||
-          KeyframeMaySee(k, FieldBox(grid, *options.region), params.max_depth)) {
-        seeing.push_back(k);
-      }
+      if (!box || KeyframeMaySee(k, *box, params.max_depth)) seeing.push_back(&k);
     }
     // Each keyframe's surface depth as the map renders it; only the depth is kept.
     std::vector<DepthImage> depths;
@@ -152,11 +152,11 @@ absl::StatusOr<TriangleMesh> ExtractObservedMesh(const PlenoxelMap& map,
     const double scale = RenderScaleWithinBudget(seeing, surface);
     for (size_t i = 0; i < seeing.size(); ++i) {
       if (cancelled && cancelled()) return absl::CancelledError("mesh export cancelled");
-      const PinholeIntrinsics k = ScaledIntrinsics(seeing[i].intrinsics, scale);
+      const PinholeIntrinsics k = ScaledIntrinsics(seeing[i]->intrinsics, scale);
       PLX_ASSIGN_OR_RETURN(RenderedView view,
-                           RenderView(backend, map, seeing[i].pose, k, render_options));
+                           RenderView(backend, map, seeing[i]->pose, k, render_options));
       depths.push_back(std::move(view.z_depth));
-      frames[i].camera = ToKernelCamera(seeing[i].pose, k);
+      frames[i].camera = ToKernelCamera(seeing[i]->pose, k);
       frames[i].color = nullptr;
       frames[i].depth = depths.back().data.data();
     }
