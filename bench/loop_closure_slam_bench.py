@@ -7,8 +7,9 @@ every sequence twice, with loop closure and with --no-loop-closure, same flags o
 
 Cases: the real sequences (tum_fr3_teddy, infinitam_teddy) and synthetic ones made here: two
 laps of the room's circle (`laps`), the same with Kinect-like depth noise and holes
-(`laps-noise`), at three times the motion per frame (`laps-fast`), and the head-turning circle
-(`head-turns`). Per run it reads the JSON (frames, LOST, keyframes, loops accepted and rejected,
+(`laps-noise`), at three times the motion per frame (`laps-fast`), the head-turning circle
+(`head-turns`), and a figure eight through the room's centre, one turn and a quarter
+(`eight`). Per run it reads the JSON (frames, LOST, keyframes, loops accepted and rejected,
 corrections, ATE of the online trajectory and of the trajectory in the map's final frame),
 --frames-out (the tracking times: median, p99, p99/median) and --loops-out: each loop edge is
 compared with the ground truth's relative pose between its two keyframes, and one more than
@@ -27,7 +28,7 @@ from bench_common import (REPO, CommandError, git_commit, log, machine_line,  # 
                           percentile, quat_to_rot, read_rows, run_json, set_log_prefix)
 from slam_hard_bench import Datasets, settings  # noqa: E402
 
-CASE_KEYS = ["teddy", "infinitam", "laps", "laps-noise", "laps-fast", "head-turns"]
+CASE_KEYS = ["teddy", "infinitam", "laps", "laps-noise", "laps-fast", "head-turns", "eight"]
 FALSE_LOOP_M = 0.05
 FALSE_LOOP_DEG = 2.0
 
@@ -51,6 +52,10 @@ def case_list(s, wanted):
     if "head-turns" in wanted:
         cases.append(("head-turns", "synthetic head turns",
                       ("synth", "head-turns", s["head-turns"])))
+    if "eight" in wanted:
+        # One turn and a quarter (20 s each): the second pass over the first lobe closes it.
+        cases.append(("eight", "synthetic figure eight, 1.25 turns",
+                      ("synth", "figure-eight", 750)))
     return cases
 
 

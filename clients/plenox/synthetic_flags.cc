@@ -20,7 +20,8 @@ void AddSyntheticFlags(FlagSet& flags, int default_frames, bool noise_by_default
   flags.Add("noise-seed", "N", "seed of the depth noise", "7")
       .Add("path", "NAME",
            "camera path: circle (around the room centre), head-turns (the circle with yaw "
-           "swings peaking at ~130 deg/s), walk-out (from the -x end into the unseen +x half)",
+           "swings peaking at ~130 deg/s), walk-out (from the -x end into the unseen +x half), "
+           "figure-eight (through the centre, one turn per 20 s: a loop)",
            "circle");
 }
 

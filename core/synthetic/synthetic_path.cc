@@ -129,6 +129,25 @@ SE3 WalkOutPose(double seconds) {
   return LookAlong(eye, heading, pitch);
 }
 
+// ---------------------------------------------------------------------------------------------
+// Figure eight: eye = (X sin(phi), Y sin(2 phi)) with phi = 2 pi t / period, heading along the
+// velocity (X cos(phi), 2 Y cos(2 phi)), which never vanishes, so the heading is smooth. The
+// eye stays > 0.6 m from the cabinet (the only box as tall as the eye) and > 1.5 m from the
+// walls.
+
+constexpr double kEightPeriod = 20.0;                   // s
+constexpr double kEightHalfX = 1.5, kEightHalfY = 0.8;  // m
+
+SE3 FigureEightPose(double seconds) {
+  const double phi = 2.0 * M_PI * seconds / kEightPeriod;
+  const Eigen::Vector3d eye(kEightHalfX * std::sin(phi), kEightHalfY * std::sin(2.0 * phi),
+                            kEyeHeight + 0.03 * std::sin(3.0 * phi));
+  const double heading =
+      std::atan2(2.0 * kEightHalfY * std::cos(2.0 * phi), kEightHalfX * std::cos(phi));
+  const double pitch = -(kPitch + 3.0 * kDegree * std::sin(phi));
+  return LookAlong(eye, heading, pitch);
+}
+
 }  // namespace
 
 const char* SyntheticPathName(SyntheticPath path) {
@@ -136,23 +155,26 @@ const char* SyntheticPathName(SyntheticPath path) {
     case SyntheticPath::kCircle: return "circle";
     case SyntheticPath::kHeadTurns: return "head-turns";
     case SyntheticPath::kWalkOut: return "walk-out";
+    case SyntheticPath::kFigureEight: return "figure-eight";
   }
   return "unknown";
 }
 
 absl::StatusOr<SyntheticPath> ParseSyntheticPath(std::string_view name) {
-  for (SyntheticPath path :
-       {SyntheticPath::kCircle, SyntheticPath::kHeadTurns, SyntheticPath::kWalkOut}) {
+  for (SyntheticPath path : {SyntheticPath::kCircle, SyntheticPath::kHeadTurns,
+                            SyntheticPath::kWalkOut, SyntheticPath::kFigureEight}) {
     if (name == SyntheticPathName(path)) return path;
   }
-  return absl::InvalidArgumentError(absl::StrCat("unknown synthetic path \"", std::string(name),
-                                                 "\": expected circle, head-turns or walk-out"));
+  return absl::InvalidArgumentError(
+      absl::StrCat("unknown synthetic path \"", std::string(name),
+                   "\": expected circle, head-turns, walk-out or figure-eight"));
 }
 
 SE3 SyntheticPathPose(SyntheticPath path, double seconds) {
   switch (path) {
     case SyntheticPath::kHeadTurns: return HeadTurnsPose(seconds);
     case SyntheticPath::kWalkOut: return WalkOutPose(seconds);
+    case SyntheticPath::kFigureEight: return FigureEightPose(seconds);
     case SyntheticPath::kCircle: break;
   }
   return CirclePose(seconds, 0.0);

@@ -1,7 +1,8 @@
 // Camera paths through the synthetic room (core/synthetic/synthetic_scene.h), as exact
 // world_T_camera poses at any time (OpenCV camera axes, x right, y down, z forward; the camera
 // never rolls). The circle is the default sequence's path; the others are hard cases for SLAM
-// (issue 21): fast head turns, and a walk out of the part of the room the first frames saw.
+// (issue 21): fast head turns, and a walk out of the part of the room the first frames saw;
+// and a figure eight for loop closure (issue 22).
 #pragma once
 
 #include <string_view>
@@ -25,9 +26,15 @@ enum class SyntheticPath {
   // (the +x wall, the table-height box, the floor in front of them) from then on. From about
   // 2.8 s on, nearly all of every view is room the first 1.5 s never saw.
   kWalkOut,
+  // A figure eight (a lemniscate of Gerono) through the room centre, walked forwards: lobes to
+  // x = +-1.5 m and y = +-0.8 m, one turn every 20 s, looking along the travel and ~15 degrees
+  // down (peak 0.69 m/s and 60 degrees/s at the lobes' ends). The centre is crossed twice per
+  // turn at headings ~85 degrees apart; the second turn revisits the first's views: a loop
+  // whose two halves drift in opposite directions of turning (issue 22's data).
+  kFigureEight,
 };
 
-// "circle", "head-turns", "walk-out".
+// "circle", "head-turns", "walk-out", "figure-eight".
 const char* SyntheticPathName(SyntheticPath path);
 // The inverse of SyntheticPathName; InvalidArgument listing the names otherwise.
 absl::StatusOr<SyntheticPath> ParseSyntheticPath(std::string_view name);

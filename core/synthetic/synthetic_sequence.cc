@@ -129,7 +129,7 @@ absl::Status ValidateSyntheticOptions(const SyntheticOptions& options) {
         absl::StrCat("hole_fraction must be in [0, 1), got ", options.hole_fraction));
   }
   if (options.path != SyntheticPath::kCircle && options.path != SyntheticPath::kHeadTurns &&
-      options.path != SyntheticPath::kWalkOut) {
+      options.path != SyntheticPath::kWalkOut && options.path != SyntheticPath::kFigureEight) {
     return absl::InvalidArgumentError(
         absl::StrCat("unknown synthetic path ", static_cast<int>(options.path)));
   }

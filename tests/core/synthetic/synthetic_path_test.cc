@@ -15,7 +15,7 @@ namespace {
 constexpr double kFps = 30.0;
 constexpr double kRadToDeg = 180.0 / M_PI;
 constexpr SyntheticPath kAllPaths[] = {SyntheticPath::kCircle, SyntheticPath::kHeadTurns,
-                                       SyntheticPath::kWalkOut};
+                                       SyntheticPath::kWalkOut, SyntheticPath::kFigureEight};
 
 // Horizontal viewing direction, radians from world +x towards +y.
 double Heading(const SE3& pose) {
@@ -83,6 +83,7 @@ TEST(SyntheticPathTest, NamesRoundTripAndUnknownNamesAreRejected) {
   }
   EXPECT_STREQ(SyntheticPathName(SyntheticPath::kHeadTurns), "head-turns");
   EXPECT_STREQ(SyntheticPathName(SyntheticPath::kWalkOut), "walk-out");
+  EXPECT_STREQ(SyntheticPathName(SyntheticPath::kFigureEight), "figure-eight");
   for (const char* bad : {"", "Circle", "head_turns", "walkout", "circle "}) {
     absl::StatusOr<SyntheticPath> parsed = ParseSyntheticPath(bad);
     EXPECT_EQ(parsed.status().code(), absl::StatusCode::kInvalidArgument) << bad;
@@ -119,6 +120,31 @@ TEST(SyntheticPathTest, HeadTurnsPeakBetween120And150DegreesPerSecondSwingAfterS
     EXPECT_EQ(SyntheticPathPose(SyntheticPath::kHeadTurns, t).translation(),
               SyntheticCameraPoseAtTime(t).translation());
   }
+}
+
+TEST(SyntheticPathTest, TheFigureEightCrossesItsCentreTwiceAndRepeatsEvery20Seconds) {
+  constexpr SyntheticPath kEight = SyntheticPath::kFigureEight;
+  // A loop: the second turn revisits the first's poses exactly.
+  for (int i = 0; i < 600; i += 13) {
+    const double t = i / kFps;
+    EXPECT_TRUE(SyntheticPathPose(kEight, t + 20.0).matrix().isApprox(
+        SyntheticPathPose(kEight, t).matrix(), 1e-9))
+        << i;
+  }
+  // The centre at 0 s and 10 s, crossed at headings 60-110 degrees apart: two views of the
+  // middle of the room that share only part of what they see.
+  const SE3 first = SyntheticPathPose(kEight, 0.0), second = SyntheticPathPose(kEight, 10.0);
+  EXPECT_LT(first.translation().head<2>().norm(), 1e-9);
+  EXPECT_LT(second.translation().head<2>().norm(), 1e-9);
+  const double apart =
+      std::abs(std::remainder(Heading(first) - Heading(second), 2.0 * M_PI)) * kRadToDeg;
+  EXPECT_GT(apart, 60.0);
+  EXPECT_LT(apart, 110.0);
+  // It turns both ways (one lobe clockwise, the other counter-clockwise), gently.
+  const std::vector<double> rates = YawRates(kEight, 600);
+  EXPECT_GT(*std::max_element(rates.begin(), rates.end()), 40.0);
+  EXPECT_LT(*std::min_element(rates.begin(), rates.end()), -40.0);
+  for (double r : rates) EXPECT_LT(std::abs(r), 70.0);
 }
 
 TEST(SyntheticPathTest, EveryPathIsSmoothLevelAndKeepsClearOfTheScene) {
