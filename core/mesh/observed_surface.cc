@@ -1,6 +1,7 @@
 #include "core/mesh/observed_surface.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <optional>
@@ -86,6 +87,16 @@ AxisBox FieldBox(const SparseGrid& grid, const AxisBox& region) {
   return box;
 }
 
+// Bricks per edge of a group whose vertices share one list of keyframes (ObserveByGroups):
+// 4 bricks of 8 voxels, 0.64 m at 2 cm, small against a keyframe's view and large enough that
+// a launch has tens of thousands of vertices.
+constexpr int kGroupBricks = 4;
+
+int32_t GroupOf(int32_t brick) {
+  // Floor division: bricks -1..-4 are group -1.
+  return brick >= 0 ? brick / kGroupBricks : -((-brick + kGroupBricks - 1) / kGroupBricks);
+}
+
 UnifiedVector<int32_t> FieldBricks(const SparseGrid& grid, const MeshOptions& options) {
   UnifiedVector<int32_t> slots;
   if (!options.region) {
@@ -99,6 +110,71 @@ UnifiedVector<int32_t> FieldBricks(const SparseGrid& grid, const MeshOptions& op
 }
 
 }  // namespace
+
+absl::Status ObserveFieldByGroups(const SparseGrid& grid, absl::Span<const int32_t> slots,
+                                  const std::vector<const MapKeyframe*>& keyframes,
+                                  absl::Span<const TrainingFrameView> frames,
+                                  const FusionParams& params, float max_depth, Backend& backend,
+                                  float* values) {
+  if (frames.size() != keyframes.size()) {
+    return absl::InvalidArgumentError(absl::StrCat("one view per keyframe: ", frames.size(),
+                                                   " views for ", keyframes.size()));
+  }
+  struct Entry {
+    std::array<int32_t, 3> group;
+    int32_t slot;
+  };
+  std::vector<Entry> entries;
+  entries.reserve(slots.size());
+  for (const int32_t slot : slots) {
+    const BrickCoord& b = grid.brick_coords()[slot];
+    entries.push_back({{GroupOf(b.x), GroupOf(b.y), GroupOf(b.z)}, slot});
+  }
+  std::sort(entries.begin(), entries.end(),
+            [](const Entry& a, const Entry& b) { return a.group < b.group; });
+  // Every group's slots and keyframes, concatenated: two allocations whatever the group count
+  // (unified memory is costly to allocate on a GPU).
+  UnifiedVector<int32_t> grouped_slots(entries.size());
+  struct Group {
+    size_t first_slot = 0, slots = 0, first_frame = 0, frames = 0;
+  };
+  std::vector<Group> groups;
+  std::vector<int32_t> frame_index;
+  const double voxel = grid.voxel_size();
+  const double group_edge = kGroupBricks * kBrickEdge * voxel;
+  for (size_t i = 0; i < entries.size();) {
+    Group g;
+    g.first_slot = i;
+    const std::array<int32_t, 3> key = entries[i].group;
+    for (; i < entries.size() && entries[i].group == key; ++i) grouped_slots[i] = entries[i].slot;
+    g.slots = i - g.first_slot;
+    // The group's vertices: brick b's are at (8 b + 0..7) voxels.
+    AxisBox box;
+    for (int a = 0; a < 3; ++a) {
+      box.min[a] = key[a] * group_edge;
+      box.max[a] = box.min[a] + group_edge - voxel;
+    }
+    g.first_frame = frame_index.size();
+    for (size_t f = 0; f < keyframes.size(); ++f) {
+      if (KeyframeMaySee(*keyframes[f], box, max_depth)) {
+        frame_index.push_back(static_cast<int32_t>(f));
+      }
+    }
+    g.frames = frame_index.size() - g.first_frame;
+    groups.push_back(g);
+  }
+  UnifiedVector<TrainingFrameView> grouped_frames(frame_index.size());
+  for (size_t i = 0; i < frame_index.size(); ++i) grouped_frames[i] = frames[frame_index[i]];
+  for (const Group& g : groups) {
+    // No keyframe may see the group: its vertices keep kIsoNoValue, as the kernel would give.
+    if (g.frames == 0) continue;
+    PLX_RETURN_IF_ERROR(backend.ObserveSurface(
+        grid.view(),
+        IsoBrickList{grouped_slots.data() + g.first_slot, static_cast<int64_t>(g.slots)},
+        grouped_frames.data() + g.first_frame, static_cast<int>(g.frames), params, values));
+  }
+  return absl::OkStatus();
+}
 
 absl::Status ValidateObservedSurfaceOptions(const ObservedSurfaceOptions& options) {
   if (!(options.render_scale > 0.0 && options.render_scale <= 1.0)) {
@@ -136,12 +212,17 @@ absl::StatusOr<TriangleMesh> ExtractObservedMesh(const PlenoxelMap& map,
     // a keyframe's view puts behind foreground edges (docs/BENCHMARKS.md, "Surfaces seen
     // once").
     FusionParams params;
+    params.min_truncation = surface.truncation_voxels * grid.voxel_size();
+    params.truncation_sigmas = 0.0f;
+    // A vertex up to a truncation beyond the fused depth still counts (its signed distance to
+    // a surface at max_depth is within the band).
+    const float see_depth = params.max_depth + params.min_truncation;
     // The keyframes that may see the field's bricks: all of them for the whole map.
     std::vector<const MapKeyframe*> seeing;
     const std::optional<AxisBox> box =
         options.region ? std::optional<AxisBox>(FieldBox(grid, *options.region)) : std::nullopt;
     for (const MapKeyframe& k : keyframes) {
-      if (!box || KeyframeMaySee(k, *box, params.max_depth)) seeing.push_back(&k);
+      if (!box || KeyframeMaySee(k, *box, see_depth)) seeing.push_back(&k);
     }
     // Each keyframe's surface depth as the map renders it; only the depth is kept.
     std::vector<DepthImage> depths;
@@ -161,8 +242,6 @@ absl::StatusOr<TriangleMesh> ExtractObservedMesh(const PlenoxelMap& map,
       frames[i].depth = depths.back().data.data();
     }
 
-    params.min_truncation = surface.truncation_voxels * grid.voxel_size();
-    params.truncation_sigmas = 0.0f;
     UnifiedVector<float> values(static_cast<size_t>(grid.num_vertices()), kIsoNoValue);
     UnifiedVector<const float*> tables(static_cast<size_t>(grid.num_bricks()));
     for (int64_t s = 0; s < grid.num_bricks(); ++s) {
@@ -170,9 +249,8 @@ absl::StatusOr<TriangleMesh> ExtractObservedMesh(const PlenoxelMap& map,
     }
     const UnifiedVector<int32_t> slots = FieldBricks(grid, options);
     if (cancelled && cancelled()) return absl::CancelledError("mesh export cancelled");
-    PLX_RETURN_IF_ERROR(backend.ObserveSurface(
-        grid.view(), IsoBrickList{slots.data(), static_cast<int64_t>(slots.size())},
-        frames.data(), static_cast<int>(frames.size()), params, values.data()));
+    PLX_RETURN_IF_ERROR(ObserveFieldByGroups(grid, slots, seeing, frames, params, see_depth,
+                                             backend, values.data()));
     depths.clear();
 
     // The field is -tsdf: positive inside, so the surface is its level 0.

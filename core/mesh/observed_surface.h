@@ -20,8 +20,10 @@
 
 #include <cstdint>
 #include <functional>
+#include <vector>
 
 #include "absl/status/statusor.h"
+#include "absl/types/span.h"
 #include "core/formats/map_keyframe.h"
 #include "core/geometry/triangle_mesh.h"
 #include "core/grid/plenoxel_map.h"
@@ -64,5 +66,18 @@ absl::StatusOr<TriangleMesh> ExtractObservedMesh(
     const PlenoxelMap& map, const MapKeyframes& keyframes, Backend& backend,
     const MeshOptions& options, const ObservedSurfaceOptions& surface = {},
     const std::function<bool()>& cancelled = nullptr);
+
+// The observed field at the vertices of the bricks `slots` (values [grid vertices], written
+// there only): frames[i] is keyframes[i]'s view (its rendered depth). Bricks go in groups of
+// 4x4x4 and each group's launch of Backend::ObserveSurface reads only the keyframes that may
+// see the group's box with depth up to `max_depth`. A keyframe that cannot see a vertex adds
+// nothing to its average, so the field is bit for bit the one a single launch over every
+// keyframe gives, at the cost of the keyframes each place has instead of all of them (a long
+// SLAM run has hundreds). Vertices of a group no keyframe may see are left as they are.
+absl::Status ObserveFieldByGroups(const SparseGrid& grid, absl::Span<const int32_t> slots,
+                                  const std::vector<const MapKeyframe*>& keyframes,
+                                  absl::Span<const TrainingFrameView> frames,
+                                  const FusionParams& params, float max_depth, Backend& backend,
+                                  float* values);
 
 }  // namespace plx

@@ -7,12 +7,14 @@
 #include <cmath>
 #include <algorithm>
 #include <cstdio>
+#include <cstring>
 #include <map>
 #include <tuple>
 #include <vector>
 
 #include "core/cpu/cpu_backend.h"
 #include "core/eval/map_metrics.h"
+#include "core/geometry/kernel_camera.h"
 #include "core/mapping/map_dataset.h"
 #include "core/mapping/mapper.h"
 #include "core/mesh/iso_surface.h"
@@ -224,6 +226,55 @@ TEST_F(SyntheticMeshTest, BoxesTileTheObservedSurface) {
   EXPECT_GT(half->num_triangles(), full->num_triangles() / 10);
   EXPECT_GT(other->num_triangles(), 0);
   EXPECT_EQ(half->num_triangles() + other->num_triangles(), full->num_triangles());
+}
+
+TEST_F(SyntheticMeshTest, GroupsOfBricksGiveTheFieldOfEveryKeyframeBitForBit) {
+  // The keyframes' measured depths as their views, and a far-away fourth keyframe looking out
+  // of the room (it sees no brick: every group culls it).
+  const std::vector<int> indices = KeyframeIndices(dataset_->size(), 10);
+  ASSERT_EQ(indices.size(), keyframes_->size());
+  std::vector<const MapKeyframe*> keyframes;
+  for (const MapKeyframe& k : *keyframes_) keyframes.push_back(&k);
+  MapKeyframe away = keyframes_->front();
+  away.pose = SE3(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0.0, 0.0, 40.0));
+  keyframes.push_back(&away);
+  std::vector<TrainingFrameView> frames;
+  for (size_t i = 0; i < keyframes.size(); ++i) {
+    const RgbdFrame& f = dataset_->frames()[indices[std::min(i, indices.size() - 1)]];
+    TrainingFrameView view;
+    view.camera = ToKernelCamera(keyframes[i]->pose, keyframes[i]->intrinsics);
+    view.color = nullptr;
+    view.depth = f.depth.data.data();
+    frames.push_back(view);
+  }
+  FusionParams params;
+  params.min_truncation = 2.0f * map_->grid.voxel_size();
+  params.truncation_sigmas = 0.0f;
+  std::vector<int32_t> slots(static_cast<size_t>(map_->grid.num_bricks()));
+  for (size_t s = 0; s < slots.size(); ++s) slots[s] = static_cast<int32_t>(s);
+  const size_t n = static_cast<size_t>(map_->grid.num_vertices());
+  std::vector<float> single(n, kIsoNoValue), grouped(n, kIsoNoValue);
+  ASSERT_TRUE(backend_->ObserveSurface(map_->grid.view(),
+                                       IsoBrickList{slots.data(),
+                                                    static_cast<int64_t>(slots.size())},
+                                       frames.data(), static_cast<int>(frames.size()), params,
+                                       single.data()).ok());
+  ASSERT_TRUE(ObserveFieldByGroups(map_->grid, slots, keyframes, frames, params,
+                                   params.max_depth + params.min_truncation, *backend_,
+                                   grouped.data()).ok());
+  int64_t differ = 0, observed = 0;
+  for (size_t v = 0; v < n; ++v) {
+    // Bit for bit: the same additions in the same order, only of views that add something.
+    differ += std::memcmp(&single[v], &grouped[v], sizeof(float)) != 0;
+    observed += IsoHasValue(single[v]);
+  }
+  EXPECT_EQ(differ, 0);
+  EXPECT_GT(observed, static_cast<int64_t>(n / 10));  // the comparison is not of empty fields
+  // One view per keyframe.
+  frames.pop_back();
+  EXPECT_EQ(ObserveFieldByGroups(map_->grid, slots, keyframes, frames, params, params.max_depth,
+                                 *backend_, grouped.data()).code(),
+            absl::StatusCode::kInvalidArgument);
 }
 
 TEST_F(SyntheticMeshTest, TheObservedSurfaceNeedsKeyframes) {
