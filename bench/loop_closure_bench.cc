@@ -1,13 +1,17 @@
 // plx_loop_closure_bench: loop closure on its own (docs/BENCHMARKS.md, "Loop closure").
 //
 //   build/bench/plx_loop_closure_bench [--width 320 --height 240 --laps 2 --iterations 30
-//                                       --yaw-drift-deg 0.35 --creep-cm 0.6 --graph-only
-//                                       --cases true,drift,loop,loop-unrefined]
+//                                       --yaw-drift-deg 0.35 --creep-cm 0.6 --drift-from 0
+//                                       --graph-only
+//                                       --cases true,drift,loop,loop-rebuild,loop-seeded,
+//                                               loop-unrefined]
 //
 // 1. The synthetic two-lap loop: keyframes every 0.4 s over `laps` laps of the room (12 s
 //    each), handed to a lock-step SlamCoordinator at poses that drift (each step's true
-//    motion times a yaw and a forward creep: odometry that drifts), once with loop closure,
-//    again without the rebuild's refinement of every keyframe (loop-unrefined), once without
+//    motion times a yaw and a forward creep: odometry that drifts), once with loop closure
+//    (small corrections applied in place), again with every correction rebuilt from nothing
+//    (loop-rebuild) or from what did not move (loop-seeded), and from nothing without the
+//    rebuild's refinement of every keyframe (loop-unrefined), once without
 //    loop closure, and once at the true poses (the reference map). Prints per run: the last
 //    keyframe's error, the keyframes' mean translation error and ATE (rigidly aligned), loops
 //    accepted and false (a loop edge more than 5 cm or 2 degrees from the truth), corrections
@@ -56,10 +60,16 @@ double Median(std::vector<double> v) {
 struct Flags {
   int width = 320, height = 240, laps = 2, iterations = 30;
   double yaw_drift_deg = 0.35, creep_cm = 0.6;
+  // The share of the path tracked without drift before the odometry starts drifting: with 0.5
+  // the first lap is exact and only the second drifts, so a correction moves only the second
+  // lap's keyframes (what a loop after a stretch of good tracking moves).
+  double drift_from = 0.0;
   bool graph_only = false;
-  // Which two-lap runs: true (true poses), drift (no loop closure), loop (loop closure),
-  // loop-unrefined (loop closure without the rebuild's refinement of every keyframe).
-  std::string cases = "true,drift,loop,loop-unrefined";
+  // Which two-lap runs: true (true poses), drift (no loop closure), loop (loop closure, small
+  // corrections in place), loop-rebuild (every correction rebuilt from nothing), loop-seeded
+  // (every correction rebuilt from what did not move), loop-unrefined (rebuilt from nothing
+  // without the rebuild's refinement of every keyframe: the first implementation).
+  std::string cases = "true,drift,loop,loop-rebuild,loop-seeded,loop-unrefined";
 };
 
 plx::SE3 Bias(const Flags& f) {
@@ -85,8 +95,9 @@ absl::StatusOr<RunResult> RunKeyframes(const plx::InMemoryDataset& data,
                                        const std::vector<int>& indices,
                                        const std::vector<plx::SE3>& poses,
                                        const std::vector<plx::SE3>& truth, bool loop_closure,
-                                       bool refine_rebuild,
-                                       const Flags& flags, const std::vector<int>& held_out) {
+                                       bool refine_rebuild, bool keep_unmoved,
+                                       bool in_place, const Flags& flags,
+                                       const std::vector<int>& held_out) {
   plx::SlamOptions o = plx::DefaultSlamOptions();
   o.deterministic = true;
   o.mapping.iterations_per_keyframe = flags.iterations;
@@ -94,6 +105,8 @@ absl::StatusOr<RunResult> RunKeyframes(const plx::InMemoryDataset& data,
   o.loop_closure.enabled = loop_closure;
   plx::SlamSplitOptions split = plx::SplitSlamOptions(o);
   split.mapper.rebuild_refines_all = refine_rebuild;
+  split.mapper.rebuild_keeps_unmoved = keep_unmoved;
+  if (!in_place) split.mapper.in_place_max_shift_m = 0.0;
   std::unique_ptr<plx::Backend> backend = plx::MakeCpuBackend(0);
   plx::SlamCoordinator coordinator(split.mapper, split.gate);
   if (absl::Status s = coordinator.StartMapper(backend.get()); !s.ok()) return s;
@@ -185,13 +198,15 @@ int TwoLapLoop(const Flags& flags) {
   std::vector<plx::SE3> truth, drifted;
   for (int i : indices) truth.push_back(*data->ground_truth(i));
   drifted.push_back(truth[0]);
+  const size_t drift_start = static_cast<size_t>(flags.drift_from * truth.size());
   for (size_t i = 1; i < truth.size(); ++i) {
-    drifted.push_back(drifted.back() * truth[i - 1].Inverse() * truth[i] * Bias(flags));
+    const plx::SE3 bias = i > drift_start ? Bias(flags) : plx::SE3();
+    drifted.push_back(drifted.back() * truth[i - 1].Inverse() * truth[i] * bias);
   }
-  std::printf("two-lap loop: %dx%d, %d laps, %zu keyframes, drift %.2f deg + %.1f cm per step, "
-              "%d iterations per keyframe\n",
+  std::printf("two-lap loop: %dx%d, %d laps, %zu keyframes, drift %.2f deg + %.1f cm per step "
+              "from keyframe %zu, %d iterations per keyframe\n",
               flags.width, flags.height, flags.laps, indices.size(), flags.yaw_drift_deg,
-              flags.creep_cm, flags.iterations);
+              flags.creep_cm, drift_start, flags.iterations);
   std::printf("%-22s %9s %9s %9s %6s %6s %6s %9s %7s %9s %7s %7s\n", "run", "end_cm", "mean_cm",
               "ate_cm", "loops", "false", "corr", "depthL1", "psnr", "alignL1", "apsnr",
               "secs");
@@ -201,16 +216,22 @@ int TwoLapLoop(const Flags& flags) {
     const std::vector<plx::SE3>* poses;
     bool loop_closure;
     bool refine_rebuild;
+    bool keep_unmoved;
+    bool in_place;
   };
-  for (const Case& c : {Case{"true", "true poses", &truth, false, true},
-                        Case{"drift", "drift, no loop closure", &drifted, false, true},
-                        Case{"loop", "drift, loop closure", &drifted, true, true},
-                        Case{"loop-unrefined", "drift, LC, unrefined", &drifted, true, false}}) {
+  for (const Case& c :
+       {Case{"true", "true poses", &truth, false, true, false, true},
+        Case{"drift", "drift, no loop closure", &drifted, false, true, false, true},
+        Case{"loop", "drift, loop closure", &drifted, true, true, false, true},
+        Case{"loop-rebuild", "drift, LC, all rebuilt", &drifted, true, true, false, false},
+        Case{"loop-seeded", "drift, LC, seeded", &drifted, true, true, true, false},
+        Case{"loop-unrefined", "drift, LC, unrefined", &drifted, true, false, false, false}}) {
     if (!absl::StrContains(absl::StrCat(",", flags.cases, ","), absl::StrCat(",", c.key, ","))) {
       continue;
     }
-    absl::StatusOr<RunResult> r = RunKeyframes(*data, indices, *c.poses, truth, c.loop_closure,
-                                               c.refine_rebuild, flags, held_out);
+    absl::StatusOr<RunResult> r =
+        RunKeyframes(*data, indices, *c.poses, truth, c.loop_closure, c.refine_rebuild,
+                     c.keep_unmoved, c.in_place, flags, held_out);
     if (!r.ok()) {
       std::fprintf(stderr, "%s: %s\n", c.name, r.status().ToString().c_str());
       return 1;
@@ -232,10 +253,14 @@ int TwoLapLoop(const Flags& flags) {
     std::fflush(stdout);
     if (c.loop_closure) {
       std::printf("  loop closure: %d keyframes checked, %d proposed, %d verified, %d rejected, "
-                  "last solve %.1f ms moving keyframes up to %.1f cm\n",
+                  "last solve %.1f ms moving keyframes up to %.1f cm; %d of the corrections "
+                  "in place; last rebuild: %d keyframes moved, %lld bricks kept, %lld dropped\n",
                   r->progress.loops.checked, r->progress.loops.proposed,
                   r->progress.loops.verified, r->progress.loops.rejected,
-                  r->progress.loops.last_solve_ms, 100 * r->progress.loops.last_shift_m);
+                  r->progress.loops.last_solve_ms, 100 * r->progress.loops.last_shift_m,
+                  r->progress.loops.in_place, r->progress.loops.last_moved_keyframes,
+                  static_cast<long long>(r->progress.loops.last_kept_bricks),
+                  static_cast<long long>(r->progress.loops.last_dropped_bricks));
     }
   }
   return 0;
@@ -344,6 +369,7 @@ int main(int argc, char** argv) {
     else if (flag == "--iterations") flags.iterations = std::atoi(value);
     else if (flag == "--yaw-drift-deg") flags.yaw_drift_deg = std::atof(value);
     else if (flag == "--creep-cm") flags.creep_cm = std::atof(value);
+    else if (flag == "--drift-from") flags.drift_from = std::atof(value);
     else if (flag == "--cases") flags.cases = value;
     else {
       std::fprintf(stderr, "unknown flag %s\n", flag.c_str());

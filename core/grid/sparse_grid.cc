@@ -214,6 +214,23 @@ SparseGrid SparseGrid::ShareCopy() const {
   return copy;
 }
 
+SparseGrid SparseGrid::ShareSubset(absl::Span<const uint8_t> keep) const {
+  SparseGrid subset(voxel_size_);
+  subset.index_min_ = index_min_;
+  subset.index_dims_ = index_dims_;
+  for (int64_t slot = 0; slot < num_bricks() && slot < static_cast<int64_t>(keep.size());
+       ++slot) {
+    if (keep[slot] == 0) continue;
+    subset.brick_coords_.push_back(brick_coords_[slot]);
+    subset.bricks_.push_back(bricks_[slot]);
+    subset.density_table_.push_back(density_table_[slot]);
+    subset.sh_table_.push_back(sh_table_[slot]);
+  }
+  subset.brick_shared_.assign(subset.bricks_.size(), 1);
+  subset.RebuildIndex();
+  return subset;
+}
+
 SparseGrid SparseGrid::Publish() {
   std::fill(brick_shared_.begin(), brick_shared_.end(), uint8_t{1});
   return ShareCopy();

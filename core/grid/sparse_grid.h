@@ -162,6 +162,11 @@ class SparseGrid {
   // written any more (a published version), e.g. to continue mapping it.
   SparseGrid Publish();
   SparseGrid ShareCopy() const;
+  // A grid of the bricks whose flag in `keep` [num_bricks] is non-zero, sharing them (as
+  // ShareCopy) in slot order, over the same index bounds (so it renders as this grid would
+  // without the others). Its occupancy is stale. Like ShareCopy, for a grid not written any
+  // more.
+  SparseGrid ShareSubset(absl::Span<const uint8_t> keep) const;
   // Clones every shared brick whose flag in `brick_flags` [num_bricks] is non-zero, so kernels
   // may write it; returns how many were cloned. With `max_clones` >= 0 at most that many are
   // cloned and the slots of the flagged bricks still shared are appended to `still_shared`.

@@ -73,7 +73,7 @@ MappingSession::MappingSession(const MappingSessionOptions& options,
     : options_(options), mapper_(std::move(mapper)) {}
 
 absl::Status MappingSession::AddKeyframe(RgbdFrame frame, const SE3& world_T_camera,
-                                         const PinholeIntrinsics& k) {
+                                         const PinholeIntrinsics& k, bool earns_iterations) {
   if (frame.color.width != k.width || frame.color.height != k.height ||
       frame.depth.width != k.width || frame.depth.height != k.height ||
       frame.color.channels != 3 || frame.depth.channels != 1) {
@@ -84,7 +84,7 @@ absl::Status MappingSession::AddKeyframe(RgbdFrame frame, const SE3& world_T_cam
   }
   PLX_RETURN_IF_ERROR(CheckPoseInsideWorld(world_T_camera, "keyframe pose"));
   std::lock_guard<std::mutex> lock(mutex_);
-  pending_.push_back(PendingKeyframe{std::move(frame), world_T_camera, k});
+  pending_.push_back(PendingKeyframe{std::move(frame), world_T_camera, k, earns_iterations});
   ++added_;
   return absl::OkStatus();
 }
@@ -95,7 +95,19 @@ int MappingSession::pending_keyframes() const {
 }
 
 bool MappingSession::BudgetLeft() const {
-  return integrated_ > 0 && mapper_->training_set().num_rays() > 0 && !mapper_->budget_spent();
+  // Mapper::budget_spent reads a zero budget as "no limit": here it is none.
+  return integrated_ > 0 && Budget() > 0 && mapper_->training_set().num_rays() > 0 &&
+         !mapper_->budget_spent();
+}
+
+int MappingSession::Budget() const {
+  return options_.iterations_per_keyframe * earning_integrated_ + granted_iterations_;
+}
+
+void MappingSession::GrantIterations(int iterations) {
+  if (iterations <= 0) return;
+  granted_iterations_ += iterations;
+  mapper_->set_max_iterations(Budget());
 }
 
 bool MappingSession::has_work() const {
@@ -119,6 +131,7 @@ absl::StatusOr<MappingStepResult> MappingSession::Step(bool finish) {
       }
     }
     if (next) {
+      integrating_earns_ = next->earns_iterations;
       PLX_RETURN_IF_ERROR(
           mapper_->AddKeyframe(std::move(next->frame), next->world_T_camera, next->intrinsics));
     }
@@ -164,9 +177,10 @@ absl::Status MappingSession::IntegrateSlice(double max_seconds, MappingStepResul
   result->integrate_s += NowSeconds() - start;
   if (!done) return absl::OkStatus();
   ++integrated_;
+  if (integrating_earns_) ++earning_integrated_;
   ++keyframes_since_publish_;
   changed_since_publish_ = true;
-  mapper_->set_max_iterations(options_.iterations_per_keyframe * integrated_);
+  mapper_->set_max_iterations(Budget());
   result->keyframes_integrated = 1;
   chunk_before_next_keyframe_ = true;
   return absl::OkStatus();
@@ -211,7 +225,7 @@ MappingSessionProgress MappingSession::progress() const {
   }
   p.keyframes_integrated = integrated_;
   p.iterations = mapper_->iterations_done();
-  p.iteration_budget = options_.iterations_per_keyframe * integrated_;
+  p.iteration_budget = Budget();
   p.fraction = p.iteration_budget > 0
                    ? std::min(1.0, static_cast<double>(p.iterations) / p.iteration_budget)
                    : 0.0;

@@ -73,7 +73,8 @@ struct MappingSessionProgress {
   int keyframes_added = 0;       // AddKeyframe calls accepted
   int keyframes_integrated = 0;  // allocated and initialised in the map, every slice done
   int iterations = 0;
-  int iteration_budget = 0;      // iterations_per_keyframe * keyframes integrated
+  // iterations_per_keyframe * keyframes integrated that earn, plus GrantIterations'
+  int iteration_budget = 0;
   double fraction = 0.0;         // iterations / budget, capped at 1
   double schedule = 0.0;         // learning-rate schedule position (never decreases)
   // The last optimisation chunk's last batch: its PSNR, depth L1 and opacity (its iteration
@@ -94,9 +95,11 @@ class MappingSession {
       const MappingSessionOptions& options, Backend* backend,
       std::shared_ptr<const PlenoxelMap> base);
 
-  // Queues a keyframe (thread-safe; checked now, integrated by a later Step).
+  // Queues a keyframe (thread-safe; checked now, integrated by a later Step). Without
+  // `earns_iterations` it is fused and trained on but adds nothing to the iteration budget: a
+  // keyframe the map already fits (a loop correction's rebuild that kept what it saw).
   absl::Status AddKeyframe(RgbdFrame frame, const SE3& world_T_camera,
-                           const PinholeIntrinsics& intrinsics);
+                           const PinholeIntrinsics& intrinsics, bool earns_iterations = true);
   int pending_keyframes() const;
 
   // True while a Step would do something: a keyframe is being integrated, keyframes are queued
@@ -120,6 +123,9 @@ class MappingSession {
   // Moves integrated keyframe i to a refined pose; the next version publishes the change
   // (step-runner thread only).
   absl::Status SetKeyframePose(int i, const SE3& world_T_camera);
+  // Adds `iterations` to the budget beyond what the keyframes earned (keyframes moved after
+  // their iterations, which the map must fit again). Step-runner thread only.
+  void GrantIterations(int iterations);
 
   MappingSessionProgress progress() const;
   // The latest published version (null before the first publish).
@@ -130,10 +136,12 @@ class MappingSession {
     RgbdFrame frame;
     SE3 world_T_camera;
     PinholeIntrinsics intrinsics;
+    bool earns_iterations = true;
   };
 
   MappingSession(const MappingSessionOptions& options, std::unique_ptr<Mapper> mapper);
   bool BudgetLeft() const;
+  int Budget() const;  // what progress().iteration_budget reports
   // Mapper::IntegrateSlice, counting the keyframe once its integration completes.
   absl::Status IntegrateSlice(double max_seconds, MappingStepResult* result);
   absl::Status PublishInto(MappingStepResult* result);
@@ -146,6 +154,9 @@ class MappingSession {
   int added_ = 0;                        // guarded by mutex_
 
   int integrated_ = 0;
+  int earning_integrated_ = 0;     // of them, those that earn iterations
+  int granted_iterations_ = 0;     // GrantIterations' sum
+  bool integrating_earns_ = true;  // the keyframe being integrated earns iterations
   bool chunk_before_next_keyframe_ = false;  // the last step completed an integration
   MappingProgress last_;
   std::shared_ptr<const PlenoxelMap> latest_;

@@ -23,13 +23,22 @@ absl::Status ValidateKeyframeRefinementOptions(const KeyframeRefinementOptions& 
 absl::StatusOr<KeyframeRefinementResult> RefineKeyframePoses(
     MappingSession& session, const PlenoxelMap& map, Backend& backend,
     const KeyframeRefinementOptions& options) {
+  const int n = session.keyframes().num_frames();
+  std::vector<int> window;
+  for (int i = std::max(1, n - options.window); i < n; ++i) window.push_back(i);
+  return RefineKeyframeList(session, map, backend, options, window);
+}
+
+absl::StatusOr<KeyframeRefinementResult> RefineKeyframeList(
+    MappingSession& session, const PlenoxelMap& map, Backend& backend,
+    const KeyframeRefinementOptions& options, const std::vector<int>& indices) {
   KeyframeRefinementResult result;
   const TrainingSet& keyframes = session.keyframes();
   const int n = keyframes.num_frames();
-  const int first = std::max(1, n - options.window);
   TrackerOptions tracker_options = options.tracker;
   tracker_options.constant_velocity = false;  // each keyframe starts from its own pose
-  for (int i = first; i < n; ++i) {
+  for (const int i : indices) {
+    if (i < 1 || i >= n) continue;
     const SE3 pose = keyframes.pose(i);
     const RgbdFrame& frame = keyframes.frame(i);
     Tracker tracker(&map, &backend, tracker_options);

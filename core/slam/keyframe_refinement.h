@@ -6,6 +6,8 @@
 // stays fixed: it anchors the map's frame (the gauge).
 #pragma once
 
+#include <vector>
+
 #include "absl/status/statusor.h"
 #include "core/grid/plenoxel_map.h"
 #include "core/kernels/backend.h"
@@ -35,5 +37,11 @@ struct KeyframeRefinementResult {
 absl::StatusOr<KeyframeRefinementResult> RefineKeyframePoses(
     MappingSession& session, const PlenoxelMap& map, Backend& backend,
     const KeyframeRefinementOptions& options);
+
+// The same for the keyframes `indices` (keyframe 0, the gauge, is skipped; options.window is
+// not read).
+absl::StatusOr<KeyframeRefinementResult> RefineKeyframeList(
+    MappingSession& session, const PlenoxelMap& map, Backend& backend,
+    const KeyframeRefinementOptions& options, const std::vector<int>& indices);
 
 }  // namespace plx

@@ -1,6 +1,7 @@
 #include "core/slam/slam_coordinator.h"
 
 #include <algorithm>
+#include <cmath>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -383,6 +384,24 @@ absl::Status SlamCoordinator::CorrectAndRebuild(SlamMapper* mapper) {
   solve->max_shift_m = correction.max_shift_m;
   solve->solve_ms = correction.solve_seconds * 1e3;
   solve->loops = static_cast<int>(kept.size());
+  // How far each keyframe's surface moves: a correction within in_place_max_shift_m is
+  // applied in the running map, as refinement applies its own, instead of rebuilding it.
+  const TrainingSet& set = mapper->integrated_keyframes();
+  double largest = 0.0;
+  int moved = 0;
+  if (correction.significant && set.num_frames() == static_cast<int>(poses.size())) {
+    const double tolerance = mapper_options_.rebuild_seed.moved_tolerance_voxels *
+                             mapper_options_.mapping.mapper.voxel_size;
+    for (int i = 0; i < set.num_frames(); ++i) {
+      const double shift = KeyframeSurfaceShift(
+          set.frame(i).depth, set.intrinsics(i), poses[i], correction.poses[i],
+          mapper_options_.rebuild_seed.pixel_stride,
+          mapper_options_.mapping.mapper.allocation.max_depth);
+      largest = std::max(largest, shift);
+      moved += shift > tolerance;
+    }
+  }
+  const bool in_place = largest <= mapper_options_.in_place_max_shift_m;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     loop_counts_.rejected += static_cast<int>(correction.rejected_loops.size());
@@ -398,23 +417,36 @@ absl::Status SlamCoordinator::CorrectAndRebuild(SlamMapper* mapper) {
     }
     main.loops = std::move(kept);
     if (!correction.significant) return absl::OkStatus();
-    main.rebuild_collecting = true;
-    main.rebuild_solve = solve;
-    main.rebuilt_at = static_cast<int>(poses.size());
-    loop_counts_.rebuilding = true;
+    if (!in_place) {
+      main.rebuild_collecting = true;
+      main.rebuild_solve = solve;
+      main.rebuilt_at = static_cast<int>(poses.size());
+      loop_counts_.rebuilding = true;
+    }
   }
+  if (in_place) return CorrectInPlace(mapper, *solve, moved);
   // Filled outside the lock (copies of every keyframe's images): cameras go on meanwhile and
   // their keyframes wait in the backlog.
+  absl::StatusOr<RebuildSeed> seed = SeedFor(mapper, poses, correction.poses);
   absl::StatusOr<std::unique_ptr<SlamMapper>> rebuild =
-      SlamMapper::Create(mapper_options_, backend_, base_);
-  const TrainingSet& set = mapper->integrated_keyframes();
+      seed.ok() ? SlamMapper::Create(mapper_options_, backend_,
+                                     seed->map != nullptr ? seed->map : base_)
+                : absl::StatusOr<std::unique_ptr<SlamMapper>>(seed.status());
   for (int i = 0; rebuild.ok() && i < set.num_frames(); ++i) {
+    const bool earns = seed->moved.empty() || seed->moved[i] != 0;
     absl::Status added = (*rebuild)->AddKeyframe(set.frame(i), correction.poses[i],
-                                                 set.intrinsics(i));
+                                                 set.intrinsics(i), earns);
     if (!added.ok()) rebuild = added;
   }
   std::lock_guard<std::mutex> lock(mutex_);
   main.rebuild_collecting = false;
+  if (seed.ok()) {
+    main.rebuild_moved = seed->moved;
+    loop_counts_.last_moved_keyframes =
+        seed->moved.empty() ? set.num_frames() : seed->moved_keyframes;
+    loop_counts_.last_kept_bricks = seed->kept_bricks;
+    loop_counts_.last_dropped_bricks = seed->dropped_bricks;
+  }
   absl::Status status = rebuild.status();
   for (const EarlyKeyframe& k : main.rebuild_backlog) {
     if (!status.ok()) break;
@@ -431,6 +463,62 @@ absl::Status SlamCoordinator::CorrectAndRebuild(SlamMapper* mapper) {
   return absl::OkStatus();
 }
 
+absl::Status SlamCoordinator::CorrectInPlace(SlamMapper* mapper, const SlamCorrection& solve,
+                                             int moved) {
+  Segment& main = *segments_[0];
+  const double extra = mapper_options_.rebuild_iteration_share *
+                       mapper_options_.mapping.iterations_per_keyframe * moved;
+  PLX_RETURN_IF_ERROR(mapper->MoveKeyframes(solve.after, static_cast<int>(std::lround(extra))));
+  // Published now, so the correction reaches cameras with the version it belongs to; the
+  // granted iterations fit the map to the moved keyframes in the versions after it.
+  PLX_RETURN_IF_ERROR(mapper->PublishIfChanged());
+  const SlamMapVersion latest = mapper->latest();
+  SetPublishedKeyframes(*mapper);
+  int64_t number = latest.version + main.version_offset;
+  if (publisher_) {
+    PLX_ASSIGN_OR_RETURN(number, publisher_(latest.map, 0));
+  }
+  const SlamMapperProgress p = mapper->progress();
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto correction = std::make_shared<SlamCorrection>(solve);
+  correction->generation = main.correction != nullptr ? main.correction->generation + 1 : 1;
+  correction->map_version = number;
+  correction->after = mapper->all_keyframe_poses();
+  main.correction = std::move(correction);
+  main.published = {latest.map, number};
+  main.version_offset = number - latest.version;
+  main.handed_mapper_version = latest.version;
+  main.integrated_at_publish = p.keyframes_integrated;
+  main.has_work = mapper->has_work();
+  const int keyframes = main.progress.keyframes;
+  main.progress = p;
+  main.progress.keyframes = keyframes;
+  main.progress.pending_keyframes = keyframes - p.keyframes_integrated;
+  main.progress.map_version = number;
+  main.progress.idle = IdleLocked(main);
+  ++loop_counts_.corrections;
+  ++loop_counts_.in_place;
+  return absl::OkStatus();
+}
+
+absl::StatusOr<RebuildSeed> SlamCoordinator::SeedFor(SlamMapper* mapper,
+                                                     const std::vector<SE3>& before,
+                                                     const std::vector<SE3>& after) {
+  if (!mapper_options_.rebuild_keeps_unmoved) {
+    RebuildSeed none;  // from the base map, every keyframe earning
+    none.dropped_bricks = mapper->latest().map != nullptr
+                              ? mapper->latest().map->grid.num_bricks() : 0;
+    return none;
+  }
+  // The seed is the old map as it is now: every integrated keyframe's bricks are in it.
+  PLX_RETURN_IF_ERROR(mapper->PublishIfChanged());
+  const std::shared_ptr<const PlenoxelMap> old = mapper->latest().map;
+  if (old == nullptr) return RebuildSeed{};
+  return SeedRebuild(*old, mapper->integrated_keyframes(), before, after,
+                     mapper_options_.mapping.mapper.allocation, mapper_options_.rebuild_seed,
+                     *backend_);
+}
+
 absl::StatusOr<SlamStepResult> SlamCoordinator::StepRebuild() {
   Segment& main = *segments_[0];
   SlamMapper* rebuild = nullptr;
@@ -444,8 +532,7 @@ absl::StatusOr<SlamStepResult> SlamCoordinator::StepRebuild() {
     out.stepped = true;
   }
   const SlamMapperProgress p = rebuild->progress();
-  const double budget = static_cast<double>(mapper_options_.mapping.iterations_per_keyframe) *
-                        p.keyframes_integrated;
+  const double budget = p.iteration_budget;
   // Ready once every keyframe is in and it has had its share of the iterations (the rest
   // after the swap); finishing steps it until then too.
   const bool trained = !rebuild->has_work() ||
@@ -453,7 +540,11 @@ absl::StatusOr<SlamStepResult> SlamCoordinator::StepRebuild() {
   if (p.pending_keyframes == 0 && trained) {
     if (mapper_options_.rebuild_refines_all && !main.rebuild_refined) {
       // One bounded step of its own: the swap is the next one, with the refined poses.
-      PLX_RETURN_IF_ERROR(rebuild->RefineAllKeyframes().status());
+      // The keyframes the solve moved, and those that reached the rebuild after it (moved by
+      // it too); every one for a rebuild from nothing.
+      std::vector<uint8_t> refine = main.rebuild_moved;
+      if (!refine.empty()) refine.resize(static_cast<size_t>(p.keyframes_integrated), 1);
+      PLX_RETURN_IF_ERROR(rebuild->RefineAllKeyframes(refine).status());
       main.rebuild_refined = true;
       out.stepped = true;
       return out;

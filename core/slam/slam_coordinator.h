@@ -31,7 +31,9 @@
 //     rebuild_iteration_share of its budget it replaces the main mapper and its map is
 //     published as one version with a SlamCorrection (View().correction): cameras move with
 //     it before their next frame, and a keyframe tracked in the old frame is moved into the
-//     new one when it is accepted.
+//     new one when it is accepted. A solve whose surfaces move no further than
+//     in_place_max_shift_m is applied in the running map instead (CorrectInPlace): no rebuild,
+//     the same SlamCorrection, published at once.
 //   - a base map's saved keyframes (SeedSavedKeyframes: a map file's, or the daemon's previous
 //     job's): the main map's keyframe list starts with them, and every published version
 //     carries the list a map file keeps (published_keyframes).
@@ -225,6 +227,9 @@ class SlamCoordinator {
     int rebuilt_at = -1;           // the keyframes when the last rebuild started
     bool step_rebuild_next = false;
     bool rebuild_refined = false;  // the rebuild's keyframes were aligned to it (once)
+    // Per keyframe of the rebuild's solve: 1 = the solve moved it (the rebuild refines those);
+    // empty: a rebuild from nothing, which refines every keyframe.
+    std::vector<uint8_t> rebuild_moved;
     // Guarded by the coordinator's lock (written by the step-runner):
     std::vector<LoopEdge> loops;   // verified and not rejected, in keyframe indices
     std::unique_ptr<SlamMapper> rebuild;  // the map at corrected poses, being built
@@ -258,6 +263,15 @@ class SlamCoordinator {
   absl::Status CloseLoops(SlamStepMode mode);
   // Solves the graph and starts the rebuild (the main mapper has nothing pending).
   absl::Status CorrectAndRebuild(SlamMapper* mapper);
+  // Applies a correction in the running map (SlamMapperOptions::in_place_max_shift_m): moves
+  // the keyframes, grants iterations for the `moved` ones and publishes the map with the
+  // correction. Step-runner.
+  absl::Status CorrectInPlace(SlamMapper* mapper, const SlamCorrection& solve, int moved);
+  // What a rebuild from `before` to `after` starts from (SlamMapperOptions::
+  // rebuild_keeps_unmoved): the old map without what moved, or nothing (an empty seed).
+  // Step-runner.
+  absl::StatusOr<RebuildSeed> SeedFor(SlamMapper* mapper, const std::vector<SE3>& before,
+                                      const std::vector<SE3>& after);
   // One step of the rebuild; once it is ready, swaps it in and publishes it.
   absl::StatusOr<SlamStepResult> StepRebuild();
   absl::StatusOr<SlamStepResult> SwapInRebuild();

@@ -1,5 +1,6 @@
 #include "core/slam/slam_mapper.h"
 
+#include <cmath>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -13,6 +14,10 @@ absl::Status ValidateSlamMapperOptions(const SlamMapperOptions& options) {
   if (!(options.rebuild_iteration_share >= 0.0 && options.rebuild_iteration_share <= 1.0)) {
     return absl::InvalidArgumentError("rebuild_iteration_share must be in [0, 1]");
   }
+  if (!(options.in_place_max_shift_m >= 0.0) || !std::isfinite(options.in_place_max_shift_m)) {
+    return absl::InvalidArgumentError("in_place_max_shift_m must be a non-negative distance");
+  }
+  PLX_RETURN_IF_ERROR(ValidateRebuildSeedOptions(options.rebuild_seed));
   return ValidateKeyframeRefinementOptions(options.refinement);
 }
 
@@ -44,13 +49,13 @@ absl::StatusOr<std::unique_ptr<SlamMapper>> SlamMapper::Create(
 }
 
 absl::Status SlamMapper::AddKeyframe(const RgbdFrame& frame, const SE3& pose,
-                                     const PinholeIntrinsics& k) {
+                                     const PinholeIntrinsics& k, bool earns_iterations) {
   RgbdFrame keyframe = frame;
   keyframe.ground_truth.reset();  // SLAM never reads it; keep it out of the map's inputs
   const int64_t bytes = SlamKeyframeBytes(keyframe);
   // Under the lock, so keyframe i of the mapping session is accepted_[i] whichever cameras add.
   std::lock_guard<std::mutex> lock(mutex_);
-  PLX_RETURN_IF_ERROR(mapping_->AddKeyframe(std::move(keyframe), pose, k));
+  PLX_RETURN_IF_ERROR(mapping_->AddKeyframe(std::move(keyframe), pose, k, earns_iterations));
   accepted_.push_back({frame.timestamp, pose});
   ++progress_.keyframes;
   ++progress_.pending_keyframes;
@@ -103,6 +108,7 @@ absl::Status SlamMapper::AfterStep(std::shared_ptr<const PlenoxelMap> published)
   progress_.keyframes_integrated = p.keyframes_integrated;
   progress_.pending_keyframes = progress_.keyframes - p.keyframes_integrated;
   progress_.mapping_iterations = p.iterations;
+  progress_.iteration_budget = p.iteration_budget;
   progress_.map_version = latest_.version;
   progress_.map_bytes = p.map_bytes;
   progress_.last_publish_s = p.last_publish_s;
@@ -110,20 +116,35 @@ absl::Status SlamMapper::AfterStep(std::shared_ptr<const PlenoxelMap> published)
   return absl::OkStatus();
 }
 
-absl::StatusOr<KeyframeRefinementResult> SlamMapper::RefineAllKeyframes() {
+absl::StatusOr<KeyframeRefinementResult> SlamMapper::RefineAllKeyframes(
+    const std::vector<uint8_t>& only) {
   PLX_RETURN_IF_ERROR(PublishIfChanged());
   const std::shared_ptr<const PlenoxelMap> map = latest().map;
   if (map == nullptr) return KeyframeRefinementResult{};
-  KeyframeRefinementOptions all = options_.refinement;
-  all.window = mapping_->keyframes().num_frames();
-  PLX_ASSIGN_OR_RETURN(KeyframeRefinementResult r,
-                       RefineKeyframePoses(*mapping_, *map, *backend_, all));
+  std::vector<int> which;
+  for (int i = 0; i < mapping_->keyframes().num_frames(); ++i) {
+    if (only.empty() || (i < static_cast<int>(only.size()) && only[i] != 0)) which.push_back(i);
+  }
+  PLX_ASSIGN_OR_RETURN(
+      KeyframeRefinementResult r,
+      RefineKeyframeList(*mapping_, *map, *backend_, options_.refinement, which));
   {
     std::lock_guard<std::mutex> lock(mutex_);
     progress_.refined_keyframes += r.refined;
   }
   PLX_RETURN_IF_ERROR(AfterStep(nullptr));  // the refined poses
   return r;
+}
+
+absl::Status SlamMapper::MoveKeyframes(const std::vector<SE3>& poses, int extra_iterations) {
+  const int n = mapping_->keyframes().num_frames();
+  if (static_cast<int>(poses.size()) != n) {
+    return absl::InvalidArgumentError(absl::StrCat("moving ", n, " keyframes needs ", n,
+                                                   " poses, got ", poses.size()));
+  }
+  for (int i = 0; i < n; ++i) PLX_RETURN_IF_ERROR(mapping_->SetKeyframePose(i, poses[i]));
+  mapping_->GrantIterations(extra_iterations);
+  return AfterStep(nullptr);
 }
 
 SlamMapVersion SlamMapper::latest() const {

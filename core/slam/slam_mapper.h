@@ -28,6 +28,7 @@
 #include "core/mapping/mapping_session.h"
 #include "core/slam/keyframe_refinement.h"
 #include "core/slam/loop_closure.h"
+#include "core/slam/rebuild_seed.h"
 
 namespace plx {
 
@@ -45,6 +46,21 @@ struct SlamMapperOptions {
   // noise model says, while the images tell where each keyframe really was (docs/SLAM.md,
   // "Loop closure").
   bool rebuild_refines_all = true;
+  // A correction that moves no keyframe's surface points further than this (metres) is not
+  // rebuilt but applied in place, as refinement applies its own (up to
+  // refinement.max_translation_m, the same 5 cm): the keyframes move in the running map, the
+  // ones that moved more than rebuild_seed's tolerance earn rebuild_iteration_share of their
+  // iterations again to fit the map to them, and the map is published at once with the
+  // correction. A larger one, whose surfaces land outside what was fitted, rebuilds the map.
+  // 0: every correction rebuilds.
+  double in_place_max_shift_m = 0.05;
+  // A rebuild starts from the old map without what the keyframes the solve moved saw, and only
+  // those keyframes earn iterations and are refined (core/slam/rebuild_seed.h). Off: on the
+  // two-lap loop the graph moves nearly every keyframe, so it saved 5-7 % of the time for
+  // 11-18 % more depth L1 (docs/BENCHMARKS.md, "Loop closure"). False: from nothing, every
+  // keyframe earning.
+  bool rebuild_keeps_unmoved = false;
+  RebuildSeedOptions rebuild_seed;
 };
 
 absl::Status ValidateSlamMapperOptions(const SlamMapperOptions& options);
@@ -62,11 +78,17 @@ struct SlamLoopCounts {
   int verified = 0;     // of them, passed the features' and the dense check
   int rejected = 0;     // failed a check, or the pose graph's
   int accepted = 0;     // loop edges in the pose graph now
-  int corrections = 0;  // corrected maps published (rebuilds swapped in)
+  int corrections = 0;  // corrected maps published (rebuilds swapped in, or in place)
+  int in_place = 0;     // of them, applied in the running map without a rebuild
   int rebuilds_abandoned = 0;  // a drain (the daemon's shutdown) came first
   bool rebuilding = false;     // a map at corrected poses is being built
   double last_solve_ms = 0.0;  // the last pose-graph solve
   double last_shift_m = 0.0;   // the largest keyframe move it made
+  // The last rebuild's seed: keyframes the solve moved (fused and trained again) and bricks of
+  // the old map it kept and dropped (all dropped for a rebuild from nothing).
+  int last_moved_keyframes = 0;
+  int64_t last_kept_bricks = 0;
+  int64_t last_dropped_bricks = 0;
 };
 
 struct SlamMapperProgress {
@@ -74,6 +96,7 @@ struct SlamMapperProgress {
   int keyframes_integrated = 0;   // allocated and initialised in the map
   int pending_keyframes = 0;      // accepted, not yet integrated (mapping lag)
   int mapping_iterations = 0;
+  int iteration_budget = 0;       // what the integrated keyframes earned (MappingSession)
   int refined_keyframes = 0;      // pose updates applied by refinement
   int64_t map_version = 0;
   int64_t map_bytes = 0;
@@ -98,7 +121,10 @@ class SlamMapper {
       std::shared_ptr<const PlenoxelMap> base = nullptr);
 
   // Queues a keyframe at `pose` (any thread): it is checked now and integrated by a later step.
-  absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k);
+  // Without `earns_iterations` it adds nothing to the iteration budget
+  // (MappingSession::AddKeyframe).
+  absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k,
+                           bool earns_iterations = true);
 
   // One bounded step (MappingSession::Step): a slice of one keyframe's integration or one chunk
   // of iterations, publishes a version when one is due and, once the new keyframes have had their
@@ -111,8 +137,12 @@ class SlamMapper {
   absl::Status PublishIfChanged();
   // Aligns every keyframe but the first to the newest published version (refinement's
   // tracker and limits, whatever its window) and moves it; the next steps fit the map to the
-  // new poses. Step-runner.
-  absl::StatusOr<KeyframeRefinementResult> RefineAllKeyframes();
+  // new poses. With `only` [keyframes], just those flagged. Step-runner.
+  absl::StatusOr<KeyframeRefinementResult> RefineAllKeyframes(
+      const std::vector<uint8_t>& only = {});
+  // Moves every integrated keyframe to `poses` (one each) and grants the map `extra_iterations`
+  // to fit them (a correction applied in place). Step-runner.
+  absl::Status MoveKeyframes(const std::vector<SE3>& poses, int extra_iterations);
   // True while a step would do something (keyframes queued or iteration budget left).
   // Step-runner thread.
   bool has_work() const;

@@ -55,6 +55,40 @@ TEST(SparseGridTest, ViewMapsWorldVerticesToSlots) {
   EXPECT_EQ(slot, local);
 }
 
+TEST(SparseGridTest, ASubsetSharesTheKeptBricksAndDropsTheOthers) {
+  SparseGrid grid(0.05f);
+  ASSERT_TRUE(grid.AllocateBricks(std::vector<BrickCoord>{{0, 0, 0}, {1, 0, 0}, {5, -2, 3}},
+                                  0.25f).ok());
+  grid.mutable_brick_density(2)[9] = 4.0f;
+  grid.mutable_brick_sh(2)[30] = -1.5f;
+  SparseGrid source = grid.Publish();  // as a published version is: no longer written
+  const std::vector<uint8_t> keep = {1, 0, 1};
+  SparseGrid subset = source.ShareSubset(keep);
+  ASSERT_EQ(subset.num_bricks(), 2);
+  EXPECT_EQ(subset.FindBrick({0, 0, 0}), 0);
+  EXPECT_EQ(subset.FindBrick({1, 0, 0}), -1);
+  EXPECT_EQ(subset.FindBrick({5, -2, 3}), 1);
+  EXPECT_EQ(subset.index_min(), source.index_min());
+  EXPECT_EQ(subset.index_dims(), source.index_dims());
+  EXPECT_TRUE(subset.occupancy_stale());
+  // Shared, not copied: the same storage until the subset writes.
+  EXPECT_EQ(subset.brick_density(1), source.brick_density(2));
+  EXPECT_FLOAT_EQ(subset.brick_density(1)[9], 4.0f);
+  EXPECT_FLOAT_EQ(subset.brick_sh(1)[30], -1.5f);
+  subset.mutable_brick_density(1)[9] = 7.0f;  // clones first
+  EXPECT_NE(subset.brick_density(1), source.brick_density(2));
+  EXPECT_FLOAT_EQ(source.brick_density(2)[9], 4.0f);
+  EXPECT_FLOAT_EQ(subset.brick_sh(1)[30], -1.5f);
+  // Its view finds the kept brick's vertices where the source's does.
+  const GridView view = subset.view();
+  const auto p = subset.VertexPosition(1, 9);
+  const Vec3f q = view.ToGrid(Vec3f{p[0], p[1], p[2]});
+  EXPECT_EQ(view.VertexSlot(static_cast<int>(std::lround(q.x)),
+                            static_cast<int>(std::lround(q.y)),
+                            static_cast<int>(std::lround(q.z))),
+            512 + 9);
+}
+
 TEST(SparseGridTest, BlocksBeforeAStoredBrickAreActive) {
   SparseGrid grid(0.1f);
   ASSERT_TRUE(grid.AllocateBricks(std::vector<BrickCoord>{{0, 0, 0}}).ok());

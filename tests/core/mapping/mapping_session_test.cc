@@ -162,6 +162,33 @@ TEST_F(MappingSessionTest, EachKeyframeEarnsItsBudgetAndTheLastVersionIsPublishe
   EXPECT_GT(metrics->psnr, 26.0) << "measured " << metrics->psnr;
 }
 
+TEST_F(MappingSessionTest, OnlyKeyframesThatEarnIterationsAddToTheBudget) {
+  const MappingSessionOptions o = Options();
+  auto session = MappingSession::Create(o, backend_.get(), nullptr);
+  ASSERT_TRUE(session.ok()) << session.status();
+  const PinholeIntrinsics& k = dataset_->calibration().pinhole;
+  for (int f : {0, 10}) {
+    const RgbdFrame& frame = dataset_->frames()[f];
+    ASSERT_TRUE((*session)->AddKeyframe(frame, *frame.ground_truth, k, false).ok());
+  }
+  // Fused, but with nothing earned there is nothing to optimise (a zero budget is not "no
+  // limit").
+  RunToEnd(**session, o);
+  MappingSessionProgress p = (*session)->progress();
+  EXPECT_EQ(p.keyframes_integrated, 2);
+  EXPECT_EQ(p.iteration_budget, 0);
+  EXPECT_EQ(p.iterations, 0);
+  ASSERT_NE((*session)->latest(), nullptr);
+  EXPECT_GT((*session)->latest()->grid.num_bricks(), 0);
+
+  ASSERT_TRUE(AddKeyframe(**session, 20).ok());
+  RunToEnd(**session, o);
+  p = (*session)->progress();
+  EXPECT_EQ(p.keyframes_integrated, 3);
+  EXPECT_EQ(p.iteration_budget, o.iterations_per_keyframe);
+  EXPECT_EQ(p.iterations, o.iterations_per_keyframe);
+}
+
 TEST_F(MappingSessionTest, PublishedVersionsNeverChangeAndShareUnchangedBricks) {
   const MappingSessionOptions o = Options();
   auto session = MappingSession::Create(o, backend_.get(), nullptr);

@@ -263,6 +263,71 @@ TEST_F(LoopClosureTest, TheCoordinatorClosesTheLoopAndPublishesTheCorrectedMap) 
   EXPECT_LT((corrected.back().translation() - Truth(kKeyframes - 1).translation()).norm(), 0.05);
 }
 
+TEST_F(LoopClosureTest, ACorrectionWithinTheInPlaceLimitMovesTheRunningMapWithoutARebuild) {
+  SlamOptions o = DefaultSlamOptions();
+  o.deterministic = true;
+  o.mapping.mapper = MapperOptionsForVoxelSize(0.03f);
+  o.mapping.mapper.window_keyframes = 5;
+  o.mapping.mapper.batch_size = 1024;
+  o.mapping.iterations_per_keyframe = 2;
+  o.refinement.window = 0;
+  SlamSplitOptions split = SplitSlamOptions(o);
+  split.mapper.in_place_max_shift_m = 1.0;  // every correction of this drift is applied in place
+  std::unique_ptr<Backend> backend = MakeCpuBackend(1);
+  SlamCoordinator coordinator(split.mapper, split.gate);
+  ASSERT_TRUE(coordinator.StartMapper(backend.get()).ok());
+  // The second lap's first 15 keyframes: enough loops to correct the first lap's drift.
+  constexpr int kUsed = 46;
+  const std::vector<SE3> drifted = DriftedPoses(0.006, 0.006);
+  SE3 camera_change;
+  int generation = 0, segment = 0;
+  bool seen_rebuilding = false;
+  int64_t versions_seen = 0;
+  for (int i = 0; i < kUsed; ++i) {
+    const std::shared_ptr<const SlamCorrection> seen = coordinator.correction();
+    if (seen != nullptr && seen->generation > generation) {
+      // Published with the map version it belongs to, which readers already see.
+      EXPECT_LE(seen->map_version, coordinator.latest().version);
+      camera_change = seen->FrameChangeAt(camera_change * drifted[i - 1]) * camera_change;
+      generation = seen->generation;
+    }
+    SlamFrameResult result;
+    result.keyframe = true;
+    result.pose = camera_change * drifted[i];
+    result.features = (*features_)[i];
+    result.correction_generation = generation;
+    ASSERT_TRUE(coordinator.Accept((*frames_)[i], K(), &result, &segment).ok());
+    for (int steps = 0;; ++steps) {
+      ASSERT_LT(steps, 100000);
+      absl::StatusOr<SlamStepResult> r = coordinator.Step(SlamStepMode::kMap);
+      ASSERT_TRUE(r.ok()) << r.status();
+      seen_rebuilding = seen_rebuilding || coordinator.View().map_rebuilding;
+      EXPECT_GE(coordinator.latest().version, versions_seen);  // never back
+      versions_seen = coordinator.latest().version;
+      if (r->out_of_work) break;
+    }
+  }
+  const SlamMapperProgress p = coordinator.progress();
+  ASSERT_GE(p.loops.corrections, 1);
+  EXPECT_EQ(p.loops.in_place, p.loops.corrections);
+  EXPECT_FALSE(seen_rebuilding);
+  EXPECT_EQ(p.refined_keyframes, 0);  // no rebuild, so no rebuild's alignment
+  const std::shared_ptr<const SlamCorrection> correction = coordinator.correction();
+  ASSERT_NE(correction, nullptr);
+  EXPECT_EQ(correction->generation, p.loops.corrections);
+  // The keyframes the map holds are the corrected ones: the drift of the first lap is mostly
+  // gone (mean error a third or less of the drifted poses').
+  std::vector<SE3> corrected;
+  for (const StampedPose& kf : coordinator.keyframe_poses()) corrected.push_back(kf.pose);
+  ASSERT_EQ(corrected.size(), static_cast<size_t>(kUsed));
+  double before = 0.0, after = 0.0;
+  for (int i = 0; i < kUsed; ++i) {
+    before += (drifted[i].translation() - Truth(i).translation()).norm() / kUsed;
+    after += (corrected[i].translation() - Truth(i).translation()).norm() / kUsed;
+  }
+  EXPECT_LT(after, before / 3.0) << "before " << before << " m, after " << after << " m";
+}
+
 TEST(SlamCorrectionTest, APoseMovesWithItsNearestKeyframe) {
   SlamCorrection c;
   c.before = {SE3::Identity(), SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(2, 0, 0))};
