@@ -358,6 +358,14 @@ int main(int argc, char** argv) {
       flags.graph_only = true;
       continue;
     }
+    if (flag == "--help" || flag == "-h") {
+      std::printf("usage: %s [--width W --height H --laps N --iterations N --yaw-drift-deg D\n"
+                  "        --creep-cm C --drift-from F --graph-only --cases LIST]\n"
+                  "  LIST: any of true,drift,loop,loop-rebuild,loop-seeded,loop-unrefined\n"
+                  "  (what each prints: the comment at the top of bench/loop_closure_bench.cc)\n",
+                  argv[0]);
+      return 0;
+    }
     if (i + 1 >= argc) {
       std::fprintf(stderr, "%s needs a value\n", argv[i]);
       return 2;
