@@ -478,27 +478,33 @@ absl::Status SlamCoordinator::CorrectInPlace(SlamMapper* mapper, const SlamCorre
   if (publisher_) {
     PLX_ASSIGN_OR_RETURN(number, publisher_(latest.map, 0));
   }
-  const SlamMapperProgress p = mapper->progress();
   std::lock_guard<std::mutex> lock(mutex_);
   auto correction = std::make_shared<SlamCorrection>(solve);
   correction->generation = main.correction != nullptr ? main.correction->generation + 1 : 1;
   correction->map_version = number;
   correction->after = mapper->all_keyframe_poses();
   main.correction = std::move(correction);
+  AdoptCorrectedVersionLocked(main, *mapper, latest, number);
+  ++loop_counts_.corrections;
+  ++loop_counts_.in_place;
+  return absl::OkStatus();
+}
+
+void SlamCoordinator::AdoptCorrectedVersionLocked(Segment& main, const SlamMapper& mapper,
+                                                  const SlamMapVersion& latest,
+                                                  int64_t number) {
   main.published = {latest.map, number};
   main.version_offset = number - latest.version;
   main.handed_mapper_version = latest.version;
+  const SlamMapperProgress p = mapper.progress();
   main.integrated_at_publish = p.keyframes_integrated;
-  main.has_work = mapper->has_work();
+  main.has_work = mapper.has_work();
   const int keyframes = main.progress.keyframes;
   main.progress = p;
   main.progress.keyframes = keyframes;
   main.progress.pending_keyframes = keyframes - p.keyframes_integrated;
   main.progress.map_version = number;
   main.progress.idle = IdleLocked(main);
-  ++loop_counts_.corrections;
-  ++loop_counts_.in_place;
-  return absl::OkStatus();
 }
 
 absl::StatusOr<RebuildSeed> SlamCoordinator::SeedFor(SlamMapper* mapper,
@@ -589,18 +595,7 @@ absl::StatusOr<SlamStepResult> SlamCoordinator::SwapInRebuild() {
     old = std::move(main.mapper);
     main.mapper = std::move(main.rebuild);
     main.rebuild_solve.reset();
-    main.published = {latest.map, number};
-    main.version_offset = number - latest.version;
-    main.handed_mapper_version = latest.version;
-    const SlamMapperProgress p = main.mapper->progress();
-    main.integrated_at_publish = p.keyframes_integrated;
-    main.has_work = main.mapper->has_work();
-    const int keyframes = main.progress.keyframes;
-    main.progress = p;
-    main.progress.keyframes = keyframes;
-    main.progress.pending_keyframes = keyframes - p.keyframes_integrated;
-    main.progress.map_version = number;
-    main.progress.idle = IdleLocked(main);
+    AdoptCorrectedVersionLocked(main, *main.mapper, latest, number);
     ++loop_counts_.corrections;
     loop_counts_.rebuilding = false;
   }

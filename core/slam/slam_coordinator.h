@@ -242,6 +242,10 @@ class SlamCoordinator {
   };
 
   bool IdleLocked(const Segment& segment) const;
+  // After a correction: the main segment now serves `latest` of `mapper` as version `number`
+  // (the published map, the version numbering and the progress follow it). Under mutex_.
+  void AdoptCorrectedVersionLocked(Segment& main, const SlamMapper& mapper,
+                                   const SlamMapVersion& latest, int64_t number);
   SlamMapView ViewLocked(int segment) const;
   // `generation`: the main map's frame `pose` is in (SlamFrameResult::correction_generation);
   // a pose from before the latest correction moves with it.

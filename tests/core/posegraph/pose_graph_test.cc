@@ -10,6 +10,16 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
+// The options' solve bound is wall time (50 ms): on a loaded machine (CI runs tests two at a
+// time beside builds) a solve that takes a few milliseconds alone can reach it and stop early.
+// These tests check what the solve finds, so they give it time; the bound is measured in
+// bench/loop_closure_bench.cc.
+PoseGraphOptions Untimed() {
+  PoseGraphOptions options;
+  options.max_solve_seconds = 30.0;
+  return options;
+}
+
 // A camera on a circle of radius 1.5 m looking inwards, `n` poses per lap.
 std::vector<SE3> CirclePoses(int n, int laps = 1) {
   std::vector<SE3> poses;
@@ -69,7 +79,7 @@ TEST(PoseGraphTest, ALoopEdgeTakesOutTheDrift) {
   edges.push_back(LoopEdge(chain.truth, 0, last));
   edges.push_back(LoopEdge(chain.truth, 0, 30));  // the second lap passing the start
   absl::StatusOr<PoseGraphResult> result =
-      OptimisePoseGraph(chain.drifted, edges, {0}, PoseGraphOptions{});
+      OptimisePoseGraph(chain.drifted, edges, {0}, Untimed());
   ASSERT_TRUE(result.ok()) << result.status();
   EXPECT_TRUE(result->rejected_edges.empty());
   const double after = TranslationError(result->poses[last], chain.truth[last]);
@@ -95,7 +105,7 @@ TEST(PoseGraphTest, AWrongLoopIsRejectedAndMovesNothing) {
                                           Eigen::Vector3d(1.0, 0.0, 0.0));
   edges.push_back(wrong);
   absl::StatusOr<PoseGraphResult> result =
-      OptimisePoseGraph(chain.drifted, edges, {0}, PoseGraphOptions{});
+      OptimisePoseGraph(chain.drifted, edges, {0}, Untimed());
   ASSERT_TRUE(result.ok()) << result.status();
   ASSERT_EQ(result->rejected_edges, std::vector<int>{static_cast<int>(edges.size()) - 1});
   EXPECT_GT(result->innovations.back(), PoseGraphOptions{}.max_loop_innovation);
@@ -121,7 +131,7 @@ TEST(PoseGraphTest, TheSolverAloneDropsALoopTheOtherLoopsContradict) {
   wrong.from_T_to = wrong.from_T_to * SE3(Eigen::Quaterniond::Identity(),
                                           Eigen::Vector3d(1.0, 0.0, 0.0));
   edges.push_back(wrong);
-  PoseGraphOptions options;
+  PoseGraphOptions options = Untimed();
   options.max_loop_innovation = 1e9;
   absl::StatusOr<PoseGraphResult> result = OptimisePoseGraph(chain.drifted, edges, {0}, options);
   ASSERT_TRUE(result.ok()) << result.status();
@@ -144,7 +154,7 @@ TEST(PoseGraphTest, ARightLoopSurvivesBesideAWrongOne) {
                                           Eigen::Vector3d(0.0, 0.0, 1.2));
   edges.push_back(wrong);
   absl::StatusOr<PoseGraphResult> result =
-      OptimisePoseGraph(chain.drifted, edges, {0}, PoseGraphOptions{});
+      OptimisePoseGraph(chain.drifted, edges, {0}, Untimed());
   ASSERT_TRUE(result.ok()) << result.status();
   EXPECT_EQ(result->rejected_edges, std::vector<int>{static_cast<int>(edges.size()) - 1});
   EXPECT_LT(TranslationError(result->poses[last], chain.truth[last]), 0.02);
