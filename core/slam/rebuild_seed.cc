@@ -42,33 +42,52 @@ double KeyframeSurfaceShift(const DepthImage& depth, const PinholeIntrinsics& k,
   return largest;
 }
 
-absl::StatusOr<RebuildSeed> SeedRebuild(const PlenoxelMap& map, const TrainingSet& keyframes,
-                                        const std::vector<SE3>& before,
-                                        const std::vector<SE3>& after,
-                                        const AllocationOptions& allocation,
-                                        const RebuildSeedOptions& options, Backend& backend) {
+absl::StatusOr<KeyframeMoves> MeasureKeyframeMoves(const TrainingSet& keyframes,
+                                                   const std::vector<SE3>& before,
+                                                   const std::vector<SE3>& after,
+                                                   float voxel_size, float max_depth,
+                                                   const RebuildSeedOptions& options) {
   PLX_RETURN_IF_ERROR(ValidateRebuildSeedOptions(options));
   const int n = keyframes.num_frames();
   if (static_cast<int>(before.size()) != n || static_cast<int>(after.size()) != n) {
-    return absl::InvalidArgumentError(absl::StrCat("a rebuild seed needs one pose per keyframe (",
+    return absl::InvalidArgumentError(absl::StrCat("measuring moves needs one pose per keyframe (",
                                                    n, "), got ", before.size(), " before and ",
                                                    after.size(), " after"));
   }
+  const double tolerance = options.moved_tolerance_voxels * voxel_size;
+  KeyframeMoves moves;
+  moves.moved.assign(static_cast<size_t>(n), 0);
+  for (int i = 0; i < n; ++i) {
+    const double shift = KeyframeSurfaceShift(keyframes.frame(i).depth, keyframes.intrinsics(i),
+                                              before[i], after[i], options.pixel_stride,
+                                              max_depth);
+    moves.largest_m = std::max(moves.largest_m, shift);
+    if (shift <= tolerance) continue;
+    moves.moved[i] = 1;
+    ++moves.moved_keyframes;
+  }
+  return moves;
+}
+
+absl::StatusOr<RebuildSeed> SeedRebuild(const PlenoxelMap& map, const TrainingSet& keyframes,
+                                        const std::vector<SE3>& before,
+                                        const KeyframeMoves& moves,
+                                        const AllocationOptions& allocation, Backend& backend) {
+  const int n = keyframes.num_frames();
+  if (static_cast<int>(before.size()) != n || static_cast<int>(moves.moved.size()) != n) {
+    return absl::InvalidArgumentError(absl::StrCat("a rebuild seed needs one pose and one move ",
+                                                   "per keyframe (", n, "), got ", before.size(),
+                                                   " and ", moves.moved.size()));
+  }
   const float voxel = map.grid.voxel_size();
-  const double tolerance = options.moved_tolerance_voxels * voxel;
   RebuildSeed seed;
-  seed.moved.assign(static_cast<size_t>(n), 0);
+  seed.moved = moves.moved;
+  seed.moved_keyframes = moves.moved_keyframes;
   absl::flat_hash_set<BrickCoord> dropped;
   for (int i = 0; i < n; ++i) {
-    const RgbdFrame& frame = keyframes.frame(i);
-    const double shift =
-        KeyframeSurfaceShift(frame.depth, keyframes.intrinsics(i), before[i], after[i],
-                             options.pixel_stride, allocation.max_depth);
-    if (shift <= tolerance) continue;
-    seed.moved[i] = 1;
-    ++seed.moved_keyframes;
-    for (const BrickCoord& b : BricksNearSurface(frame.depth, before[i], keyframes.intrinsics(i),
-                                                 voxel, allocation)) {
+    if (moves.moved[i] == 0) continue;
+    for (const BrickCoord& b : BricksNearSurface(keyframes.frame(i).depth, before[i],
+                                                 keyframes.intrinsics(i), voxel, allocation)) {
       dropped.insert(b);
     }
   }

@@ -48,13 +48,28 @@ double KeyframeSurfaceShift(const DepthImage& depth, const PinholeIntrinsics& in
                             const SE3& before, const SE3& after, int pixel_stride,
                             float max_depth);
 
-// The seed of a rebuild of `map` (the latest version built from `keyframes` at `before`) at the
-// corrected poses `after` (one per keyframe). `allocation` is the mapper's (the bands its
-// keyframes allocated). InvalidArgument when the pose lists do not match the keyframes.
+// Which keyframes a correction from `before` to `after` (one pose each) moves: those whose
+// surface shift (above, up to `max_depth`) exceeds options.moved_tolerance_voxels voxels of
+// `voxel_size`. Measured once per correction: it decides both whether the correction is
+// applied in place and what a seeded rebuild drops. InvalidArgument when the pose lists do not
+// match the keyframes or the options are invalid.
+struct KeyframeMoves {
+  std::vector<uint8_t> moved;  // per keyframe: 1 = it moved
+  int moved_keyframes = 0;
+  double largest_m = 0.0;      // the largest surface shift of any keyframe
+};
+absl::StatusOr<KeyframeMoves> MeasureKeyframeMoves(const TrainingSet& keyframes,
+                                                   const std::vector<SE3>& before,
+                                                   const std::vector<SE3>& after,
+                                                   float voxel_size, float max_depth,
+                                                   const RebuildSeedOptions& options);
+
+// The seed of a rebuild of `map` (the latest version built from `keyframes` at `before`) once
+// the keyframes `moves` names have moved. `allocation` is the mapper's (the bands its
+// keyframes allocated). InvalidArgument when `before` or `moves` do not match the keyframes.
 absl::StatusOr<RebuildSeed> SeedRebuild(const PlenoxelMap& map, const TrainingSet& keyframes,
                                         const std::vector<SE3>& before,
-                                        const std::vector<SE3>& after,
-                                        const AllocationOptions& allocation,
-                                        const RebuildSeedOptions& options, Backend& backend);
+                                        const KeyframeMoves& moves,
+                                        const AllocationOptions& allocation, Backend& backend);
 
 }  // namespace plx

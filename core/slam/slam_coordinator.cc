@@ -387,21 +387,15 @@ absl::Status SlamCoordinator::CorrectAndRebuild(SlamMapper* mapper) {
   // How far each keyframe's surface moves: a correction within in_place_max_shift_m is
   // applied in the running map, as refinement applies its own, instead of rebuilding it.
   const TrainingSet& set = mapper->integrated_keyframes();
-  double largest = 0.0;
-  int moved = 0;
+  KeyframeMoves moves;
   if (correction.significant && set.num_frames() == static_cast<int>(poses.size())) {
-    const double tolerance = mapper_options_.rebuild_seed.moved_tolerance_voxels *
-                             mapper_options_.mapping.mapper.voxel_size;
-    for (int i = 0; i < set.num_frames(); ++i) {
-      const double shift = KeyframeSurfaceShift(
-          set.frame(i).depth, set.intrinsics(i), poses[i], correction.poses[i],
-          mapper_options_.rebuild_seed.pixel_stride,
-          mapper_options_.mapping.mapper.allocation.max_depth);
-      largest = std::max(largest, shift);
-      moved += shift > tolerance;
-    }
+    PLX_ASSIGN_OR_RETURN(moves, MeasureKeyframeMoves(set, poses, correction.poses,
+                                                     mapper_options_.mapping.mapper.voxel_size,
+                                                     mapper_options_.mapping.mapper.allocation
+                                                         .max_depth,
+                                                     mapper_options_.rebuild_seed));
   }
-  const bool in_place = largest <= mapper_options_.in_place_max_shift_m;
+  const bool in_place = moves.largest_m <= mapper_options_.in_place_max_shift_m;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     loop_counts_.rejected += static_cast<int>(correction.rejected_loops.size());
@@ -424,10 +418,10 @@ absl::Status SlamCoordinator::CorrectAndRebuild(SlamMapper* mapper) {
       loop_counts_.rebuilding = true;
     }
   }
-  if (in_place) return CorrectInPlace(mapper, *solve, moved);
+  if (in_place) return CorrectInPlace(mapper, *solve, moves.moved_keyframes);
   // Filled outside the lock (copies of every keyframe's images): cameras go on meanwhile and
   // their keyframes wait in the backlog.
-  absl::StatusOr<RebuildSeed> seed = SeedFor(mapper, poses, correction.poses);
+  absl::StatusOr<RebuildSeed> seed = SeedFor(mapper, poses, moves);
   absl::StatusOr<std::unique_ptr<SlamMapper>> rebuild =
       seed.ok() ? SlamMapper::Create(mapper_options_, backend_,
                                      seed->map != nullptr ? seed->map : base_)
@@ -509,7 +503,7 @@ void SlamCoordinator::AdoptCorrectedVersionLocked(Segment& main, const SlamMappe
 
 absl::StatusOr<RebuildSeed> SlamCoordinator::SeedFor(SlamMapper* mapper,
                                                      const std::vector<SE3>& before,
-                                                     const std::vector<SE3>& after) {
+                                                     const KeyframeMoves& moves) {
   if (!mapper_options_.rebuild_keeps_unmoved) {
     RebuildSeed none;  // from the base map, every keyframe earning
     none.dropped_bricks = mapper->latest().map != nullptr
@@ -520,9 +514,8 @@ absl::StatusOr<RebuildSeed> SlamCoordinator::SeedFor(SlamMapper* mapper,
   PLX_RETURN_IF_ERROR(mapper->PublishIfChanged());
   const std::shared_ptr<const PlenoxelMap> old = mapper->latest().map;
   if (old == nullptr) return RebuildSeed{};
-  return SeedRebuild(*old, mapper->integrated_keyframes(), before, after,
-                     mapper_options_.mapping.mapper.allocation, mapper_options_.rebuild_seed,
-                     *backend_);
+  return SeedRebuild(*old, mapper->integrated_keyframes(), before, moves,
+                     mapper_options_.mapping.mapper.allocation, *backend_);
 }
 
 absl::StatusOr<SlamStepResult> SlamCoordinator::StepRebuild() {

@@ -271,11 +271,11 @@ class SlamCoordinator {
   // the keyframes, grants iterations for the `moved` ones and publishes the map with the
   // correction. Step-runner.
   absl::Status CorrectInPlace(SlamMapper* mapper, const SlamCorrection& solve, int moved);
-  // What a rebuild from `before` to `after` starts from (SlamMapperOptions::
+  // What a rebuild after `moves` of the keyframes at `before` starts from (SlamMapperOptions::
   // rebuild_keeps_unmoved): the old map without what moved, or nothing (an empty seed).
   // Step-runner.
   absl::StatusOr<RebuildSeed> SeedFor(SlamMapper* mapper, const std::vector<SE3>& before,
-                                      const std::vector<SE3>& after);
+                                      const KeyframeMoves& moves);
   // One step of the rebuild; once it is ready, swaps it in and publishes it.
   absl::StatusOr<SlamStepResult> StepRebuild();
   absl::StatusOr<SlamStepResult> SwapInRebuild();

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "absl/container/flat_hash_set.h"
+#include "core/common/status_macros.h"
 #include "core/cpu/cpu_backend.h"
 #include "core/mapping/mapping_session.h"
 #include "tests/synthetic_room.h"
@@ -51,6 +52,17 @@ class RebuildSeedTest : public ::testing::Test {
     return after;
   }
 
+  // The seed of the latest map once the keyframes move from `poses_` to `after` (the moves
+  // measured as the coordinator measures them).
+  absl::StatusOr<RebuildSeed> Seed(const std::vector<SE3>& after,
+                                   const RebuildSeedOptions& options = {}) {
+    PLX_ASSIGN_OR_RETURN(KeyframeMoves moves,
+                         MeasureKeyframeMoves(session_->keyframes(), poses_, after, kVoxel,
+                                              allocation_.max_depth, options));
+    return SeedRebuild(*session_->latest(), session_->keyframes(), poses_, moves, allocation_,
+                       *backend_);
+  }
+
   std::unique_ptr<InMemoryDataset> room_;
   std::unique_ptr<Backend> backend_;
   std::unique_ptr<MappingSession> session_;
@@ -76,8 +88,7 @@ TEST_F(RebuildSeedTest, TheSurfaceShiftIsHowFarTheKeyframesPointsMove) {
 
 TEST_F(RebuildSeedTest, WhatAMovedKeyframeSawIsDroppedAndTheRestShared) {
   const PlenoxelMap& map = *session_->latest();
-  absl::StatusOr<RebuildSeed> seed = SeedRebuild(map, session_->keyframes(), poses_,
-                                                 MovedBy(2, 0.05), allocation_, {}, *backend_);
+  absl::StatusOr<RebuildSeed> seed = Seed(MovedBy(2, 0.05));
   ASSERT_TRUE(seed.ok()) << seed.status();
   EXPECT_EQ(seed->moved, (std::vector<uint8_t>{0, 0, 1}));
   EXPECT_EQ(seed->moved_keyframes, 1);
@@ -110,9 +121,7 @@ TEST_F(RebuildSeedTest, WhatAMovedKeyframeSawIsDroppedAndTheRestShared) {
 TEST_F(RebuildSeedTest, AMoveUnderTheToleranceKeepsEverything) {
   const PlenoxelMap& map = *session_->latest();
   // 0.4 voxel: under the default half-voxel tolerance.
-  absl::StatusOr<RebuildSeed> seed =
-      SeedRebuild(map, session_->keyframes(), poses_, MovedBy(1, 0.4 * kVoxel), allocation_, {},
-                  *backend_);
+  absl::StatusOr<RebuildSeed> seed = Seed(MovedBy(1, 0.4 * kVoxel));
   ASSERT_TRUE(seed.ok()) << seed.status();
   EXPECT_EQ(seed->moved_keyframes, 0);
   EXPECT_EQ(seed->dropped_bricks, 0);
@@ -120,8 +129,7 @@ TEST_F(RebuildSeedTest, AMoveUnderTheToleranceKeepsEverything) {
   // A tolerance of 0.1 voxel calls the same move a move.
   RebuildSeedOptions strict;
   strict.moved_tolerance_voxels = 0.1;
-  seed = SeedRebuild(map, session_->keyframes(), poses_, MovedBy(1, 0.4 * kVoxel), allocation_,
-                     strict, *backend_);
+  seed = Seed(MovedBy(1, 0.4 * kVoxel), strict);
   ASSERT_TRUE(seed.ok()) << seed.status();
   EXPECT_EQ(seed->moved, (std::vector<uint8_t>{0, 1, 0}));
 }
@@ -130,7 +138,9 @@ TEST_F(RebuildSeedTest, RejectsMismatchedPosesAndBadOptions) {
   const PlenoxelMap& map = *session_->latest();
   std::vector<SE3> short_list = poses_;
   short_list.pop_back();
-  EXPECT_EQ(SeedRebuild(map, session_->keyframes(), poses_, short_list, allocation_, {},
+  EXPECT_EQ(Seed(short_list).status().code(), absl::StatusCode::kInvalidArgument);
+  // Moves measured for other keyframes (none here).
+  EXPECT_EQ(SeedRebuild(map, session_->keyframes(), poses_, KeyframeMoves{}, allocation_,
                         *backend_).status().code(),
             absl::StatusCode::kInvalidArgument);
   RebuildSeedOptions bad;
@@ -138,9 +148,7 @@ TEST_F(RebuildSeedTest, RejectsMismatchedPosesAndBadOptions) {
   EXPECT_EQ(ValidateRebuildSeedOptions(bad).code(), absl::StatusCode::kInvalidArgument);
   bad = RebuildSeedOptions{};
   bad.pixel_stride = 0;
-  EXPECT_EQ(SeedRebuild(map, session_->keyframes(), poses_, poses_, allocation_, bad, *backend_)
-                .status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(Seed(poses_, bad).status().code(), absl::StatusCode::kInvalidArgument);
 }
 
 }  // namespace
