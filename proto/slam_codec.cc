@@ -178,6 +178,7 @@ pb::SlamMapping SlamMappingToProto(const SlamMapperProgress& p, const std::strin
   mapping.set_loops_accepted(static_cast<uint32_t>(p.loops.accepted));
   mapping.set_loops_rejected(static_cast<uint32_t>(p.loops.rejected));
   mapping.set_corrections(static_cast<uint32_t>(p.loops.corrections));
+  mapping.set_corrections_in_place(static_cast<uint32_t>(p.loops.in_place));
   mapping.set_last_solve_ms(p.loops.last_solve_ms);
   return mapping;
 }

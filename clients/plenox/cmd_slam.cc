@@ -250,6 +250,7 @@ int RunSlam(const std::vector<std::string>& args) {
   report.loops_accepted = p.mapping.loops.accepted;
   report.loops_rejected = p.mapping.loops.rejected;
   report.corrections = p.mapping.loops.corrections;
+  report.corrections_in_place = p.mapping.loops.in_place;
   report.started_from_ground_truth = result->started_from_ground_truth;
   ScoreSlamTrajectory(*dataset, result->trajectory, corrected, *rpe_delta, &report);
   line.Finish(SlamSummaryText(report, absl::StrCat(" [", BackendText(*backend), "]")));

@@ -412,6 +412,7 @@ void PrintRemoteSlamResult(const FlagSet& flags, const SlamDatasetOptions& optio
   report.loops_accepted = static_cast<int>(s.mapping.loops_accepted());
   report.loops_rejected = static_cast<int>(s.mapping.loops_rejected());
   report.corrections = static_cast<int>(s.mapping.corrections());
+  report.corrections_in_place = static_cast<int>(s.mapping.corrections_in_place());
   const double roundtrip_median = Percentile(roundtrip_ms, 0.5);
   const double roundtrip_p95 = Percentile(roundtrip_ms, 0.95);
   std::string failover;

@@ -180,8 +180,8 @@ std::string SlamSummaryText(const SlamReport& r, const std::string& tag) {
   if (r.loops_accepted > 0 || r.loops_rejected > 0) {
     text += absl::StrFormat(
         "\nslam: loop closure: %d loops in the pose graph, %d candidates rejected, %d "
-        "corrections",
-        r.loops_accepted, r.loops_rejected, r.corrections);
+        "corrections (%d in place)",
+        r.loops_accepted, r.loops_rejected, r.corrections, r.corrections_in_place);
   }
   if (r.ate_none_m && r.ate_se3_m) {
     text += absl::StrFormat("\nslam: ATE %.2f cm (no alignment), %.2f cm (SE(3))",
@@ -231,6 +231,7 @@ void PrintSlamResult(const SlamReport& r, bool json, const JsonObject& more) {
       .Add("loops_accepted", r.loops_accepted)
       .Add("loops_rejected", r.loops_rejected)
       .Add("corrections", r.corrections)
+      .Add("corrections_in_place", r.corrections_in_place)
       .Add("trajectory", r.trajectory)
       .Add("corrected_trajectory", r.corrected_trajectory);
   if (r.ate_none_m) out.Add("ate_none_m", *r.ate_none_m);

@@ -63,8 +63,9 @@ struct SlamReport {
   std::optional<double> keyframe_mb;
   std::optional<double> peak_rss_mb;
   // Loop closure on the map (docs/SLAM.md, "Loop closure"): loop edges in its pose graph,
-  // candidates rejected, corrected maps published.
-  int loops_accepted = 0, loops_rejected = 0, corrections = 0;
+  // candidates rejected, corrected maps published and of those the ones applied in the running
+  // map without a rebuild.
+  int loops_accepted = 0, loops_rejected = 0, corrections = 0, corrections_in_place = 0;
   bool started_from_ground_truth = false;
   // With ground truth (eval-traj's definitions): the online trajectory's, and the ATE of the
   // trajectory in the map's final frame (what --corrected-out writes).

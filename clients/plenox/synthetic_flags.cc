@@ -21,7 +21,8 @@ void AddSyntheticFlags(FlagSet& flags, int default_frames, bool noise_by_default
       .Add("path", "NAME",
            "camera path: circle (around the room centre), head-turns (the circle with yaw "
            "swings peaking at ~130 deg/s), walk-out (from the -x end into the unseen +x half), "
-           "figure-eight (through the centre, one turn per 20 s: a loop)",
+           "figure-eight (through the centre, one turn per 20 s: a loop), two-room-eight (a "
+           "figure eight through two rooms joined by a doorway, one turn per 30 s)",
            "circle");
 }
 

@@ -138,15 +138,20 @@ SE3 WalkOutPose(double seconds) {
 constexpr double kEightPeriod = 20.0;                   // s
 constexpr double kEightHalfX = 1.5, kEightHalfY = 0.8;  // m
 
-SE3 FigureEightPose(double seconds) {
-  const double phi = 2.0 * M_PI * seconds / kEightPeriod;
-  const Eigen::Vector3d eye(kEightHalfX * std::sin(phi), kEightHalfY * std::sin(2.0 * phi),
+SE3 EightPose(double seconds, double period, double half_x, double half_y) {
+  const double phi = 2.0 * M_PI * seconds / period;
+  const Eigen::Vector3d eye(half_x * std::sin(phi), half_y * std::sin(2.0 * phi),
                             kEyeHeight + 0.03 * std::sin(3.0 * phi));
-  const double heading =
-      std::atan2(2.0 * kEightHalfY * std::cos(2.0 * phi), kEightHalfX * std::cos(phi));
+  const double heading = std::atan2(2.0 * half_y * std::cos(2.0 * phi), half_x * std::cos(phi));
   const double pitch = -(kPitch + 3.0 * kDegree * std::sin(phi));
   return LookAlong(eye, heading, pitch);
 }
+
+// Through two rooms: the doorway (|y| <= 0.8 m) is crossed at |y| < 0.06 m within the
+// partition's 10 cm; the eye stays > 0.6 m from every box as tall as it and > 1.4 m from the
+// walls.
+constexpr double kTwoRoomPeriod = 30.0;                       // s
+constexpr double kTwoRoomHalfX = 3.6, kTwoRoomHalfY = 1.0;  // m
 
 }  // namespace
 
@@ -156,25 +161,35 @@ const char* SyntheticPathName(SyntheticPath path) {
     case SyntheticPath::kHeadTurns: return "head-turns";
     case SyntheticPath::kWalkOut: return "walk-out";
     case SyntheticPath::kFigureEight: return "figure-eight";
+    case SyntheticPath::kTwoRoomEight: return "two-room-eight";
   }
   return "unknown";
 }
 
 absl::StatusOr<SyntheticPath> ParseSyntheticPath(std::string_view name) {
   for (SyntheticPath path : {SyntheticPath::kCircle, SyntheticPath::kHeadTurns,
-                            SyntheticPath::kWalkOut, SyntheticPath::kFigureEight}) {
+                            SyntheticPath::kWalkOut, SyntheticPath::kFigureEight,
+                            SyntheticPath::kTwoRoomEight}) {
     if (name == SyntheticPathName(path)) return path;
   }
   return absl::InvalidArgumentError(
       absl::StrCat("unknown synthetic path \"", std::string(name),
-                   "\": expected circle, head-turns, walk-out or figure-eight"));
+                   "\": expected circle, head-turns, walk-out, figure-eight or two-room-eight"));
+}
+
+SyntheticSceneKind SyntheticPathScene(SyntheticPath path) {
+  return path == SyntheticPath::kTwoRoomEight ? SyntheticSceneKind::kTwoRooms
+                                              : SyntheticSceneKind::kRoom;
 }
 
 SE3 SyntheticPathPose(SyntheticPath path, double seconds) {
   switch (path) {
     case SyntheticPath::kHeadTurns: return HeadTurnsPose(seconds);
     case SyntheticPath::kWalkOut: return WalkOutPose(seconds);
-    case SyntheticPath::kFigureEight: return FigureEightPose(seconds);
+    case SyntheticPath::kFigureEight:
+      return EightPose(seconds, kEightPeriod, kEightHalfX, kEightHalfY);
+    case SyntheticPath::kTwoRoomEight:
+      return EightPose(seconds, kTwoRoomPeriod, kTwoRoomHalfX, kTwoRoomHalfY);
     case SyntheticPath::kCircle: break;
   }
   return CirclePose(seconds, 0.0);

@@ -1,14 +1,15 @@
-// Camera paths through the synthetic room (core/synthetic/synthetic_scene.h), as exact
+// Camera paths through the synthetic scenes (core/synthetic/synthetic_scene.h), as exact
 // world_T_camera poses at any time (OpenCV camera axes, x right, y down, z forward; the camera
 // never rolls). The circle is the default sequence's path; the others are hard cases for SLAM
 // (issue 21): fast head turns, and a walk out of the part of the room the first frames saw;
-// and a figure eight for loop closure (issue 22).
+// and figure eights for loop closure (issue 22), in the room and through two rooms.
 #pragma once
 
 #include <string_view>
 
 #include "absl/status/statusor.h"
 #include "core/geometry/se3.h"
+#include "core/synthetic/synthetic_scene.h"
 
 namespace plx {
 
@@ -32,9 +33,19 @@ enum class SyntheticPath {
   // turn at headings ~85 degrees apart; the second turn revisits the first's views: a loop
   // whose two halves drift in opposite directions of turning (issue 22's data).
   kFigureEight,
+  // A figure eight through the two rooms of SyntheticSceneKind::kTwoRooms, one lobe in each:
+  // lobes to x = +-3.6 m and y = +-1 m, one turn every 30 s, through the doorway at ~29 degrees
+  // to the partition twice per turn, looking along the travel and ~15 degrees down (peak
+  // about 0.86 m/s). Each pass through the doorway turns the view from one room to the other
+  // within a second, and the second turn revisits both rooms: loops in two places that share
+  // their walls' textures.
+  kTwoRoomEight,
 };
 
-// "circle", "head-turns", "walk-out", "figure-eight".
+// The scene a path walks through: kTwoRooms for kTwoRoomEight, kRoom for the others.
+SyntheticSceneKind SyntheticPathScene(SyntheticPath path);
+
+// "circle", "head-turns", "walk-out", "figure-eight", "two-room-eight".
 const char* SyntheticPathName(SyntheticPath path);
 // The inverse of SyntheticPathName; InvalidArgument listing the names otherwise.
 absl::StatusOr<SyntheticPath> ParseSyntheticPath(std::string_view name);

@@ -56,16 +56,47 @@ SyntheticScene BuildRoom() {
   return scene;
 }
 
-const std::vector<PreparedBox>& PreparedBoxes() {
-  static const std::vector<PreparedBox>* boxes = [] {
-    auto* out = new std::vector<PreparedBox>();
-    for (const SyntheticBox& b : SyntheticRoom().boxes) {
-      out->push_back({b.center, b.half_extents, std::cos(b.yaw), std::sin(b.yaw),
-                      b.half_extents.head<2>().squaredNorm()});
-    }
-    return out;
-  }();
-  return *boxes;
+// Two rooms of 6 m x 5 m in a row along x, the partition at x = 0 with a doorway at
+// |y| <= 0.8 m, z <= 2.1 m. The -x room is BuildRoom's furniture moved 3 m along -x; the +x
+// room's keeps > 0.6 m from the two-room figure eight (synthetic_path.cc) and sits near its
+// walls.
+SyntheticScene BuildTwoRooms() {
+  SyntheticScene scene;
+  scene.room_min = Eigen::Vector3d(-6.0, -2.5, 0.0);
+  scene.room_max = Eigen::Vector3d(6.0, 2.5, 3.0);
+  for (SyntheticBox box : BuildRoom().boxes) {
+    box.center.x() -= 3.0;
+    scene.boxes.push_back(box);
+  }
+  const std::vector<SyntheticBox> rest = {
+      MakeBox(0.0, -1.65, 0.0, 0.2, 1.7, 3.0, 0.0),   // partition, -y of the doorway
+      MakeBox(0.0, 1.65, 0.0, 0.2, 1.7, 3.0, 0.0),    // partition, +y of the doorway
+      MakeBox(0.0, 0.0, 2.1, 0.2, 1.6, 0.9, 0.0),     // lintel over the doorway
+      MakeBox(4.6, 1.5, 0.0, 1.0, 1.4, 0.8, -12.0),   // long low box
+      MakeBox(4.5, 1.45, 0.8, 0.45, 0.35, 0.3, 18.0),  // cushion on it
+      MakeBox(5.45, -1.55, 0.0, 0.5, 0.9, 2.1, 5.0),  // tall shelf
+      MakeBox(2.2, -1.95, 0.0, 0.9, 0.6, 1.1, 20.0),  // dresser
+      MakeBox(2.6, 1.95, 0.0, 0.5, 0.5, 0.45, -30.0),  // stool
+  };
+  scene.boxes.insert(scene.boxes.end(), rest.begin(), rest.end());
+  return scene;
+}
+
+std::vector<PreparedBox> Prepare(const SyntheticScene& scene) {
+  std::vector<PreparedBox> out;
+  for (const SyntheticBox& b : scene.boxes) {
+    out.push_back({b.center, b.half_extents, std::cos(b.yaw), std::sin(b.yaw),
+                   b.half_extents.head<2>().squaredNorm()});
+  }
+  return out;
+}
+
+const std::vector<PreparedBox>& PreparedBoxes(SyntheticSceneKind kind) {
+  static const std::vector<PreparedBox>* room =
+      new std::vector<PreparedBox>(Prepare(SyntheticSceneOf(SyntheticSceneKind::kRoom)));
+  static const std::vector<PreparedBox>* two_rooms =
+      new std::vector<PreparedBox>(Prepare(SyntheticSceneOf(SyntheticSceneKind::kTwoRooms)));
+  return kind == SyntheticSceneKind::kTwoRooms ? *two_rooms : *room;
 }
 
 // Narrows [*t_near, *t_far] to where origin + t * direction lies within +-half along one axis
@@ -90,11 +121,12 @@ bool ClipSlab(double o, double d, double half, int axis, double* t_near, double*
 // origin are computed once per view, not once per ray.
 class RayCaster {
  public:
-  explicit RayCaster(const Eigen::Vector3d& origin) : origin_(origin) {
-    const SyntheticScene& room = SyntheticRoom();
+  RayCaster(const Eigen::Vector3d& origin, SyntheticSceneKind scene)
+      : origin_(origin), boxes_(PreparedBoxes(scene)) {
+    const SyntheticScene& room = SyntheticSceneOf(scene);
     to_min_ = room.room_min - origin;
     to_max_ = room.room_max - origin;
-    for (const PreparedBox& box : PreparedBoxes()) {
+    for (const PreparedBox& box : boxes_) {
       local_origins_.push_back(box.ToLocal(origin - box.center));
       to_centre_xy_.push_back((box.center - origin).head<2>());
     }
@@ -120,7 +152,7 @@ class RayCaster {
     int best_box = -1, best_axis = 0;
     double best_sign = 1.0;
 
-    const std::vector<PreparedBox>& boxes = PreparedBoxes();
+    const std::vector<PreparedBox>& boxes = boxes_;
     const double planar_norm2 = direction.x() * direction.x() + direction.y() * direction.y();
     for (size_t b = 0; b < boxes.size(); ++b) {
       const PreparedBox& box = boxes[b];
@@ -168,6 +200,7 @@ class RayCaster {
 
  private:
   Eigen::Vector3d origin_;
+  const std::vector<PreparedBox>& boxes_;
   Eigen::Vector3d to_min_, to_max_;
   std::vector<Eigen::Vector3d> local_origins_;  // per box, in the box frame
   std::vector<Eigen::Vector2d> to_centre_xy_;   // per box, world xy
@@ -355,7 +388,8 @@ float Shading(const Eigen::Vector3d& normal) {
 // Texture coordinates of a hit on its surface: floor and ceiling (x, y), walls (horizontal
 // coordinate, height), box faces the two in-face axes of the box frame, offset per face so
 // opposite faces do not look alike.
-void SurfaceCoordinates(const SyntheticHit& hit, float* s, float* t) {
+void SurfaceCoordinates(const SyntheticHit& hit, const std::vector<PreparedBox>& boxes, float* s,
+                        float* t) {
   const Eigen::Vector3d& p = hit.point;
   if (hit.surface <= kSyntheticCeiling) {
     *s = static_cast<float>(p.x()), *t = static_cast<float>(p.y());
@@ -364,7 +398,7 @@ void SurfaceCoordinates(const SyntheticHit& hit, float* s, float* t) {
   } else if (hit.surface <= kSyntheticWallMaxY) {
     *s = static_cast<float>(p.x()), *t = static_cast<float>(p.z());
   } else {
-    const PreparedBox& box = PreparedBoxes()[hit.surface - kSyntheticFirstBox];
+    const PreparedBox& box = boxes[hit.surface - kSyntheticFirstBox];
     const Eigen::Vector3d local = box.ToLocal(p - box.center);
     const Eigen::Vector3d n = box.ToLocal(hit.normal);
     int axis = 0;
@@ -379,9 +413,11 @@ void SurfaceCoordinates(const SyntheticHit& hit, float* s, float* t) {
 // Shades 1..kLanes hits that all lie on one surface (not kSyntheticNoHit) and adds
 // weight * colour of each into *sum. Unused lanes repeat the last hit.
 void ShadeSameSurface(const SyntheticHit* const* hits, int count, float weight,
-                      Eigen::Vector3f* sum) {
+                      const std::vector<PreparedBox>& boxes, Eigen::Vector3f* sum) {
   float s[kLanes], t[kLanes];
-  for (int i = 0; i < kLanes; ++i) SurfaceCoordinates(*hits[std::min(i, count - 1)], &s[i], &t[i]);
+  for (int i = 0; i < kLanes; ++i) {
+    SurfaceCoordinates(*hits[std::min(i, count - 1)], boxes, &s[i], &t[i]);
+  }
   LaneColors colors;
   const int surface = hits[0]->surface;
   if (surface == kSyntheticFloor) {
@@ -399,7 +435,8 @@ void ShadeSameSurface(const SyntheticHit* const* hits, int count, float weight,
 
 // Adds weight * colour of each hit (count <= 32) into *sum, grouping hits on one surface into
 // lanes.
-void ShadeHits(const SyntheticHit* hits, int count, float weight, Eigen::Vector3f* sum) {
+void ShadeHits(const SyntheticHit* hits, int count, float weight,
+               const std::vector<PreparedBox>& boxes, Eigen::Vector3f* sum) {
   const SyntheticHit* group[kLanes];
   uint32_t done = 0;
   for (int first = 0; first < count; ++first) {
@@ -412,31 +449,36 @@ void ShadeHits(const SyntheticHit* hits, int count, float weight, Eigen::Vector3
         done |= 1u << i;
       }
     }
-    if (surface != kSyntheticNoHit) ShadeSameSurface(group, n, weight, sum);  // else black
+    if (surface != kSyntheticNoHit) ShadeSameSurface(group, n, weight, boxes, sum);  // or black
   }
 }
 
 }  // namespace
 
-const SyntheticScene& SyntheticRoom() {
-  static const SyntheticScene* scene = new SyntheticScene(BuildRoom());
-  return *scene;
+const SyntheticScene& SyntheticSceneOf(SyntheticSceneKind kind) {
+  static const SyntheticScene* room = new SyntheticScene(BuildRoom());
+  static const SyntheticScene* two_rooms = new SyntheticScene(BuildTwoRooms());
+  return kind == SyntheticSceneKind::kTwoRooms ? *two_rooms : *room;
 }
 
-SyntheticHit CastSyntheticRay(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction) {
-  return RayCaster(origin).Cast(direction);
+const SyntheticScene& SyntheticRoom() { return SyntheticSceneOf(SyntheticSceneKind::kRoom); }
+
+SyntheticHit CastSyntheticRay(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
+                              SyntheticSceneKind scene) {
+  return RayCaster(origin, scene).Cast(direction);
 }
 
-Eigen::Vector3f SyntheticSurfaceColor(const SyntheticHit& hit) {
+Eigen::Vector3f SyntheticSurfaceColor(const SyntheticHit& hit, SyntheticSceneKind scene) {
   Eigen::Vector3f rgb = Eigen::Vector3f::Zero();
-  ShadeHits(&hit, 1, 1.0f, &rgb);
+  ShadeHits(&hit, 1, 1.0f, PreparedBoxes(scene), &rgb);
   return rgb;
 }
 
 namespace internal {
 
 void RenderSyntheticRows(const SE3& world_T_camera, const PinholeIntrinsics& k, int supersampling,
-                         int row_begin, int row_end, RgbdFrame* frame) {
+                         SyntheticSceneKind scene, int row_begin, int row_end,
+                         RgbdFrame* frame) {
   const Eigen::Matrix3d rotation = world_T_camera.rotation_matrix();
   const Eigen::Vector3d origin = world_T_camera.translation();
   const int ss = std::clamp(supersampling, 1, kMaxSupersampling);
@@ -457,7 +499,8 @@ void RenderSyntheticRows(const SE3& world_T_camera, const PinholeIntrinsics& k, 
   slopes(k.width, k.cx, k.fx, &x_centre, &x_sample);
   slopes(k.height, k.cy, k.fy, &y_centre, &y_sample);
   const Eigen::Vector3d right = rotation.col(0), down = rotation.col(1), forward = rotation.col(2);
-  const RayCaster caster(origin);
+  const RayCaster caster(origin, scene);
+  const std::vector<PreparedBox>& boxes = PreparedBoxes(scene);
   std::vector<SyntheticHit> samples(ss * ss);
   for (int v = row_begin; v < row_end; ++v) {
     for (int u = 0; u < k.width; ++u) {
@@ -475,7 +518,7 @@ void RenderSyntheticRows(const SE3& world_T_camera, const PinholeIntrinsics& k, 
         }
       }
       Eigen::Vector3f sum = Eigen::Vector3f::Zero();
-      ShadeHits(samples.data(), ss * ss, weight, &sum);
+      ShadeHits(samples.data(), ss * ss, weight, boxes, &sum);
       float* rgb = frame->color.pixel(u, v);
       for (int c = 0; c < 3; ++c) rgb[c] = sum[c];
     }
@@ -485,7 +528,7 @@ void RenderSyntheticRows(const SE3& world_T_camera, const PinholeIntrinsics& k, 
 }  // namespace internal
 
 RgbdFrame RenderSyntheticView(const SE3& world_T_camera, const PinholeIntrinsics& intrinsics,
-                              int supersampling) {
+                              int supersampling, SyntheticSceneKind scene) {
   RgbdFrame frame;
   frame.ground_truth = world_T_camera;
   if (intrinsics.width <= 0 || intrinsics.height <= 0) return frame;
@@ -500,10 +543,11 @@ RgbdFrame RenderSyntheticView(const SE3& world_T_camera, const PinholeIntrinsics
     const int begin = intrinsics.height * w / num_threads;
     const int end = intrinsics.height * (w + 1) / num_threads;
     workers.emplace_back([&, begin, end] {
-      internal::RenderSyntheticRows(world_T_camera, intrinsics, supersampling, begin, end, &frame);
+      internal::RenderSyntheticRows(world_T_camera, intrinsics, supersampling, scene, begin, end,
+                                    &frame);
     });
   }
-  internal::RenderSyntheticRows(world_T_camera, intrinsics, supersampling, 0,
+  internal::RenderSyntheticRows(world_T_camera, intrinsics, supersampling, scene, 0,
                                 intrinsics.height / num_threads, &frame);
   for (std::thread& t : workers) t.join();
   return frame;

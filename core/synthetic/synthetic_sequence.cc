@@ -129,7 +129,8 @@ absl::Status ValidateSyntheticOptions(const SyntheticOptions& options) {
         absl::StrCat("hole_fraction must be in [0, 1), got ", options.hole_fraction));
   }
   if (options.path != SyntheticPath::kCircle && options.path != SyntheticPath::kHeadTurns &&
-      options.path != SyntheticPath::kWalkOut && options.path != SyntheticPath::kFigureEight) {
+      options.path != SyntheticPath::kWalkOut && options.path != SyntheticPath::kFigureEight &&
+      options.path != SyntheticPath::kTwoRoomEight) {
     return absl::InvalidArgumentError(
         absl::StrCat("unknown synthetic path ", static_cast<int>(options.path)));
   }
@@ -168,13 +169,14 @@ absl::StatusOr<InMemoryDataset> GenerateSyntheticSequence(const SyntheticOptions
   auto make_frame = [&](int i, bool split_rows) {
     RgbdFrame& frame = frames[i];
     const SE3 pose = SyntheticCameraPose(options, i);
+    const SyntheticSceneKind scene = SyntheticPathScene(options.path);
     if (split_rows) {
-      frame = RenderSyntheticView(pose, k, /*supersampling=*/2);
+      frame = RenderSyntheticView(pose, k, /*supersampling=*/2, scene);
     } else {
       frame.ground_truth = pose;
       frame.color = ColorImage(k.width, k.height, 3);
       frame.depth = DepthImage(k.width, k.height, 1);
-      internal::RenderSyntheticRows(pose, k, /*supersampling=*/2, 0, k.height, &frame);
+      internal::RenderSyntheticRows(pose, k, /*supersampling=*/2, scene, 0, k.height, &frame);
     }
     frame.timestamp = i / options.fps;
     CorruptDepth(options, i, &frame.depth);

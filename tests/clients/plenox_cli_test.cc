@@ -922,6 +922,7 @@ TEST_F(PlenoxEndToEndTest, SlamWritesTrajectoryKeyframesAndMapAndScoresThem) {
   // map's final frame (each pose on its keyframe as refined at the end) is scored as well.
   EXPECT_EQ(JsonNumber(json, "loops_accepted").value_or(-1), 0);
   EXPECT_EQ(JsonNumber(json, "corrections").value_or(-1), 0);
+  EXPECT_EQ(JsonNumber(json, "corrections_in_place").value_or(-1), 0);
   EXPECT_EQ(ReadRows(corrected).size(), static_cast<size_t>(kFrames));
   EXPECT_LT(JsonNumber(json, "corrected_ate_se3_m").value_or(1), 0.03) << r.Describe();
   // The same ATE as eval-traj computes from the written file.

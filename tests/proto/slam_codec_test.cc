@@ -295,12 +295,14 @@ TEST(SlamCodecTest, MappingCarriesTheLoopClosureCounts) {
   SlamMapperProgress p = Progress();
   p.loops.accepted = 3;
   p.loops.rejected = 2;
-  p.loops.corrections = 1;
+  p.loops.corrections = 3;
+  p.loops.in_place = 2;
   p.loops.last_solve_ms = 4.5;
   const pb::SlamMapping m = SlamMappingToProto(p, "slam-3", 1, false);
   EXPECT_EQ(m.loops_accepted(), 3u);
   EXPECT_EQ(m.loops_rejected(), 2u);
-  EXPECT_EQ(m.corrections(), 1u);
+  EXPECT_EQ(m.corrections(), 3u);
+  EXPECT_EQ(m.corrections_in_place(), 2u);
   EXPECT_DOUBLE_EQ(m.last_solve_ms(), 4.5);
 }
 

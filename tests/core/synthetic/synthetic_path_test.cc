@@ -15,7 +15,8 @@ namespace {
 constexpr double kFps = 30.0;
 constexpr double kRadToDeg = 180.0 / M_PI;
 constexpr SyntheticPath kAllPaths[] = {SyntheticPath::kCircle, SyntheticPath::kHeadTurns,
-                                       SyntheticPath::kWalkOut, SyntheticPath::kFigureEight};
+                                       SyntheticPath::kWalkOut, SyntheticPath::kFigureEight,
+                                       SyntheticPath::kTwoRoomEight};
 
 // Horizontal viewing direction, radians from world +x towards +y.
 double Heading(const SE3& pose) {
@@ -84,6 +85,7 @@ TEST(SyntheticPathTest, NamesRoundTripAndUnknownNamesAreRejected) {
   EXPECT_STREQ(SyntheticPathName(SyntheticPath::kHeadTurns), "head-turns");
   EXPECT_STREQ(SyntheticPathName(SyntheticPath::kWalkOut), "walk-out");
   EXPECT_STREQ(SyntheticPathName(SyntheticPath::kFigureEight), "figure-eight");
+  EXPECT_STREQ(SyntheticPathName(SyntheticPath::kTwoRoomEight), "two-room-eight");
   for (const char* bad : {"", "Circle", "head_turns", "walkout", "circle "}) {
     absl::StatusOr<SyntheticPath> parsed = ParseSyntheticPath(bad);
     EXPECT_EQ(parsed.status().code(), absl::StatusCode::kInvalidArgument) << bad;
@@ -147,12 +149,76 @@ TEST(SyntheticPathTest, TheFigureEightCrossesItsCentreTwiceAndRepeatsEvery20Seco
   for (double r : rates) EXPECT_LT(std::abs(r), 70.0);
 }
 
+TEST(SyntheticPathTest, TheTwoRoomEightWalksThroughTheDoorwayIntoEachRoomAndRepeats) {
+  constexpr SyntheticPath kEight = SyntheticPath::kTwoRoomEight;
+  EXPECT_EQ(SyntheticPathScene(kEight), SyntheticSceneKind::kTwoRooms);
+  for (SyntheticPath path : kAllPaths) {
+    if (path != kEight) {
+      EXPECT_EQ(SyntheticPathScene(path), SyntheticSceneKind::kRoom);
+    }
+  }
+  for (int i = 0; i < 900; i += 13) {
+    const double t = i / kFps;
+    EXPECT_TRUE(SyntheticPathPose(kEight, t + 30.0).matrix().isApprox(
+        SyntheticPathPose(kEight, t).matrix(), 1e-9))
+        << i;
+  }
+  // One turn: through the partition (x in [-0.1, 0.1]) only within the doorway, under its
+  // lintel, twice; about half the time in each room.
+  int crossings = 0, in_plus_x = 0;
+  double previous_x = SyntheticPathPose(kEight, 0.0).translation().x();
+  for (int i = 1; i <= 900; ++i) {
+    const Eigen::Vector3d p = SyntheticPathPose(kEight, i / kFps).translation();
+    if (std::abs(p.x()) <= 0.1) {
+      EXPECT_LT(std::abs(p.y()), 0.8 - 0.5) << i;
+      EXPECT_LT(p.z(), 2.1 - 0.5) << i;
+    }
+    crossings += (p.x() > 0.0) != (previous_x > 0.0);
+    in_plus_x += p.x() > 0.0;
+    previous_x = p.x();
+  }
+  EXPECT_EQ(crossings, 2);
+  EXPECT_NEAR(in_plus_x, 450, 2);
+  // From the +x room looking back at the partition (heading 180 degrees at 11.25 s), the
+  // -x room is seen only through the doorway: every ray that ends beyond the partition
+  // crossed x = 0 within it.
+  const PinholeIntrinsics k{.fx = 68, .fy = 68, .cx = 40, .cy = 30, .width = 80, .height = 60};
+  const SE3 back = SyntheticPathPose(kEight, 11.25);
+  ASSERT_GT(back.translation().x(), 2.0);
+  const RgbdFrame view = RenderSyntheticView(back, k, 1, SyntheticSceneKind::kTwoRooms);
+  int behind_partition = 0, through_doorway = 0;
+  for (int v = 0; v < k.height; ++v) {
+    for (int u = 0; u < k.width; ++u) {
+      const Eigen::Vector3d ray((u + 0.5 - k.cx) / k.fx, (v + 0.5 - k.cy) / k.fy, 1.0);
+      const Eigen::Vector3d world = back * (view.depth.pixel(u, v)[0] * ray);
+      if (world.x() >= -0.11) continue;
+      ++behind_partition;
+      const Eigen::Vector3d eye = back.translation();
+      const Eigen::Vector3d at_partition = eye + (world - eye) * (eye.x() / (eye.x() - world.x()));
+      EXPECT_LT(std::abs(at_partition.y()), 0.8) << u << "," << v;
+      EXPECT_LT(at_partition.z(), 2.1) << u << "," << v;
+    }
+  }
+  EXPECT_GT(behind_partition, 0);
+  const SE3 before_door = SyntheticPathPose(kEight, 29.0);  // 1 s before the crossing at 30 s
+  ASSERT_LT(before_door.translation().x(), -0.5);
+  const RgbdFrame door = RenderSyntheticView(before_door, k, 1, SyntheticSceneKind::kTwoRooms);
+  for (int v = 0; v < k.height; ++v) {
+    for (int u = 0; u < k.width; ++u) {
+      const Eigen::Vector3d ray((u + 0.5 - k.cx) / k.fx, (v + 0.5 - k.cy) / k.fy, 1.0);
+      through_doorway += (*door.ground_truth * (door.depth.pixel(u, v)[0] * ray)).x() > 0.11;
+    }
+  }
+  EXPECT_GT(through_doorway, k.width * k.height / 10);
+}
+
 TEST(SyntheticPathTest, EveryPathIsSmoothLevelAndKeepsClearOfTheScene) {
-  const SyntheticScene& room = SyntheticRoom();
   PinholeIntrinsics wide{.fx = 24, .fy = 24, .cx = 20, .cy = 15, .width = 40, .height = 30};
   for (SyntheticPath path : kAllPaths) {
     SCOPED_TRACE(SyntheticPathName(path));
-    for (int i = 0; i < 450; ++i) {  // 15 s
+    const SyntheticSceneKind scene = SyntheticPathScene(path);
+    const SyntheticScene& room = SyntheticSceneOf(scene);
+    for (int i = 0; i < 900; ++i) {  // 30 s: a whole turn of the two-room eight
       const SE3 a = SyntheticPathPose(path, i / kFps), b = SyntheticPathPose(path, (i + 1) / kFps);
       ASSERT_TRUE(a.IsFinite()) << i;
       EXPECT_LT((b.translation() - a.translation()).norm(), 0.03) << i;  // < 0.9 m/s
@@ -163,7 +229,7 @@ TEST(SyntheticPathTest, EveryPathIsSmoothLevelAndKeepsClearOfTheScene) {
       for (const SyntheticBox& box : room.boxes) EXPECT_GT(DistanceToBox(box, p), 0.5) << i;
       if (i % 3 == 0) {
         // Nothing in view closer than 0.5 m (coarse wide-angle render).
-        const RgbdFrame frame = RenderSyntheticView(a, wide, 1);
+        const RgbdFrame frame = RenderSyntheticView(a, wide, 1, scene);
         EXPECT_GT(*std::min_element(frame.depth.data.begin(), frame.depth.data.end()), 0.5f) << i;
       }
     }
@@ -230,21 +296,25 @@ TEST(SyntheticPathTest, WalkOutLooksAtRoomTheFirstFramesNeverSaw) {
   EXPECT_LT(mostly_new, 300 - 45);  // the first 1.5 s are not
 }
 
-TEST(SyntheticPathTest, GeneratedSequenceFollowsTheChosenPath) {
-  SyntheticOptions options;
-  options.width = 32;
-  options.height = 24;
-  options.num_frames = 8;
-  options.path = SyntheticPath::kWalkOut;
-  absl::StatusOr<InMemoryDataset> dataset = GenerateSyntheticSequence(options);
-  ASSERT_TRUE(dataset.ok()) << dataset.status();
-  for (int i = 0; i < dataset->size(); ++i) {
-    ASSERT_TRUE(dataset->ground_truth(i).has_value());
-    EXPECT_EQ(dataset->ground_truth(i)->matrix(),
-              SyntheticPathPose(SyntheticPath::kWalkOut, i / kFps).matrix());
-    EXPECT_EQ(dataset->frames()[i].depth.data,
-              RenderSyntheticView(*dataset->ground_truth(i), SyntheticCalibration(options).pinhole)
-                  .depth.data);
+TEST(SyntheticPathTest, GeneratedSequenceFollowsTheChosenPathInItsScene) {
+  for (SyntheticPath path : {SyntheticPath::kWalkOut, SyntheticPath::kTwoRoomEight}) {
+    SCOPED_TRACE(SyntheticPathName(path));
+    SyntheticOptions options;
+    options.width = 32;
+    options.height = 24;
+    options.num_frames = 8;
+    options.path = path;
+    absl::StatusOr<InMemoryDataset> dataset = GenerateSyntheticSequence(options);
+    ASSERT_TRUE(dataset.ok()) << dataset.status();
+    for (int i = 0; i < dataset->size(); ++i) {
+      ASSERT_TRUE(dataset->ground_truth(i).has_value());
+      EXPECT_EQ(dataset->ground_truth(i)->matrix(), SyntheticPathPose(path, i / kFps).matrix());
+      EXPECT_EQ(dataset->frames()[i].depth.data,
+                RenderSyntheticView(*dataset->ground_truth(i),
+                                    SyntheticCalibration(options).pinhole, 2,
+                                    SyntheticPathScene(path))
+                    .depth.data);
+    }
   }
 }
 

@@ -178,6 +178,38 @@ TEST(SyntheticSceneTest, DepthFacingEachBoxIsDistanceToItsFace) {
   }
 }
 
+TEST(SyntheticSceneTest, TwoRoomsAreJoinedOnlyByTheDoorway) {
+  constexpr SyntheticSceneKind kTwo = SyntheticSceneKind::kTwoRooms;
+  const SyntheticScene& two = SyntheticSceneOf(kTwo);
+  EXPECT_DOUBLE_EQ(two.room_min.x(), -6.0);
+  EXPECT_DOUBLE_EQ(two.room_max.x(), 6.0);
+  // The -x room is the one room's furniture moved 3 m towards -x.
+  const SyntheticScene& one = SyntheticRoom();
+  ASSERT_GT(two.boxes.size(), one.boxes.size());
+  for (size_t i = 0; i < one.boxes.size(); ++i) {
+    EXPECT_EQ(two.boxes[i].center, one.boxes[i].center - Eigen::Vector3d(3.0, 0.0, 0.0));
+  }
+  const Eigen::Vector3d along_x = Eigen::Vector3d::UnitX();
+  // Through the doorway, from the -x room to the far wall of the +x room.
+  const SyntheticHit through = CastSyntheticRay({-2.0, 0.0, 1.4}, along_x, kTwo);
+  EXPECT_EQ(through.surface, kSyntheticWallMaxX);
+  EXPECT_NEAR(through.t, 8.0, 1e-9);
+  // Beside the doorway and above it the partition stops the ray at its -x face.
+  for (const Eigen::Vector3d& origin : {Eigen::Vector3d(-2.0, 1.2, 1.4),
+                                        Eigen::Vector3d(-2.0, -1.2, 1.4),
+                                        Eigen::Vector3d(-2.0, 0.0, 2.5)}) {
+    const SyntheticHit hit = CastSyntheticRay(origin, along_x, kTwo);
+    EXPECT_GE(hit.surface, kSyntheticFirstBox) << origin.transpose();
+    EXPECT_NEAR(hit.point.x(), -0.1, 1e-9) << origin.transpose();
+    EXPECT_NEAR(hit.normal.x(), -1.0, 1e-9) << origin.transpose();
+    EXPECT_GT(SyntheticSurfaceColor(hit, kTwo).sum(), 0.0f);
+  }
+  // The one room's scene is unchanged by the other's existence: the same ray ends at its wall.
+  const SyntheticHit in_one = CastSyntheticRay({-2.0, 0.0, 1.4}, along_x);
+  EXPECT_EQ(in_one.surface, kSyntheticWallMaxX);
+  EXPECT_NEAR(in_one.t, 5.0, 1e-9);
+}
+
 // Back-projects frame a with its depth and ground truth, projects into frame b and compares
 // with b's depth, interpolating b's inverse depth bilinearly (exact on planes).
 std::vector<double> ReprojectionErrors(const RgbdFrame& a, const RgbdFrame& b,
