@@ -1,7 +1,9 @@
 // plenox slam: online SLAM over a dataset's frames (core/slam): each frame's pose while the map
 // grows, no ground truth used except frame 0's pose as the start when the dataset has one.
 #include <algorithm>
+#include <chrono>
 #include <fstream>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -178,12 +180,20 @@ int RunSlam(const std::vector<std::string>& args) {
   ProgressLine line(!flags.GetSwitch("quiet"));
   int lost = 0;
   const int frames = SlamFrameCount(*dataset, *options);
+  std::optional<std::chrono::steady_clock::time_point> finish_start;
   absl::StatusOr<SlamDatasetResult> result = RunSlamOnDataset(
-      *dataset, *backend, mapping_backend, *options, [&](const SlamFrameResult& r) {
+      *dataset, *backend, mapping_backend, *options,
+      [&](const SlamFrameResult& r) {
         lost += r.state == SlamState::kLost;
         line.Update(SlamProgressText(r.frame + 1, frames, SlamStateName(r.state), r.milliseconds,
                                      r.keyframes, lost, r.state == SlamState::kOk ? "" : r.reason));
         return true;
+      },
+      [&](const SlamProgress& p) {
+        if (!finish_start) finish_start = std::chrono::steady_clock::now();
+        line.Update(SlamFinishingText(
+            p, std::chrono::duration<double>(std::chrono::steady_clock::now() - *finish_start)
+                   .count()));
       });
   if (!result.ok()) return ReportError(kCommand, result.status());
   const std::string header =

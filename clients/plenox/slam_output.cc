@@ -159,6 +159,14 @@ std::string SlamProgressText(int frame, int frames, const char* state, double mi
                          state, milliseconds, keyframes, lost, reason.empty() ? "" : "  ", reason);
 }
 
+std::string SlamFinishingText(const SlamProgress& progress, double seconds) {
+  const SlamMapperProgress& m = progress.mapping;
+  return absl::StrFormat(
+      "slam: finishing the map: %d/%d keyframes integrated, %d/%d iterations%s, %.0f s",
+      m.keyframes_integrated, m.keyframes, m.mapping_iterations, m.iteration_budget,
+      m.loops.rebuilding ? ", rebuilding at the loop closure's poses" : "", seconds);
+}
+
 std::string SlamSummaryText(const SlamReport& r, const std::string& tag) {
   std::string memory = absl::StrFormat("map %.1f MB", r.map_mb);
   if (r.keyframe_mb) absl::StrAppendFormat(&memory, ", keyframes %.1f MB", *r.keyframe_mb);

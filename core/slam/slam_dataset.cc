@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <future>
 #include <thread>
 
 #include "absl/strings/str_cat.h"
@@ -22,13 +23,18 @@ double SecondsSince(std::chrono::steady_clock::time_point start) {
 absl::StatusOr<SlamDatasetResult> RunSlamOnDataset(
     const RgbdDataset& dataset, Backend& tracking_backend,
     const SlamSession::BackendFactory& make_mapping_backend, const SlamDatasetOptions& options,
-    const std::function<bool(const SlamFrameResult&)>& progress) {
+    const std::function<bool(const SlamFrameResult&)>& progress,
+    const std::function<void(const SlamProgress&)>& finishing) {
   if (dataset.size() == 0) return absl::InvalidArgumentError("the dataset has no frames");
   if (options.realtime && !(options.speed > 0.0 && std::isfinite(options.speed))) {
     return absl::InvalidArgumentError(
         absl::StrCat("realtime speed must be positive, got ", options.speed));
   }
   if (options.max_frames < 0) return absl::InvalidArgumentError("max_frames must not be negative");
+  if (!(options.finishing_report_s > 0.0 && std::isfinite(options.finishing_report_s))) {
+    return absl::InvalidArgumentError(absl::StrCat("finishing_report_s must be positive, got ",
+                                                   options.finishing_report_s));
+  }
   SlamDatasetResult out;
   out.frames = options.max_frames > 0 ? std::min(options.max_frames, dataset.size())
                                       : dataset.size();
@@ -69,7 +75,18 @@ absl::StatusOr<SlamDatasetResult> RunSlamOnDataset(
   }
   out.stream_s = SecondsSince(wall_start);
   out.trajectory = PosesInMainMap(out.results);
-  PLX_RETURN_IF_ERROR(session->Finish());
+  if (finishing) {
+    // Finish blocks until the map is done; progress() may be read from any thread meanwhile.
+    finishing(session->progress());
+    std::future<absl::Status> finished =
+        std::async(std::launch::async, [&session] { return session->Finish(); });
+    const auto every = std::chrono::duration<double>(options.finishing_report_s);
+    while (finished.wait_for(every) != std::future_status::ready) finishing(session->progress());
+    PLX_RETURN_IF_ERROR(finished.get());
+    finishing(session->progress());
+  } else {
+    PLX_RETURN_IF_ERROR(session->Finish());
+  }
   out.wall_s = SecondsSince(wall_start);
   out.map = session->latest_map();
   out.map_keyframes = session->latest_map_keyframes();

@@ -26,6 +26,8 @@ struct SlamDatasetOptions {
   bool realtime = false;
   double speed = 1.0;  // realtime replay speed (2 = twice as fast as recorded)
   int max_frames = 0;  // 0 = every frame
+  // How often `finishing` (RunSlamOnDataset) hears how the final mapping goes (seconds).
+  double finishing_report_s = 1.0;
 };
 
 struct SlamDatasetResult {
@@ -49,10 +51,14 @@ struct SlamDatasetResult {
   double stream_s = 0.0;
 };
 
-// `progress(result)` after every processed frame; returning false cancels.
+// `progress(result)` after every processed frame; returning false cancels. After the last
+// frame the session finishes its map (the iterations mapping still owes, a loop correction's
+// rebuild: on a long run minutes); `finishing(progress)` hears how that goes, once when it
+// starts, every options.finishing_report_s while it runs, and once when it is done.
 absl::StatusOr<SlamDatasetResult> RunSlamOnDataset(
     const RgbdDataset& dataset, Backend& tracking_backend,
     const SlamSession::BackendFactory& make_mapping_backend, const SlamDatasetOptions& options,
-    const std::function<bool(const SlamFrameResult&)>& progress = nullptr);
+    const std::function<bool(const SlamFrameResult&)>& progress = nullptr,
+    const std::function<void(const SlamProgress&)>& finishing = nullptr);
 
 }  // namespace plx

@@ -120,6 +120,31 @@ TEST_F(SlamSessionTest, DeterministicRunsAreBitIdentical) {
   EXPECT_TRUE(da == db);
 }
 
+TEST_F(SlamSessionTest, FinishingTheMapIsReportedUntilItsBudgetIsSpent) {
+  SlamDatasetOptions options;
+  options.slam = TestOptions();
+  options.max_frames = 30;
+  options.finishing_report_s = 0.001;
+  std::vector<SlamMapperProgress> reports;
+  absl::StatusOr<SlamDatasetResult> result = RunSlamOnDataset(
+      *dataset_, *backend_, CpuFactory(), options, nullptr,
+      [&](const SlamProgress& p) { reports.push_back(p.mapping); });
+  ASSERT_TRUE(result.ok()) << result.status();
+  // Once at the start, once at the end (and in between as often as the finish lasts).
+  ASSERT_GE(reports.size(), 2u);
+  for (size_t i = 1; i < reports.size(); ++i) {
+    EXPECT_GE(reports[i].mapping_iterations, reports[i - 1].mapping_iterations) << i;
+  }
+  const SlamMapperProgress& last = reports.back();
+  EXPECT_EQ(last.keyframes_integrated, last.keyframes);
+  EXPECT_GE(last.mapping_iterations, last.iteration_budget);
+  EXPECT_EQ(last.mapping_iterations, result->progress.mapping.mapping_iterations);
+
+  options.finishing_report_s = 0.0;
+  EXPECT_EQ(RunSlamOnDataset(*dataset_, *backend_, CpuFactory(), options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
 TEST_F(SlamSessionTest, StartsAtTheGivenInitialPose) {
   // Not the ground truth: the whole trajectory lands in the frame the initial pose sets.
   const SE3 initial(Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitY())),
