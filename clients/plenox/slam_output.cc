@@ -161,10 +161,15 @@ std::string SlamProgressText(int frame, int frames, const char* state, double mi
 
 std::string SlamFinishingText(const SlamProgress& progress, double seconds) {
   const SlamMapperProgress& m = progress.mapping;
+  const std::string rebuild =
+      m.loops.rebuilding
+          ? absl::StrFormat(", rebuilding at the loop closure's poses (%d/%d iterations)",
+                            m.loops.rebuild_iterations, m.loops.rebuild_iteration_budget)
+          : "";
   return absl::StrFormat(
       "slam: finishing the map: %d/%d keyframes integrated, %d/%d iterations%s, %.0f s",
-      m.keyframes_integrated, m.keyframes, m.mapping_iterations, m.iteration_budget,
-      m.loops.rebuilding ? ", rebuilding at the loop closure's poses" : "", seconds);
+      m.keyframes_integrated, m.keyframes, m.mapping_iterations, m.iteration_budget, rebuild,
+      seconds);
 }
 
 std::string SlamSummaryText(const SlamReport& r, const std::string& tag) {

@@ -96,7 +96,8 @@ std::string SlamProgressText(int frame, int frames, const char* state, double mi
                              int keyframes, int lost, const std::string& reason);
 
 // While the map is finished after the last frame: "slam: finishing the map: 60/71 keyframes
-// integrated, 1200/2130 iterations, rebuilding at the loop closure's poses, 35 s".
+// integrated, 1200/2130 iterations, rebuilding at the loop closure's poses (300/2100
+// iterations), 35 s".
 std::string SlamFinishingText(const SlamProgress& progress, double seconds);
 
 // The summary line(s) on stderr.

@@ -279,10 +279,14 @@ absl::StatusOr<SlamStepResult> SlamCoordinator::Step(SlamStepMode mode) {
     rebuilding = m.rebuild != nullptr;
   }
   if (rebuilding && main) {
-    // The main map and the rebuild in turn; the rebuild alone once the main one is idle.
+    // The main map and the rebuild in turn; the rebuild alone once the main one is idle, or
+    // when finishing: no camera tracks against the main map any more, and the rebuild has every
+    // keyframe and replaces it, so its remaining iterations would be thrown away.
     Segment& m = *segments_[0];
     m.step_rebuild_next = !m.step_rebuild_next;
-    if (m.step_rebuild_next || !m.mapper->has_work()) return StepRebuild();
+    if (m.step_rebuild_next || !m.mapper->has_work() || mode == SlamStepMode::kFinish) {
+      return StepRebuild();
+    }
   }
   PLX_ASSIGN_OR_RETURN(SlamStepResult out, StepSegment(segment, main, mode));
   if (main) PLX_RETURN_IF_ERROR(CloseLoops(mode));
@@ -531,6 +535,11 @@ absl::StatusOr<SlamStepResult> SlamCoordinator::StepRebuild() {
     out.stepped = true;
   }
   const SlamMapperProgress p = rebuild->progress();
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    loop_counts_.rebuild_iterations = p.mapping_iterations;
+    loop_counts_.rebuild_iteration_budget = p.iteration_budget;
+  }
   const double budget = p.iteration_budget;
   // Ready once every keyframe is in and it has had its share of the iterations (the rest
   // after the swap); finishing steps it until then too.

@@ -82,6 +82,8 @@ struct SlamLoopCounts {
   int in_place = 0;     // of them, applied in the running map without a rebuild
   int rebuilds_abandoned = 0;  // a drain (the daemon's shutdown) came first
   bool rebuilding = false;     // a map at corrected poses is being built
+  int rebuild_iterations = 0;  // its iterations so far, of the budget its keyframes earned
+  int rebuild_iteration_budget = 0;
   double last_solve_ms = 0.0;  // the last pose-graph solve
   double last_shift_m = 0.0;   // the largest keyframe move it made
   // The last rebuild's seed: keyframes the solve moved (fused and trained again) and bricks of
