@@ -88,12 +88,41 @@ class LoopClosureTest : public ::testing::Test {
     return t;
   }
 
-  static double MeanTranslationError(const std::vector<SE3>& poses) {
+  // Over the first `count` keyframes.
+  static double MeanTranslationError(const std::vector<SE3>& poses, int count = kKeyframes) {
     double sum = 0.0;
-    for (int i = 0; i < kKeyframes; ++i) {
+    for (int i = 0; i < count; ++i) {
       sum += (poses[i].translation() - Truth(i).translation()).norm();
     }
-    return sum / kKeyframes;
+    return sum / count;
+  }
+
+  // A camera on drifting odometry that moves with every correction it sees, as
+  // SlamTracker::FollowCorrection does, and hands keyframe i to the coordinator.
+  struct DriftingCamera {
+    std::vector<SE3> drifted;
+    SE3 change;  // the odometry's frame to the map's, from the corrections followed
+    int generation = 0;
+    int segment = 0;
+  };
+  // The correction the camera followed before keyframe i (null when none was new).
+  static std::shared_ptr<const SlamCorrection> FollowAndAccept(SlamCoordinator& coordinator,
+                                                               int i, DriftingCamera* camera) {
+    std::shared_ptr<const SlamCorrection> seen = coordinator.correction();
+    if (seen == nullptr || seen->generation <= camera->generation) {
+      seen = nullptr;
+    } else {
+      camera->change = seen->FrameChangeAt(camera->change * camera->drifted[i - 1]) *
+                       camera->change;
+      camera->generation = seen->generation;
+    }
+    SlamFrameResult result;
+    result.keyframe = true;
+    result.pose = camera->change * camera->drifted[i];
+    result.features = (*features_)[i];
+    result.correction_generation = camera->generation;
+    EXPECT_TRUE(coordinator.Accept((*frames_)[i], K(), &result, &camera->segment).ok()) << i;
+    return seen;
   }
 
   static InMemoryDataset* room_;
@@ -210,12 +239,9 @@ TEST_F(LoopClosureTest, TheCoordinatorClosesTheLoopAndPublishesTheCorrectedMap) 
   std::unique_ptr<Backend> backend = MakeCpuBackend(1);
   SlamCoordinator coordinator(split.mapper, split.gate);
   ASSERT_TRUE(coordinator.StartMapper(backend.get()).ok());
-  const std::vector<SE3> drifted = DriftedPoses(0.006, 0.006);
-  int segment = 0;
+  DriftingCamera camera{DriftedPoses(0.006, 0.006)};
+  const std::vector<SE3>& drifted = camera.drifted;
   int64_t version_before_correction = 0;
-  // The camera's frame: the drifting odometry's, moved by every correction it has seen.
-  SE3 camera_change;
-  int generation = 0;
   bool seen_rebuilding = false;  // a camera's view said a rebuild runs
   auto step_until_out_of_work = [&](SlamStepMode mode) {
     for (int steps = 0; steps < 100000; ++steps) {
@@ -227,18 +253,7 @@ TEST_F(LoopClosureTest, TheCoordinatorClosesTheLoopAndPublishesTheCorrectedMap) 
     FAIL() << "the coordinator never ran out of work";
   };
   for (int i = 0; i < kKeyframes; ++i) {
-    const std::shared_ptr<const SlamCorrection> seen = coordinator.correction();
-    if (seen != nullptr && seen->generation > generation) {
-      // As SlamTracker::FollowCorrection does: the camera moves with its keyframe.
-      camera_change = seen->FrameChangeAt(camera_change * drifted[i - 1]) * camera_change;
-      generation = seen->generation;
-    }
-    SlamFrameResult result;
-    result.keyframe = true;
-    result.pose = camera_change * drifted[i];
-    result.features = (*features_)[i];
-    result.correction_generation = generation;
-    ASSERT_TRUE(coordinator.Accept((*frames_)[i], K(), &result, &segment).ok());
+    FollowAndAccept(coordinator, i, &camera);
     step_until_out_of_work(SlamStepMode::kMap);
     if (coordinator.correction() == nullptr) {
       version_before_correction = coordinator.latest().version;
@@ -287,25 +302,14 @@ TEST_F(LoopClosureTest, ACorrectionWithinTheInPlaceLimitMovesTheRunningMapWithou
   ASSERT_TRUE(coordinator.StartMapper(backend.get()).ok());
   // The second lap's first 15 keyframes: enough loops to correct the first lap's drift.
   constexpr int kUsed = 46;
-  const std::vector<SE3> drifted = DriftedPoses(0.006, 0.006);
-  SE3 camera_change;
-  int generation = 0, segment = 0;
+  DriftingCamera camera{DriftedPoses(0.006, 0.006)};
   bool seen_rebuilding = false;
   int64_t versions_seen = 0;
   for (int i = 0; i < kUsed; ++i) {
-    const std::shared_ptr<const SlamCorrection> seen = coordinator.correction();
-    if (seen != nullptr && seen->generation > generation) {
-      // Published with the map version it belongs to, which readers already see.
-      EXPECT_LE(seen->map_version, coordinator.latest().version);
-      camera_change = seen->FrameChangeAt(camera_change * drifted[i - 1]) * camera_change;
-      generation = seen->generation;
-    }
-    SlamFrameResult result;
-    result.keyframe = true;
-    result.pose = camera_change * drifted[i];
-    result.features = (*features_)[i];
-    result.correction_generation = generation;
-    ASSERT_TRUE(coordinator.Accept((*frames_)[i], K(), &result, &segment).ok());
+    const int64_t latest = coordinator.latest().version;
+    const std::shared_ptr<const SlamCorrection> seen = FollowAndAccept(coordinator, i, &camera);
+    // Published with the map version it belongs to, which readers already see.
+    if (seen != nullptr) EXPECT_LE(seen->map_version, latest);
     for (int steps = 0;; ++steps) {
       ASSERT_LT(steps, 100000);
       absl::StatusOr<SlamStepResult> r = coordinator.Step(SlamStepMode::kMap);
@@ -329,11 +333,8 @@ TEST_F(LoopClosureTest, ACorrectionWithinTheInPlaceLimitMovesTheRunningMapWithou
   std::vector<SE3> corrected;
   for (const StampedPose& kf : coordinator.keyframe_poses()) corrected.push_back(kf.pose);
   ASSERT_EQ(corrected.size(), static_cast<size_t>(kUsed));
-  double before = 0.0, after = 0.0;
-  for (int i = 0; i < kUsed; ++i) {
-    before += (drifted[i].translation() - Truth(i).translation()).norm() / kUsed;
-    after += (corrected[i].translation() - Truth(i).translation()).norm() / kUsed;
-  }
+  const double before = MeanTranslationError(camera.drifted, kUsed);
+  const double after = MeanTranslationError(corrected, kUsed);
   EXPECT_LT(after, before / 3.0) << "before " << before << " m, after " << after << " m";
 }
 
