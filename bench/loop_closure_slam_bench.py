@@ -164,6 +164,10 @@ def main():
     ap.add_argument("--deterministic", action="store_true",
                     help="map in lock-step (plenox slam --deterministic): the difference loop "
                          "closure makes without the CPU it takes from concurrent mapping")
+    ap.add_argument("--loop-closure", choices=("both", "on", "off"), default="both",
+                    help="run each case with and without loop closure (both), or one side "
+                         "only (a change to loop closure alone leaves the 'off' rows as they "
+                         "were: rerun only 'on')")
     ap.add_argument("--keep", help="make the sequences under this folder and keep them (a "
                                    "second run reuses nothing; it only keeps them to look at)")
     ap.add_argument("--timeout", type=float, default=3600.0)
@@ -199,7 +203,7 @@ def main():
                 log(str(dataset))
                 failed = True
                 continue
-            for lc in (True, False):
+            for lc in {"both": (True, False), "on": (True,), "off": (False,)}[args.loop_closure]:
                 try:
                     r = run(args, name, dataset, os.path.join(root, key, str(lc)), lc)
                 except CommandError as exc:

@@ -22,12 +22,16 @@ OdometryOptions LoopOdometry(const OdometryOptions& given, const LoopClosureOpti
   return o;
 }
 
-// Standard deviations of a sequential edge that moved `m` metres and `rad` radians.
-void SequentialSigmas(const SE3& motion, const LoopClosureOptions& o, PoseGraphEdge* edge) {
+// Standard deviations of a sequential edge that moved by `motion`, `unconfirmed` of it without
+// the map's confirmation.
+void SequentialSigmas(const SE3& motion, const UnconfirmedMotion& unconfirmed,
+                      const LoopClosureOptions& o, PoseGraphEdge* edge) {
   const double m = motion.translation().norm();
   const double rad = Eigen::AngleAxisd(motion.rotation()).angle();
-  edge->sigma_m = o.sequential_sigma_m + o.sequential_sigma_per_m * m;
-  edge->sigma_rad = o.sequential_sigma_rad + o.sequential_sigma_per_rad * rad;
+  edge->sigma_m = o.sequential_sigma_m + o.sequential_sigma_per_m * m +
+                  o.unconfirmed_sigma_per_m * unconfirmed.m;
+  edge->sigma_rad = o.sequential_sigma_rad + o.sequential_sigma_per_rad * rad +
+                    o.unconfirmed_sigma_per_rad * unconfirmed.rad;
 }
 
 }  // namespace
@@ -50,6 +54,7 @@ absl::Status ValidateLoopClosureOptions(const LoopClosureOptions& o) {
     return absl::InvalidArgumentError("loop closure's confirm_residual must be >= 0");
   }
   if (!(o.sequential_sigma_per_m >= 0.0) || !(o.sequential_sigma_per_rad >= 0.0) ||
+      !(o.unconfirmed_sigma_per_m >= 0.0) || !(o.unconfirmed_sigma_per_rad >= 0.0) ||
       !(o.min_correction_m >= 0.0) || !(o.min_correction_rad >= 0.0)) {
     return absl::InvalidArgumentError("loop closure's per-motion sigmas and corrections >= 0");
   }
@@ -140,7 +145,8 @@ absl::StatusOr<LoopSearch> SearchLoop(int query, const std::vector<LoopKeyframe>
 
 std::vector<PoseGraphEdge> LoopClosureGraph(const std::vector<SE3>& poses,
                                             const std::vector<LoopEdge>& loops,
-                                            const LoopClosureOptions& options) {
+                                            const LoopClosureOptions& options,
+                                            const std::vector<UnconfirmedMotion>& unconfirmed) {
   std::vector<PoseGraphEdge> edges;
   edges.reserve(poses.size() + loops.size());
   for (size_t i = 1; i < poses.size(); ++i) {
@@ -148,7 +154,8 @@ std::vector<PoseGraphEdge> LoopClosureGraph(const std::vector<SE3>& poses,
     edge.from = static_cast<int>(i - 1);
     edge.to = static_cast<int>(i);
     edge.from_T_to = poses[i - 1].Inverse() * poses[i];
-    SequentialSigmas(edge.from_T_to, options, &edge);
+    const UnconfirmedMotion doubt = i < unconfirmed.size() ? unconfirmed[i] : UnconfirmedMotion{};
+    SequentialSigmas(edge.from_T_to, doubt, options, &edge);
     edges.push_back(edge);
   }
   for (const LoopEdge& loop : loops) {
@@ -164,9 +171,9 @@ std::vector<PoseGraphEdge> LoopClosureGraph(const std::vector<SE3>& poses,
   return edges;
 }
 
-absl::StatusOr<LoopCorrection> CorrectKeyframes(const std::vector<SE3>& poses,
-                                                const std::vector<LoopEdge>& loops,
-                                                const LoopClosureOptions& options) {
+absl::StatusOr<LoopCorrection> CorrectKeyframes(
+    const std::vector<SE3>& poses, const std::vector<LoopEdge>& loops,
+    const LoopClosureOptions& options, const std::vector<UnconfirmedMotion>& unconfirmed) {
   LoopCorrection correction;
   if (poses.empty()) return correction;
   for (const LoopEdge& loop : loops) {
@@ -176,7 +183,12 @@ absl::StatusOr<LoopCorrection> CorrectKeyframes(const std::vector<SE3>& poses,
           absl::StrFormat("loop %d-%d names a keyframe not in the graph", loop.from, loop.to));
     }
   }
-  const std::vector<PoseGraphEdge> edges = LoopClosureGraph(poses, loops, options);
+  for (const UnconfirmedMotion& u : unconfirmed) {
+    if (!(u.m >= 0.0) || !(u.rad >= 0.0) || !std::isfinite(u.m) || !std::isfinite(u.rad)) {
+      return absl::InvalidArgumentError("a keyframe's unconfirmed motion must be finite, >= 0");
+    }
+  }
+  const std::vector<PoseGraphEdge> edges = LoopClosureGraph(poses, loops, options, unconfirmed);
   const int first_loop = static_cast<int>(poses.size()) - 1;
   const bool all_confirm = std::all_of(
       edges.begin() + first_loop, edges.end(), [&](const PoseGraphEdge& loop) {

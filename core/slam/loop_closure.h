@@ -33,6 +33,7 @@
 #include "core/posegraph/pose_graph.h"
 #include "core/relocalisation/feature_relocaliser.h"
 #include "core/relocalisation/frame_features.h"
+#include "core/slam/unconfirmed_motion.h"
 
 namespace plx {
 
@@ -60,6 +61,14 @@ struct LoopClosureOptions {
   double sequential_sigma_per_m = 0.05;
   double sequential_sigma_rad = 0.003;
   double sequential_sigma_per_rad = 0.05;
+  // ...plus the motion the map did not confirm (core/slam/unconfirmed_motion.h: frames carried
+  // by the odometry alone, relocalised or lost), at one standard deviation per metre and
+  // radian: such a stretch can be off by as much as it moved. Drift gathers there: in the
+  // two-room run the error grew by 20-30 cm over odometry-carried stretches and jumps (70 % of
+  // the motion on one of them) and by a few cm over metres tracked OK (docs/BENCHMARKS.md,
+  // "Loop closure"), so a loop's correction should go mostly to those edges, not evenly.
+  double unconfirmed_sigma_per_m = 1.0;
+  double unconfirmed_sigma_per_rad = 1.0;
   double loop_sigma_m = 0.005;
   double loop_sigma_rad = 0.005;
   PoseGraphOptions graph;
@@ -111,10 +120,11 @@ absl::StatusOr<LoopSearch> SearchLoop(int query, const std::vector<LoopKeyframe>
                                       const LoopClosureOptions& options);
 
 // The pose graph over `poses` (keyframes in order): a sequential edge between each keyframe and
-// the next (their current relative pose, the options' sigmas), then one edge per loop.
-std::vector<PoseGraphEdge> LoopClosureGraph(const std::vector<SE3>& poses,
-                                            const std::vector<LoopEdge>& loops,
-                                            const LoopClosureOptions& options);
+// the next (their current relative pose, the options' sigmas, wider by `unconfirmed[i]` for the
+// edge into keyframe i; empty or shorter: none), then one edge per loop.
+std::vector<PoseGraphEdge> LoopClosureGraph(
+    const std::vector<SE3>& poses, const std::vector<LoopEdge>& loops,
+    const LoopClosureOptions& options, const std::vector<UnconfirmedMotion>& unconfirmed = {});
 
 struct LoopCorrection {
   std::vector<SE3> poses;          // every keyframe's corrected pose
@@ -132,8 +142,8 @@ struct LoopCorrection {
 
 // Solves LoopClosureGraph with keyframe 0 fixed (step 4), unless every loop confirms the poses
 // (confirm_residual).
-absl::StatusOr<LoopCorrection> CorrectKeyframes(const std::vector<SE3>& poses,
-                                                const std::vector<LoopEdge>& loops,
-                                                const LoopClosureOptions& options);
+absl::StatusOr<LoopCorrection> CorrectKeyframes(
+    const std::vector<SE3>& poses, const std::vector<LoopEdge>& loops,
+    const LoopClosureOptions& options, const std::vector<UnconfirmedMotion>& unconfirmed = {});
 
 }  // namespace plx

@@ -132,6 +132,7 @@ absl::Status SlamCoordinator::StartMapper(Backend* backend) {
 absl::Status SlamCoordinator::AddKeyframeLocked(const RgbdFrame& frame, const SE3& given_pose,
                                                 const PinholeIntrinsics& k,
                                                 std::shared_ptr<const FrameFeatures> features,
+                                                const UnconfirmedMotion& unconfirmed,
                                                 Segment* to, bool keep, int generation) {
   SE3 pose = given_pose;
   const bool main = to == segments_[0].get();
@@ -156,6 +157,7 @@ absl::Status SlamCoordinator::AddKeyframeLocked(const RgbdFrame& frame, const SE
     to->kept.back().frame.ground_truth.reset();
   }
   to->features.push_back(std::move(features));
+  to->unconfirmed.push_back(unconfirmed);
   ++to->progress.keyframes;
   ++to->progress.pending_keyframes;
   to->has_work = true;
@@ -166,13 +168,14 @@ absl::Status SlamCoordinator::AddKeyframeLocked(const RgbdFrame& frame, const SE
 absl::Status SlamCoordinator::AddKeyframe(const RgbdFrame& frame, const SE3& pose,
                                           const PinholeIntrinsics& k,
                                           std::shared_ptr<const FrameFeatures> features,
-                                          int segment) {
+                                          int segment, UnconfirmedMotion unconfirmed) {
   std::lock_guard<std::mutex> lock(mutex_);
   if (segment < 0 || segment >= static_cast<int>(segments_.size()) ||
       segments_[segment]->joined) {
     return absl::InvalidArgumentError(absl::StrCat("no open map segment ", segment));
   }
-  return AddKeyframeLocked(frame, pose, k, std::move(features), segments_[segment].get(),
+  return AddKeyframeLocked(frame, pose, k, std::move(features), unconfirmed,
+                           segments_[segment].get(),
                            /*keep=*/segment != 0, CurrentGenerationLocked());
 }
 
@@ -190,7 +193,8 @@ absl::Status SlamCoordinator::JoinLocked(int segment, const SE3& main_T_segment,
     const SE3 pose = i < refined.size() ? refined[i].pose : from.kept[i].pose;
     PLX_RETURN_IF_ERROR(AddKeyframeLocked(from.kept[i].frame, main_T_segment * pose,
                                           from.kept[i].intrinsics, from.features[i],
-                                          segments_[0].get(), /*keep=*/false, generation));
+                                          from.unconfirmed[i], segments_[0].get(),
+                                          /*keep=*/false, generation));
   }
   from.joined = true;
   from.kept.clear();
@@ -218,7 +222,8 @@ absl::StatusOr<bool> SlamCoordinator::Accept(const RgbdFrame& frame,
   result->segment = *segment;
   if (result->keyframe) {
     PLX_RETURN_IF_ERROR(AddKeyframeLocked(frame, result->pose, k, result->features,
-                                          segments_[*segment].get(), /*keep=*/*segment != 0,
+                                          result->unconfirmed, segments_[*segment].get(),
+                                          /*keep=*/*segment != 0,
                                           result->correction_generation));
     queued = true;
   }
@@ -369,11 +374,15 @@ absl::Status SlamCoordinator::CorrectAndRebuild(SlamMapper* mapper) {
   const LoopClosureOptions& options = mapper_options_.loop_closure;
   const std::vector<SE3> poses = mapper->all_keyframe_poses();
   std::vector<LoopEdge> loops;
+  std::vector<UnconfirmedMotion> unconfirmed;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     loops = main.loops;
+    unconfirmed = main.unconfirmed;
   }
-  PLX_ASSIGN_OR_RETURN(const LoopCorrection correction, CorrectKeyframes(poses, loops, options));
+  unconfirmed.resize(poses.size());
+  PLX_ASSIGN_OR_RETURN(const LoopCorrection correction,
+                       CorrectKeyframes(poses, loops, options, unconfirmed));
   main.correction_due = false;
   std::vector<LoopEdge> kept;
   for (size_t i = 0; i < loops.size(); ++i) {

@@ -149,9 +149,10 @@ class SlamCoordinator {
   // Queues a keyframe of `segment` (any thread); until the step-runner made that segment's
   // mapper it waits in the coordinator. `features` (SlamFrameResult::features) are kept for
   // relocalisation; null: this keyframe has none.
+  // `unconfirmed`: SlamFrameResult::unconfirmed (loop closure's doubt in the edge into it).
   absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k,
                            std::shared_ptr<const FrameFeatures> features = nullptr,
-                           int segment = 0);
+                           int segment = 0, UnconfirmedMotion unconfirmed = {});
 
   // Applies a camera's tracked frame (any thread): starts the segment it asked for, joins its
   // segment to the main map, queues its keyframe; `segment` is the camera's (0 at first),
@@ -205,6 +206,8 @@ class SlamCoordinator {
     std::vector<EarlyKeyframe> early;    // added before the mapper exists
     // Every accepted keyframe's features, in the order accepted (immutable once shared).
     std::vector<std::shared_ptr<const FrameFeatures>> features;
+    // ...and the motion into each the map did not confirm (LoopClosureGraph's doubt).
+    std::vector<UnconfirmedMotion> unconfirmed;
     // A segment's keyframes as accepted (not the main map's): what a join moves. A copy of
     // what its mapper holds: the mapper's frames belong to the step-runner, a join happens on
     // a camera's thread.
@@ -251,8 +254,9 @@ class SlamCoordinator {
   // a pose from before the latest correction moves with it.
   absl::Status AddKeyframeLocked(const RgbdFrame& frame, const SE3& pose,
                                  const PinholeIntrinsics& k,
-                                 std::shared_ptr<const FrameFeatures> features, Segment* to,
-                                 bool keep, int generation);
+                                 std::shared_ptr<const FrameFeatures> features,
+                                 const UnconfirmedMotion& unconfirmed, Segment* to, bool keep,
+                                 int generation);
   // Moves `segment`'s keyframes into the main map at main_T_segment times their poses
   // (main_T_segment measured in the main map's frame `generation`).
   absl::Status JoinLocked(int segment, const SE3& main_T_segment, int generation);

@@ -667,6 +667,14 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   }
   out.tracking = *result;
   out.pose = result->pose;
+  // Motion the map did not confirm since the camera's last keyframe, measured from the last
+  // pose given out (a LOST frame's prediction is no motion; the relocalised pose after it
+  // carries the whole jump). A new segment or a join starts another chain of poses.
+  if (out.new_segment || out.main_T_segment) {
+    unconfirmed_ = {};
+  } else if (out.state != SlamState::kOk && out.state != SlamState::kLost && last_good_pose_) {
+    unconfirmed_.Add(*last_good_pose_, out.pose);
+  }
   if (out.state == SlamState::kLost) {
     if (!lost_) relocalisation_cursor_ = 0;  // a new loss starts at the likeliest pose
     lost_ = true;
@@ -708,6 +716,7 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
     } else if (decision.keyframe) {
       out.keyframe = true;
       out.keyframes += 1;
+      out.unconfirmed = std::exchange(unconfirmed_, UnconfirmedMotion{});
       out.reason = overdue ? absl::StrFormat("%s (deferred on %d frames: waits for mapping)",
                                              decision.reason, options_.max_deferred_frames)
                            : decision.reason;

@@ -61,6 +61,7 @@
 #include "core/slam/pose_fusion.h"
 #include "core/slam/slam_correction.h"
 #include "core/slam/slam_state.h"
+#include "core/slam/unconfirmed_motion.h"
 #include "core/tracking/tracker.h"
 
 namespace plx {
@@ -206,6 +207,9 @@ struct SlamFrameResult {
   bool keyframe = false;        // the caller hands this frame to the mapper ...
   // ... with these (SlamCoordinator::AddKeyframe); null when feature relocalisation is off.
   std::shared_ptr<const FrameFeatures> features;
+  // ... and the motion since this camera's previous keyframe that the map did not confirm
+  // (core/slam/unconfirmed_motion.h; zero on other frames).
+  UnconfirmedMotion unconfirmed;
   int keyframes = 0;            // keyframes accepted so far, this one included
   // The map segment `pose` is in (0: the main map; set by SlamCoordinator::Accept).
   int segment = 0;
@@ -383,6 +387,7 @@ class SlamTracker {
   double carry_start_ = 0.0;  // keyframe 0's timestamp (of the map or the camera's segment)
   SE3 carry_origin_;          // and its pose
   int correction_generation_ = 0;  // the main map's corrections followed (FollowCorrection)
+  UnconfirmedMotion unconfirmed_;  // since the camera's last keyframe
   // The current frame's features once extracted (FeaturesOf), reset per frame.
   std::shared_ptr<const FrameFeatures> frame_features_;
   SlamTrackerCounts counts_;

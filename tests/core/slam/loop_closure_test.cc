@@ -197,6 +197,36 @@ TEST_F(LoopClosureTest, AWrongLoopAmongRightOnesIsRejectedAndTheRightOnesCorrect
   EXPECT_LT(alone->max_shift_m, 1e-9);
 }
 
+TEST_F(LoopClosureTest, ACorrectionGoesToTheEdgeTheMapDidNotConfirm) {
+  // The second lap tracked well but for one stretch carried by the odometry alone into
+  // keyframe 35, which slid 20 cm sideways (the two-room run's shape: drift gathered where the
+  // map could not confirm the pose). Loops after it measure the truth.
+  constexpr int kJump = 35;
+  std::vector<SE3> tracked;
+  const SE3 slide(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0.2, 0.0, 0.0));
+  for (int i = 0; i < kKeyframes; ++i) tracked.push_back(i < kJump ? Truth(i) : slide * Truth(i));
+  std::vector<LoopEdge> loops;
+  for (int q : {40, 50, 60}) loops.push_back({q - 30, q, Truth(q - 30).Inverse() * Truth(q)});
+  // Without knowing where: the 20 cm spread over every edge the loops span.
+  absl::StatusOr<LoopCorrection> even = CorrectKeyframes(tracked, loops, Untimed());
+  ASSERT_TRUE(even.ok()) << even.status();
+  // Told which motion the map did not confirm (the whole step into keyframe 35).
+  std::vector<UnconfirmedMotion> unconfirmed(kKeyframes);
+  unconfirmed[kJump].Add(Truth(kJump - 1), Truth(kJump));
+  absl::StatusOr<LoopCorrection> told = CorrectKeyframes(tracked, loops, Untimed(), unconfirmed);
+  ASSERT_TRUE(told.ok()) << told.status();
+  EXPECT_TRUE(told->rejected_loops.empty());
+  const double before = MeanTranslationError(tracked);
+  const double spread = MeanTranslationError(even->poses);
+  const double placed = MeanTranslationError(told->poses);
+  EXPECT_GT(before, 0.05);
+  EXPECT_LT(placed, spread / 3.0) << "before " << before << " spread " << spread;
+  EXPECT_LT(placed, 0.01) << "before " << before << " spread " << spread;
+  // A doubt that is not a number is refused, not solved with.
+  unconfirmed[3].m = -1.0;
+  EXPECT_FALSE(CorrectKeyframes(tracked, loops, Untimed(), unconfirmed).ok());
+}
+
 TEST_F(LoopClosureTest, LoopsThatAgreeWithThePosesWithinTheirNoiseMoveNothing) {
   // Tracking against the map already put the second lap where the first one was: the loops
   // (measured to within a few millimetres) confirm the poses, and a solve would only move
