@@ -13,7 +13,8 @@ std::string SharedDataDir();
 // Path of one dev sequence, or empty when the data is absent. Tests call GTEST_SKIP on empty.
 std::string SharedSequence(const std::string& name);
 
-// A fresh, empty directory under the system temp dir, unique per call.
+// A fresh, empty directory under the system temp dir, unique per call; removed with what is in
+// it when the test binary exits (PLX_KEEP_TEST_DIRS=1 keeps it).
 std::string MakeTempDir(const std::string& prefix);
 
 // This process's resident memory in bytes (VmRSS of /proc/self/status), -1 when unreadable: what

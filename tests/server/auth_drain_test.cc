@@ -150,7 +150,7 @@ std::vector<Rpc> AllRpcs() {
 }
 
 TEST(AuthTest, EveryRpcNeedsTheBearerTokenButHealthDoesNot) {
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_auth"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_auth"));
   o.auth_token = kToken;
   absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartWithMaps({"room"}, o);
   ASSERT_TRUE(started.ok()) << started.status();
@@ -256,14 +256,14 @@ grpc::Status AskReflection(const std::shared_ptr<grpc::Channel>& channel, std::s
 // process before it.
 TEST(AuthTest, ReflectionIsOffWithAuthEvenAfterADaemonWithoutAuth) {
   absl::StatusOr<std::unique_ptr<TestDaemon>> open =
-      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_open")));
+      StartTestDaemon(TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_open")));
   ASSERT_TRUE(open.ok()) << open.status();
   std::string listing;
   const grpc::Status open_status = AskReflection((*open)->channel, &listing);
   EXPECT_TRUE(open_status.ok()) << Describe(open_status);
   EXPECT_NE(listing.find("plenoxd.v1.Plenoxd"), std::string::npos) << "reflection lists the API";
 
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_closed"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_closed"));
   o.auth_token = kToken;
   absl::StatusOr<std::unique_ptr<TestDaemon>> closed = StartTestDaemon(o);
   ASSERT_TRUE(closed.ok()) << closed.status();
@@ -278,7 +278,7 @@ TEST(AuthTest, ReflectionIsOffWithAuthEvenAfterADaemonWithoutAuth) {
 // the stream that keeps going finishes OK within the grace period, the idle one is cancelled at
 // the deadline, and the map changed by an Integrate is saved as <name>.plx.
 TEST(DrainTest, HealthNewCallsOpenStreamsAndSaving) {
-  const std::string dir = ScratchDir("plx_srv_drain");
+  const std::string dir = plx::testing::MakeTempDir("plx_srv_drain");
   absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartWithMaps({"room"},
                                                                       TestDaemonOptions(dir));
   ASSERT_TRUE(started.ok()) << started.status();

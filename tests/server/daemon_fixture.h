@@ -192,40 +192,6 @@ inline bool WaitFor(const std::function<bool()>& condition,
 }
 
 // ---------------------------------------------------------------------------------------------
-// Scratch directories: maps are tens of MB, so every directory made here is removed when the
-// test program ends.
-
-class ScratchDirCleanup : public ::testing::Environment {
- public:
-  static std::vector<std::string>& Dirs() {
-    static std::vector<std::string> dirs;
-    return dirs;
-  }
-  static std::mutex& Mutex() {
-    static std::mutex mutex;
-    return mutex;
-  }
-  void TearDown() override {
-    std::lock_guard<std::mutex> lock(Mutex());
-    for (const std::string& dir : Dirs()) {
-      std::error_code ec;
-      std::filesystem::remove_all(dir, ec);
-    }
-    Dirs().clear();
-  }
-};
-inline const bool kScratchDirCleanupRegistered =
-    (::testing::AddGlobalTestEnvironment(new ScratchDirCleanup), true);
-
-// A fresh, empty directory (tests/test_util.h) that is removed at the end of the program.
-inline std::string ScratchDir(const std::string& prefix) {
-  const std::string dir = plx::testing::MakeTempDir(prefix);
-  std::lock_guard<std::mutex> lock(ScratchDirCleanup::Mutex());
-  ScratchDirCleanup::Dirs().push_back(dir);
-  return dir;
-}
-
-// ---------------------------------------------------------------------------------------------
 // The daemon.
 
 inline DaemonOptions TestDaemonOptions(const std::string& data_dir) {
@@ -421,7 +387,7 @@ inline void BuildSmallMap(pb::Plenoxd::Stub& stub, const std::string& name) {
 inline const std::string& CachedRoomMapFile() {
   static const std::string* path = [] {
     auto* out = new std::string();
-    const std::string dir = ScratchDir("plx_srv_cache");
+    const std::string dir = plx::testing::MakeTempDir("plx_srv_cache");
     absl::StatusOr<std::unique_ptr<TestDaemon>> d = StartTestDaemon(TestDaemonOptions(dir));
     if (!d.ok()) {
       ADD_FAILURE() << "daemon for the cached map: " << d.status();
@@ -458,7 +424,7 @@ inline void SeedMaps(const std::string& data_dir, const std::vector<std::string>
 // A fresh daemon whose data directory holds the cached room map under each of `names`.
 inline absl::StatusOr<std::unique_ptr<TestDaemon>> StartWithMaps(
     const std::vector<std::string>& names, DaemonOptions options = TestDaemonOptions("")) {
-  if (options.data_dir.empty()) options.data_dir = ScratchDir("plx_srv");
+  if (options.data_dir.empty()) options.data_dir = plx::testing::MakeTempDir("plx_srv");
   SeedMaps(options.data_dir, names);
   return StartTestDaemon(options);
 }

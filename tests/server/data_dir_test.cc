@@ -37,7 +37,7 @@ grpc::Status LoadMapCall(pb::Plenoxd::Stub& stub, const std::string& name,
 // are removed when the daemon starts, and each removal is logged; a temporary of a running
 // process (maybe a save in progress) and other files stay.
 TEST(DataDirTest, StaleTemporariesAreRemovedAtStart) {
-  const std::string data = ScratchDir("plx_srv_stale");
+  const std::string data = plx::testing::MakeTempDir("plx_srv_stale");
   const pid_t child = ::fork();
   if (child == 0) ::_exit(0);
   ::waitpid(child, nullptr, 0);  // a pid that no process has now
@@ -129,7 +129,7 @@ TEST(DataDirTest, ACorruptOrTruncatedMapFileIsDataLoss) {
 // then every later load, save and SIGTERM. Now it is skipped at start, LoadMap of it fails at
 // once, and the other maps load and save.
 TEST(DataDirTest, AFifoNamedLikeAMapBlocksNothing) {
-  const std::string dir = ScratchDir("plx_srv_fifo");
+  const std::string dir = plx::testing::MakeTempDir("plx_srv_fifo");
   const std::string data = dir + "/data";
   fs::create_directories(data);
   SeedMaps(data, {"room"});

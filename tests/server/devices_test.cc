@@ -154,7 +154,7 @@ TEST(WorkerPoolTest, WorkGoesToTheWorkersWhoseRoleTakesIt) {
 
 TEST(DaemonDevicesTest, CudaWithoutAGpuFailsAtStartNamingCuda) {
   if (CudaDeviceCount() > 0) GTEST_SKIP() << "a CUDA device is visible here";
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_cuda"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_cuda"));
   o.backend = BackendKind::kCuda;
   const absl::StatusOr<std::unique_ptr<Daemon>> d = Daemon::Start(o);
   ASSERT_FALSE(d.ok());
@@ -164,7 +164,7 @@ TEST(DaemonDevicesTest, CudaWithoutAGpuFailsAtStartNamingCuda) {
 }
 
 TEST(DaemonDevicesTest, GpusWithTheCpuBackendIsInvalid) {
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_gpus"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_gpus"));
   o.backend = BackendKind::kCpu;
   o.gpus = std::vector<int>{0};
   const absl::StatusOr<std::unique_ptr<Daemon>> d = Daemon::Start(o);
@@ -183,7 +183,7 @@ grpc::Status GetServerInfo(pb::Plenoxd::Stub& stub, pb::ServerInfo* info,
 // auto without a GPU (and cpu anywhere): the CPU's interactive and mapping workers, reported by
 // GetServerInfo and metrics.
 TEST(DaemonDevicesTest, TheCpuWorkersAreReportedByGetServerInfoAndMetrics) {
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_devices"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_devices"));
   o.metrics_port = 0;
   if (CudaDeviceCount() > 0) o.backend = BackendKind::kCpu;  // else the default, auto
   absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(o);
@@ -226,7 +226,7 @@ TEST(DaemonDevicesTest, TheCpuWorkersAreReportedByGetServerInfoAndMetrics) {
 }
 
 TEST(DaemonDevicesTest, GetServerInfoNeedsTheToken) {
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_info_auth"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_info_auth"));
   o.auth_token = "s3cret";
   o.backend = BackendKind::kCpu;
   absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(o);
@@ -242,7 +242,7 @@ TEST(DaemonDevicesTest, GetServerInfoNeedsTheToken) {
 
 // --mapping-worker off: one CPU worker takes both kinds of work.
 TEST(DaemonDevicesTest, WithoutTheMappingWorkerOneCpuWorkerDoesEverything) {
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_one_worker"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_one_worker"));
   o.backend = BackendKind::kCpu;
   o.mapping_worker = false;
   absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(o);
@@ -254,7 +254,7 @@ TEST(DaemonDevicesTest, WithoutTheMappingWorkerOneCpuWorkerDoesEverything) {
 }
 
 TEST(DaemonDevicesTest, AMappingNiceOutsideItsRangeIsRefusedAtStart) {
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_bad_nice"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_bad_nice"));
   o.backend = BackendKind::kCpu;
   o.mapping_nice = 20;
   const absl::StatusOr<std::unique_ptr<Daemon>> d = Daemon::Start(o);

@@ -14,7 +14,7 @@ namespace {
 class LifecycleTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_life"));
+    DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_life"));
     o.max_maps = 3;
     absl::StatusOr<std::unique_ptr<TestDaemon>> d = StartTestDaemon(o);
     ASSERT_TRUE(d.ok()) << d.status();
@@ -209,9 +209,9 @@ TEST_F(LifecycleTest, SaveThenLoadRoundTrips) {
 // ("cannot listen on ...") rather than share the port with the first.
 TEST(LifecyclePortTest, ListenPortInUseFailsToStart) {
   absl::StatusOr<std::unique_ptr<TestDaemon>> first =
-      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_port1")));
+      StartTestDaemon(TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_port1")));
   ASSERT_TRUE(first.ok()) << first.status();
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_port2"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_port2"));
   o.listen = "127.0.0.1:" + std::to_string((*first)->daemon->port());
   absl::StatusOr<std::unique_ptr<Daemon>> second = Daemon::Start(o);
   EXPECT_FALSE(second.ok()) << "a second daemon started on port " << (*first)->daemon->port();

@@ -38,7 +38,7 @@ grpc::Status Close(TrackStream& stream) {
 }
 
 TEST(LimitsTest, ThirdConcurrentStreamIsResourceExhausted) {
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_streams"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_streams"));
   o.max_streams = 2;
   absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartWithMaps({"room"}, o);
   ASSERT_TRUE(started.ok()) << started.status();
@@ -89,7 +89,7 @@ TEST(LimitsTest, ThirdConcurrentStreamIsResourceExhausted) {
 // A map that would outgrow max_map_bytes is never published: the Integrate stream ends
 // RESOURCE_EXHAUSTED, the job FAILED, and the map keeps its previous version and content.
 TEST(LimitsTest, MapOverTheByteLimitKeepsItsPreviousVersion) {
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_bytes"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_bytes"));
   o.max_map_bytes = 4096;
   absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(o);
   ASSERT_TRUE(started.ok()) << started.status();
@@ -130,7 +130,7 @@ TEST(LimitsTest, MapOverTheByteLimitKeepsItsPreviousVersion) {
 // Messages over the daemon's max_message_bytes are refused by gRPC with RESOURCE_EXHAUSTED,
 // on a unary call and inside a stream; the daemon carries on.
 TEST(LimitsTest, MessageOverTheSizeLimitIsResourceExhausted) {
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_msg"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_msg"));
   o.max_message_bytes = 256 << 10;
   absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartWithMaps({"room"}, o);
   ASSERT_TRUE(started.ok()) << started.status();
@@ -178,7 +178,7 @@ TEST(LimitsTest, MessageOverTheSizeLimitIsResourceExhausted) {
 // its encoding, on Track and Integrate alike: RESOURCE_EXHAUSTED naming the intrinsics and the
 // flag, with no image decoded. At exactly the limit it is tracked.
 TEST(LimitsTest, FrameOverThePixelLimitIsResourceExhaustedBeforeDecoding) {
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_pixels"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_pixels"));
   o.max_frame_pixels = kWidth * kHeight - 1;
   absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartWithMaps({"room"}, o);
   ASSERT_TRUE(started.ok()) << started.status();
@@ -214,7 +214,7 @@ TEST(LimitsTest, FrameOverThePixelLimitIsResourceExhaustedBeforeDecoding) {
   EXPECT_EQ(ImageBuffersDecoded(), decoded_before);
   EXPECT_TRUE(WaitFor([&] { return d.daemon->state().metrics->active_streams.load() == 0; }));
 
-  DaemonOptions at_limit = TestDaemonOptions(ScratchDir("plx_srv_pixels_ok"));
+  DaemonOptions at_limit = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_pixels_ok"));
   at_limit.max_frame_pixels = kWidth * kHeight;
   absl::StatusOr<std::unique_ptr<TestDaemon>> ok = StartWithMaps({"room"}, at_limit);
   ASSERT_TRUE(ok.ok()) << ok.status();
@@ -237,7 +237,7 @@ int64_t Sample(const std::string& body, const std::string& name) {
 }
 
 TEST(MetricsTest, FramesTrackedAndDroppedMatchTheStreams) {
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_metrics"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_metrics"));
   o.metrics_port = 0;
   absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartWithMaps({"room"}, o);
   ASSERT_TRUE(started.ok()) << started.status();

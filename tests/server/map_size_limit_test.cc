@@ -43,7 +43,7 @@ class MapSizeLimitTest : public ::testing::Test {
 };
 
 TEST_F(MapSizeLimitTest, LoadMapOverTheLimitIsRefusedBeforeAllocating) {
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_loadlimit"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_loadlimit"));
   o.max_map_bytes = 1 << 20;  // the room map is tens of MB
   absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartWithMaps({"room"}, o);
   ASSERT_TRUE(started.ok()) << started.status();
@@ -65,7 +65,7 @@ TEST_F(MapSizeLimitTest, LoadMapOverTheLimitIsRefusedBeforeAllocating) {
 }
 
 TEST_F(MapSizeLimitTest, AKeyframeOverTheLimitIsRefusedBeforeAllocating) {
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_srv_keylimit"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_keylimit"));
   o.max_map_bytes = 1 << 20;  // a room keyframe adds about a hundred 56 KB bricks
   absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(o);
   ASSERT_TRUE(started.ok()) << started.status();

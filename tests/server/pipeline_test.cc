@@ -36,7 +36,7 @@ bool SamePixels(const cv::Mat& a, const cv::Mat& b) {
 }
 
 TEST(PipelineTest, IntegrateTrackRenderSaveRestartRender) {
-  const std::string dir = ScratchDir("plx_srv_pipeline");
+  const std::string dir = plx::testing::MakeTempDir("plx_srv_pipeline");
   pb::RenderResponse before;
   {
     absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(TestDaemonOptions(dir));

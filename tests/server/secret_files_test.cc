@@ -29,7 +29,7 @@ std::string WriteFile(const std::string& dir, const std::string& name, const std
 }
 
 TEST(AuthTokenFileTest, TrimsTheEndsAndRefusesWhitespaceOrControlsInside) {
-  const std::string dir = ScratchDir("plx_token");
+  const std::string dir = plx::testing::MakeTempDir("plx_token");
   absl::StatusOr<std::string> token = ReadAuthTokenFile(WriteFile(dir, "ok", "  s3cret-token\n"));
   ASSERT_TRUE(token.ok()) << token.status();
   EXPECT_EQ(*token, "s3cret-token");
@@ -50,7 +50,7 @@ TEST(AuthTokenFileTest, TrimsTheEndsAndRefusesWhitespaceOrControlsInside) {
 }
 
 TEST(AuthTokenFileTest, WarnsWhenGroupOrOthersCanReadIt) {
-  const std::string dir = ScratchDir("plx_token_mode");
+  const std::string dir = plx::testing::MakeTempDir("plx_token_mode");
   const std::string open_file = WriteFile(dir, "open", "tok\n", 0644);
   ::testing::internal::CaptureStderr();
   EXPECT_TRUE(ReadAuthTokenFile(open_file).ok());
@@ -77,7 +77,7 @@ bool MakeCertificate(const std::string& dir, const std::string& name) {
 }
 
 TEST(TlsFilesTest, BadCertificateOrKeyFilesAreNamed) {
-  const std::string dir = ScratchDir("plx_tls");
+  const std::string dir = plx::testing::MakeTempDir("plx_tls");
   if (!MakeCertificate(dir, "a") || !MakeCertificate(dir, "b")) {
     GTEST_SKIP() << "needs /usr/bin/openssl to make certificates";
   }
@@ -108,7 +108,7 @@ TEST(TlsFilesTest, BadCertificateOrKeyFilesAreNamed) {
 
 // Daemon::Start with a certificate gRPC cannot use says so, not "address in use".
 TEST(TlsFilesTest, DaemonStartReportsABadCertificateAsSuch) {
-  DaemonOptions o = TestDaemonOptions(ScratchDir("plx_tls_daemon"));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir("plx_tls_daemon"));
   o.tls_cert_pem = "not a certificate";
   o.tls_key_pem = "not a key";
   const absl::StatusOr<std::unique_ptr<Daemon>> d = Daemon::Start(o);

@@ -72,7 +72,7 @@ LeaseRecord ReadLease(const std::string& shared_dir, const std::string& map) {
 }
 
 TEST(SharedStorageTest, APausedOwnerThatLostItsLeaseWritesNothingWhenItResumes) {
-  const std::string dir = ScratchDir("plx_shared_storage");
+  const std::string dir = plx::testing::MakeTempDir("plx_shared_storage");
   const std::string shared = dir + "/shared";
   const std::string map_file = shared + "/room.plx";
   fs::create_directories(shared);

@@ -139,7 +139,7 @@ std::vector<int> Range(int begin, int end, int step = 1) {
 
 TEST(SlamStreamTest, LockStepStreamMatchesInProcessSlam) {
   // One CPU thread in the daemon and in-process: lock-step SLAM is then bit-identical.
-  DaemonOptions daemon_options = TestDaemonOptions(ScratchDir("plx_srv_slam_same"));
+  DaemonOptions daemon_options = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_slam_same"));
   daemon_options.threads = 1;
   absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(daemon_options);
   ASSERT_TRUE(started.ok()) << started.status();
@@ -204,7 +204,7 @@ TEST(SlamStreamTest, LockStepStreamMatchesInProcessSlam) {
 
 TEST(SlamStreamTest, TwoCamerasIntoOneLiveMapWhileReadersRenderIt) {
   absl::StatusOr<std::unique_ptr<TestDaemon>> started =
-      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_slam_two")));
+      StartTestDaemon(TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_slam_two")));
   ASSERT_TRUE(started.ok()) << started.status();
   TestDaemon& d = **started;
   // Camera A walks the room's path; once it has passed frame 15, camera B joins at frame 15's
@@ -321,7 +321,7 @@ TEST(SlamStreamTest, TwoCamerasIntoOneLiveMapWhileReadersRenderIt) {
 // they would wait. Released, mapping catches up and the trajectory is as good.
 TEST(SlamStreamTest, OnePendingKeyframeLetsTrackingRunAheadOfMapping) {
   absl::StatusOr<std::unique_ptr<TestDaemon>> started =
-      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_slam_ahead")));
+      StartTestDaemon(TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_slam_ahead")));
   ASSERT_TRUE(started.ok()) << started.status();
   TestDaemon& d = **started;
   DeviceWorker& mapping = d.daemon->state().workers->Pick(Priority::kBackground);
@@ -414,7 +414,7 @@ TEST(SlamStreamTest, OnePendingKeyframeLetsTrackingRunAheadOfMapping) {
 
 TEST(SlamStreamTest, BadInputNamesTheFieldAndLeavesOthersAlone) {
   absl::StatusOr<std::unique_ptr<TestDaemon>> started =
-      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_slam_bad")));
+      StartTestDaemon(TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_slam_bad")));
   ASSERT_TRUE(started.ok()) << started.status();
   TestDaemon& d = **started;
   const auto expect_refused = [&](const std::string& map, pb::SlamOptions options,
@@ -500,7 +500,7 @@ TEST(SlamStreamTest, BadInputNamesTheFieldAndLeavesOthersAlone) {
 
 TEST(SlamStreamTest, FramesWithoutDepthWaitAndTheFirstGoodFrameBootstraps) {
   absl::StatusOr<std::unique_ptr<TestDaemon>> started =
-      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_slam_waiting")));
+      StartTestDaemon(TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_slam_waiting")));
   ASSERT_TRUE(started.ok()) << started.status();
   TestDaemon& d = **started;
   // A camera whose first frames have no depth: WAITING at the initial pose, nothing mapped;
@@ -570,7 +570,7 @@ TEST(SlamStreamTest, FramesWithoutDepthWaitAndTheFirstGoodFrameBootstraps) {
 
 TEST(SlamStreamTest, AWaitingCameraJoinsTheMapAnotherCameraBootstrapped) {
   absl::StatusOr<std::unique_ptr<TestDaemon>> started =
-      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_slam_waiting_two")));
+      StartTestDaemon(TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_slam_waiting_two")));
   ASSERT_TRUE(started.ok()) << started.status();
   TestDaemon& d = **started;
   // Camera A opens the map first and sees no depth: WAITING. Camera B (another stream)
@@ -624,7 +624,7 @@ TEST(SlamStreamTest, AWaitingCameraJoinsTheMapAnotherCameraBootstrapped) {
 }
 
 TEST(SlamStreamTest, ABadInitialPoseCreatesNoMap) {
-  DaemonOptions options = TestDaemonOptions(ScratchDir("plx_srv_slam_bad_pose"));
+  DaemonOptions options = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_slam_bad_pose"));
   options.max_maps = 1;
   absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(options);
   ASSERT_TRUE(started.ok()) << started.status();
@@ -670,7 +670,7 @@ TEST(SlamStreamTest, ABadInitialPoseCreatesNoMap) {
 
 TEST(SlamStreamTest, AnErrorNamesTheFramesPositionInTheStream) {
   absl::StatusOr<std::unique_ptr<TestDaemon>> started =
-      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_slam_frame_index")));
+      StartTestDaemon(TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_slam_frame_index")));
   ASSERT_TRUE(started.ok()) << started.status();
   TestDaemon& d = **started;
   // The fourth frame is bad and comes while the third is being tracked: it is posted as soon
@@ -710,7 +710,7 @@ TEST(SlamStreamTest, AnErrorNamesTheFramesPositionInTheStream) {
 }
 
 TEST(SlamStreamTest, DrainMidStreamSavesEveryKeyframeAndARestartExtendsTheMap) {
-  const std::string dir = ScratchDir("plx_srv_slam_drain");
+  const std::string dir = plx::testing::MakeTempDir("plx_srv_slam_drain");
   uint32_t keyframes_seen = 0;
   uint32_t processed = 0;
   {
@@ -796,7 +796,7 @@ TEST(SlamStreamTest, DrainMidStreamSavesEveryKeyframeAndARestartExtendsTheMap) {
 
 TEST(SlamStreamTest, CancelledStreamLeavesTheJobAndReleasesTheMap) {
   absl::StatusOr<std::unique_ptr<TestDaemon>> started =
-      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_slam_cancel")));
+      StartTestDaemon(TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_slam_cancel")));
   ASSERT_TRUE(started.ok()) << started.status();
   TestDaemon& d = **started;
   {

@@ -57,7 +57,7 @@ double MetricValue(const std::string& text, const std::string& name) {
 }
 
 TEST(SnapshotRestartTest, AfterKillNineTheSnapshotComesBackAndASlamStreamContinuesIt) {
-  const std::string dir = ScratchDir("plx_snapshot_restart");
+  const std::string dir = plx::testing::MakeTempDir("plx_snapshot_restart");
   const std::string data = dir + "/data";
   fs::create_directories(data);
   fs::create_directories(dir + "/first");

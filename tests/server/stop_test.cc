@@ -37,7 +37,7 @@ void MakeDirtyMaps(pb::Plenoxd::Stub& stub, const std::vector<std::string>& name
 // Saves that never finish (the test-only delay stands in for a hung file system): the watchdog
 // ends the process at the deadline, exit 3, naming both maps.
 TEST(StopTest, AStuckSaveStillEndsTheProcessInTimeNamingTheUnsavedMaps) {
-  const std::string dir = ScratchDir("plx_srv_stop_stuck");
+  const std::string dir = plx::testing::MakeTempDir("plx_srv_stop_stuck");
   fs::create_directories(dir + "/data");
   DaemonProcess daemon(kPlenoxdBinary, dir,
                        {"--data-dir", dir + "/data", "--threads", "2", "--drain-seconds", "0.5",
@@ -60,7 +60,7 @@ TEST(StopTest, AStuckSaveStillEndsTheProcessInTimeNamingTheUnsavedMaps) {
 // One map cannot be saved (a directory stands where its file goes), the other can: the other
 // is saved, the exit status is 1 and the log names the one lost.
 TEST(StopTest, AMapThatCannotBeSavedIsNamedAndTheOthersAreSaved) {
-  const std::string dir = ScratchDir("plx_srv_stop_fail");
+  const std::string dir = plx::testing::MakeTempDir("plx_srv_stop_fail");
   const std::string data = dir + "/data";
   fs::create_directories(data);
   DaemonProcess daemon(kPlenoxdBinary, dir, {"--data-dir", data, "--threads", "2"});

@@ -396,7 +396,7 @@ TEST(StreamsTest, ClientCancellationReleasesTheLeaseAndLeavesOthersAlone) {
 // WatchJob streams that clients cancel while the job they watch keeps reporting progress.
 TEST(StreamsTest, WatchJobCancelledDuringUpdatesIsSafe) {
   absl::StatusOr<std::unique_ptr<TestDaemon>> started =
-      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_watch")));
+      StartTestDaemon(TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_watch")));
   ASSERT_TRUE(started.ok()) << started.status();
   TestDaemon& d = **started;
   ASSERT_TRUE(CreateMap(*d.stub, "m").ok());

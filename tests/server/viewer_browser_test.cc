@@ -112,7 +112,7 @@ TEST(ViewerBrowserTest, PageDrawsTheMapAndALiveSlamCamera) {
     while (!stop && stream.Advance(1)) absl::SleepFor(absl::Milliseconds(300));
   });
 
-  const std::string shot = ScratchDir("plx_srv_viewer_shot") + "/viewer.png";
+  const std::string shot = plx::testing::MakeTempDir("plx_srv_viewer_shot") + "/viewer.png";
   const std::string command = absl::StrCat(
       "/usr/bin/python3 ", PLX_SOURCE_DIR, "/tests/server/viewer_browser.py --chromium ",
       chromium, " --url 'http://127.0.0.1:", port, "/viewer/#map=live' --out ", shot,
@@ -154,7 +154,7 @@ TEST(ViewerBrowserTest, MeshToggleDrawsTheMesh) {
       StartWithMaps({"room"}, ViewerDaemonOptions("plx_srv_viewer_browser_mesh"));
   ASSERT_TRUE(started.ok()) << started.status();
   const int port = (*started)->daemon->metrics_port();
-  const std::string shot = ScratchDir("plx_srv_viewer_mesh_shot") + "/mesh.png";
+  const std::string shot = plx::testing::MakeTempDir("plx_srv_viewer_mesh_shot") + "/mesh.png";
   const std::string command = absl::StrCat(
       "/usr/bin/python3 ", PLX_SOURCE_DIR, "/tests/server/viewer_browser.py --chromium ",
       chromium, " --url 'http://127.0.0.1:", port, "/viewer/#map=room' --out ", shot,
@@ -196,7 +196,7 @@ TEST(ViewerBrowserTest, ALevelOfDetailLoadsThroughGltfLoader) {
   ASSERT_TRUE(started.ok()) << started.status();
   const int port = (*started)->daemon->metrics_port();
   constexpr int kBudget = 2000;
-  const std::string shot = ScratchDir("plx_srv_viewer_glb_shot") + "/glb.png";
+  const std::string shot = plx::testing::MakeTempDir("plx_srv_viewer_glb_shot") + "/glb.png";
   const std::string command = absl::StrCat(
       "/usr/bin/python3 ", PLX_SOURCE_DIR, "/tests/server/viewer_browser.py --chromium ",
       chromium, " --url 'http://127.0.0.1:", port, "/viewer/#map=room' --out ", shot,

@@ -29,7 +29,7 @@ inline std::string RenderQuery(const std::string& map, int index, int width, int
 
 // Options of a daemon with the viewer on a free HTTP port.
 inline DaemonOptions ViewerDaemonOptions(const std::string& prefix) {
-  DaemonOptions o = TestDaemonOptions(ScratchDir(prefix));
+  DaemonOptions o = TestDaemonOptions(plx::testing::MakeTempDir(prefix));
   o.metrics_port = 0;
   o.viewer = true;
   return o;

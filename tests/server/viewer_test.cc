@@ -273,13 +273,13 @@ TEST(ViewerTest, StartChecksTheViewersNeeds) {
   EXPECT_NE(d.status().message().find("--metrics-port"), std::string::npos) << d.status();
 
   DaemonOptions no_three = ViewerDaemonOptions("plx_srv_viewer_nothree");
-  no_three.viewer_three_dir = ScratchDir("plx_srv_no_three");
+  no_three.viewer_three_dir = plx::testing::MakeTempDir("plx_srv_no_three");
   d = Daemon::Start(no_three);
   EXPECT_EQ(d.status().code(), absl::StatusCode::kNotFound) << d.status();
   EXPECT_NE(d.status().message().find("libjs-three"), std::string::npos) << d.status();
 
   // Off unless asked for: no /viewer/ on the metrics port.
-  DaemonOptions off = TestDaemonOptions(ScratchDir("plx_srv_viewer_off"));
+  DaemonOptions off = TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_viewer_off"));
   off.metrics_port = 0;
   absl::StatusOr<std::unique_ptr<TestDaemon>> started = StartTestDaemon(off);
   ASSERT_TRUE(started.ok()) << started.status();

@@ -36,7 +36,7 @@ grpc::Status IntegrateWithPose(TestDaemon& d, const std::string& map, const pb::
 
 TEST(WorldExtentTest, FarKeyframesAreRefusedAndTheMapStillSavesAndLoads) {
   absl::StatusOr<std::unique_ptr<TestDaemon>> started =
-      StartTestDaemon(TestDaemonOptions(ScratchDir("plx_srv_world")));
+      StartTestDaemon(TestDaemonOptions(plx::testing::MakeTempDir("plx_srv_world")));
   ASSERT_TRUE(started.ok()) << started.status();
   TestDaemon& d = **started;
   pb::MapInfo before;
