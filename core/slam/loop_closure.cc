@@ -184,7 +184,7 @@ absl::StatusOr<LoopCorrection> CorrectKeyframes(
     }
   }
   for (const UnconfirmedMotion& u : unconfirmed) {
-    if (!(u.m >= 0.0) || !(u.rad >= 0.0) || !std::isfinite(u.m) || !std::isfinite(u.rad)) {
+    if (!(u.m >= 0.0 && std::isfinite(u.m) && u.rad >= 0.0 && std::isfinite(u.rad))) {
       return absl::InvalidArgumentError("a keyframe's unconfirmed motion must be finite, >= 0");
     }
   }

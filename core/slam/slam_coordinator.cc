@@ -380,7 +380,6 @@ absl::Status SlamCoordinator::CorrectAndRebuild(SlamMapper* mapper) {
     loops = main.loops;
     unconfirmed = main.unconfirmed;
   }
-  unconfirmed.resize(poses.size());
   PLX_ASSIGN_OR_RETURN(const LoopCorrection correction,
                        CorrectKeyframes(poses, loops, options, unconfirmed));
   main.correction_due = false;
