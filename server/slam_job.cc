@@ -68,7 +68,7 @@ SlamJob::~SlamJob() {
 }
 
 absl::Status SlamJob::Accept(const RgbdFrame& frame, const PinholeIntrinsics& k,
-                             SlamFrameResult* result, int* segment) {
+                             SlamFrameResult* result, int* segment, int camera) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     if (status_.finished) {
@@ -76,7 +76,7 @@ absl::Status SlamJob::Accept(const RgbdFrame& frame, const PinholeIntrinsics& k,
           absl::StrCat("the SLAM job on map \"", map_, "\" has ended"));
     }
   }
-  PLX_ASSIGN_OR_RETURN(const bool queued, coordinator_->Accept(frame, k, result, segment));
+  PLX_ASSIGN_OR_RETURN(const bool queued, coordinator_->Accept(frame, k, result, segment, camera));
   if (!queued) return absl::OkStatus();
   std::lock_guard<std::mutex> lock(mutex_);
   ScheduleLocked();

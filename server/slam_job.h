@@ -79,9 +79,10 @@ class SlamJob : public std::enable_shared_from_this<SlamJob> {
 
   // Applies a camera's tracked frame (any thread; SlamCoordinator::Accept: a new segment, a
   // join, the keyframe with its relocalisation features) and schedules mapping for what it
-  // queued. `segment` is the camera's.
+  // queued. `segment` is the camera's, `camera` its number in trajectory() (each camera's
+  // keyframes form their own chain in loop closure's pose graph).
   absl::Status Accept(const RgbdFrame& frame, const PinholeIntrinsics& k,
-                      SlamFrameResult* result, int* segment);
+                      SlamFrameResult* result, int* segment, int camera);
   // What a camera in `segment` tracks against now (the newest version with the store's number
   // for the main map, keyframes accepted and refined).
   SlamMapView View(int segment = 0) const { return coordinator_->View(segment); }

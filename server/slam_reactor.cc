@@ -173,6 +173,7 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
   std::optional<Pending> work;
   std::shared_ptr<SlamJob> job;
   int segment = 0;
+  int camera = -1;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     if (!StartTaskLocked(cancelled)) return;
@@ -180,6 +181,7 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
     queue_.pop_front();
     job = job_;
     segment = segment_;
+    camera = camera_;
     ResumeReadingLocked();
   }
   bool client_error = false;  // the frame's data was bad: no error log, the stream just ends
@@ -213,7 +215,7 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
         tracker_->Track(frame, k, decoded->client_pose, view);
     if (!tracked.ok()) return tracked.status();  // the backend's (memory, device)
     result = *std::move(tracked);
-    PLX_RETURN_IF_ERROR(job->Accept(frame, k, &result, &segment));
+    PLX_RETURN_IF_ERROR(job->Accept(frame, k, &result, &segment, camera));
     return absl::OkStatus();
   });
   const double seconds =

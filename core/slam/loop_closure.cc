@@ -146,16 +146,17 @@ absl::StatusOr<LoopSearch> SearchLoop(int query, const std::vector<LoopKeyframe>
 std::vector<PoseGraphEdge> LoopClosureGraph(const std::vector<SE3>& poses,
                                             const std::vector<LoopEdge>& loops,
                                             const LoopClosureOptions& options,
-                                            const std::vector<UnconfirmedMotion>& unconfirmed) {
+                                            const std::vector<SequentialLink>& links) {
   std::vector<PoseGraphEdge> edges;
   edges.reserve(poses.size() + loops.size());
   for (size_t i = 1; i < poses.size(); ++i) {
+    const SequentialLink link = i < links.size() ? links[i] : SequentialLink{};
     PoseGraphEdge edge;
-    edge.from = static_cast<int>(i - 1);
+    edge.from = link.from >= 0 && link.from < static_cast<int>(i) ? link.from
+                                                                    : static_cast<int>(i - 1);
     edge.to = static_cast<int>(i);
-    edge.from_T_to = poses[i - 1].Inverse() * poses[i];
-    const UnconfirmedMotion doubt = i < unconfirmed.size() ? unconfirmed[i] : UnconfirmedMotion{};
-    SequentialSigmas(edge.from_T_to, doubt, options, &edge);
+    edge.from_T_to = poses[edge.from].Inverse() * poses[i];
+    SequentialSigmas(edge.from_T_to, link.unconfirmed, options, &edge);
     edges.push_back(edge);
   }
   for (const LoopEdge& loop : loops) {
@@ -173,7 +174,7 @@ std::vector<PoseGraphEdge> LoopClosureGraph(const std::vector<SE3>& poses,
 
 absl::StatusOr<LoopCorrection> CorrectKeyframes(
     const std::vector<SE3>& poses, const std::vector<LoopEdge>& loops,
-    const LoopClosureOptions& options, const std::vector<UnconfirmedMotion>& unconfirmed) {
+    const LoopClosureOptions& options, const std::vector<SequentialLink>& links) {
   LoopCorrection correction;
   if (poses.empty()) return correction;
   for (const LoopEdge& loop : loops) {
@@ -183,12 +184,17 @@ absl::StatusOr<LoopCorrection> CorrectKeyframes(
           absl::StrFormat("loop %d-%d names a keyframe not in the graph", loop.from, loop.to));
     }
   }
-  for (const UnconfirmedMotion& u : unconfirmed) {
+  for (size_t i = 0; i < links.size(); ++i) {
+    const UnconfirmedMotion& u = links[i].unconfirmed;
     if (!(u.m >= 0.0 && std::isfinite(u.m) && u.rad >= 0.0 && std::isfinite(u.rad))) {
       return absl::InvalidArgumentError("a keyframe's unconfirmed motion must be finite, >= 0");
     }
+    if (links[i].from < -1 || links[i].from >= static_cast<int>(std::min(i, poses.size()))) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "keyframe %d's sequential edge comes from %d, not an older keyframe", i, links[i].from));
+    }
   }
-  const std::vector<PoseGraphEdge> edges = LoopClosureGraph(poses, loops, options, unconfirmed);
+  const std::vector<PoseGraphEdge> edges = LoopClosureGraph(poses, loops, options, links);
   const int first_loop = static_cast<int>(poses.size()) - 1;
   const bool all_confirm = std::all_of(
       edges.begin() + first_loop, edges.end(), [&](const PoseGraphEdge& loop) {

@@ -119,12 +119,26 @@ absl::StatusOr<LoopSearch> SearchLoop(int query, const std::vector<LoopKeyframe>
                                       const std::vector<double>& timestamps,
                                       const LoopClosureOptions& options);
 
-// The pose graph over `poses` (keyframes in order): a sequential edge between each keyframe and
-// the next (their current relative pose, the options' sigmas, wider by `unconfirmed[i]` for the
-// edge into keyframe i; empty or shorter: none), then one edge per loop.
-std::vector<PoseGraphEdge> LoopClosureGraph(
-    const std::vector<SE3>& poses, const std::vector<LoopEdge>& loops,
-    const LoopClosureOptions& options, const std::vector<UnconfirmedMotion>& unconfirmed = {});
+// The odometry edge into one keyframe of the graph: which keyframe it comes from and how much
+// of the motion between them the map did not confirm.
+struct SequentialLink {
+  // The same camera's previous keyframe in this map (an index below this keyframe's), so that
+  // with several cameras in one map each camera's drift stays on its own chain; -1: the
+  // keyframe just before it in the list (a camera's first keyframe here, whose pose the map
+  // tied to the others when it was accepted, or a caller that does not know the camera).
+  int from = -1;
+  UnconfirmedMotion unconfirmed;
+};
+
+// The pose graph over `poses` (keyframes in order): one sequential edge into each keyframe but
+// the first, from links[i].from (their current relative pose, the options' sigmas, wider by
+// links[i].unconfirmed; `links` empty or shorter: from the keyframe before, no doubt), then
+// one edge per loop. Every keyframe is joined to keyframe 0 through earlier ones, so the graph
+// is connected.
+std::vector<PoseGraphEdge> LoopClosureGraph(const std::vector<SE3>& poses,
+                                            const std::vector<LoopEdge>& loops,
+                                            const LoopClosureOptions& options,
+                                            const std::vector<SequentialLink>& links = {});
 
 struct LoopCorrection {
   std::vector<SE3> poses;          // every keyframe's corrected pose
@@ -141,9 +155,11 @@ struct LoopCorrection {
 };
 
 // Solves LoopClosureGraph with keyframe 0 fixed (step 4), unless every loop confirms the poses
-// (confirm_residual).
-absl::StatusOr<LoopCorrection> CorrectKeyframes(
-    const std::vector<SE3>& poses, const std::vector<LoopEdge>& loops,
-    const LoopClosureOptions& options, const std::vector<UnconfirmedMotion>& unconfirmed = {});
+// (confirm_residual). InvalidArgument for a loop or link naming a keyframe outside the graph,
+// a link from a keyframe not older than its own, or a negative or non-finite doubt.
+absl::StatusOr<LoopCorrection> CorrectKeyframes(const std::vector<SE3>& poses,
+                                                const std::vector<LoopEdge>& loops,
+                                                const LoopClosureOptions& options,
+                                                const std::vector<SequentialLink>& links = {});
 
 }  // namespace plx

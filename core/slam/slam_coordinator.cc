@@ -133,7 +133,8 @@ absl::Status SlamCoordinator::AddKeyframeLocked(const RgbdFrame& frame, const SE
                                                 const PinholeIntrinsics& k,
                                                 std::shared_ptr<const FrameFeatures> features,
                                                 const UnconfirmedMotion& unconfirmed,
-                                                Segment* to, bool keep, int generation) {
+                                                int camera, Segment* to, bool keep,
+                                                int generation) {
   SE3 pose = given_pose;
   const bool main = to == segments_[0].get();
   if (main && to->correction != nullptr && generation < to->correction->generation) {
@@ -157,7 +158,14 @@ absl::Status SlamCoordinator::AddKeyframeLocked(const RgbdFrame& frame, const SE
     to->kept.back().frame.ground_truth.reset();
   }
   to->features.push_back(std::move(features));
-  to->unconfirmed.push_back(unconfirmed);
+  SequentialLink link{-1, unconfirmed};
+  if (camera >= 0) {
+    const auto last = to->last_keyframe_of_camera.find(camera);
+    if (last != to->last_keyframe_of_camera.end()) link.from = last->second;
+    to->last_keyframe_of_camera[camera] = static_cast<int>(to->links.size());
+  }
+  to->links.push_back(link);
+  to->cameras.push_back(camera);
   ++to->progress.keyframes;
   ++to->progress.pending_keyframes;
   to->has_work = true;
@@ -168,13 +176,14 @@ absl::Status SlamCoordinator::AddKeyframeLocked(const RgbdFrame& frame, const SE
 absl::Status SlamCoordinator::AddKeyframe(const RgbdFrame& frame, const SE3& pose,
                                           const PinholeIntrinsics& k,
                                           std::shared_ptr<const FrameFeatures> features,
-                                          int segment, UnconfirmedMotion unconfirmed) {
+                                          int segment, UnconfirmedMotion unconfirmed,
+                                          int camera) {
   std::lock_guard<std::mutex> lock(mutex_);
   if (segment < 0 || segment >= static_cast<int>(segments_.size()) ||
       segments_[segment]->joined) {
     return absl::InvalidArgumentError(absl::StrCat("no open map segment ", segment));
   }
-  return AddKeyframeLocked(frame, pose, k, std::move(features), unconfirmed,
+  return AddKeyframeLocked(frame, pose, k, std::move(features), unconfirmed, camera,
                            segments_[segment].get(),
                            /*keep=*/segment != 0, CurrentGenerationLocked());
 }
@@ -189,11 +198,16 @@ absl::Status SlamCoordinator::JoinLocked(int segment, const SE3& main_T_segment,
   // The poses mapping refined so far (integrated keyframes), else as accepted.
   const std::vector<StampedPose> refined =
       from.mapper != nullptr ? from.mapper->keyframe_poses() : std::vector<StampedPose>{};
+  // A camera's chain in the main map ends where it lost the map: the segment's first keyframe
+  // is tied to the main map by the join (the keyframe before it), not by tracking from the
+  // camera's keyframe before the loss.
+  Segment& main = *segments_[0];
+  for (int camera : from.cameras) main.last_keyframe_of_camera.erase(camera);
   for (size_t i = 0; i < from.kept.size(); ++i) {
     const SE3 pose = i < refined.size() ? refined[i].pose : from.kept[i].pose;
     PLX_RETURN_IF_ERROR(AddKeyframeLocked(from.kept[i].frame, main_T_segment * pose,
                                           from.kept[i].intrinsics, from.features[i],
-                                          from.unconfirmed[i], segments_[0].get(),
+                                          from.links[i].unconfirmed, from.cameras[i], &main,
                                           /*keep=*/false, generation));
   }
   from.joined = true;
@@ -206,7 +220,8 @@ absl::Status SlamCoordinator::JoinLocked(int segment, const SE3& main_T_segment,
 
 absl::StatusOr<bool> SlamCoordinator::Accept(const RgbdFrame& frame,
                                              const PinholeIntrinsics& k,
-                                             SlamFrameResult* result, int* segment) {
+                                             SlamFrameResult* result, int* segment,
+                                             int camera) {
   std::lock_guard<std::mutex> lock(mutex_);
   bool queued = false;
   if (result->new_segment) {
@@ -222,7 +237,8 @@ absl::StatusOr<bool> SlamCoordinator::Accept(const RgbdFrame& frame,
   result->segment = *segment;
   if (result->keyframe) {
     PLX_RETURN_IF_ERROR(AddKeyframeLocked(frame, result->pose, k, result->features,
-                                          result->unconfirmed, segments_[*segment].get(),
+                                          result->unconfirmed, camera,
+                                          segments_[*segment].get(),
                                           /*keep=*/*segment != 0,
                                           result->correction_generation));
     queued = true;
@@ -374,14 +390,14 @@ absl::Status SlamCoordinator::CorrectAndRebuild(SlamMapper* mapper) {
   const LoopClosureOptions& options = mapper_options_.loop_closure;
   const std::vector<SE3> poses = mapper->all_keyframe_poses();
   std::vector<LoopEdge> loops;
-  std::vector<UnconfirmedMotion> unconfirmed;
+  std::vector<SequentialLink> links;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     loops = main.loops;
-    unconfirmed = main.unconfirmed;
+    links = main.links;
   }
   PLX_ASSIGN_OR_RETURN(const LoopCorrection correction,
-                       CorrectKeyframes(poses, loops, options, unconfirmed));
+                       CorrectKeyframes(poses, loops, options, links));
   main.correction_due = false;
   std::vector<LoopEdge> kept;
   for (size_t i = 0; i < loops.size(); ++i) {
@@ -673,6 +689,11 @@ bool SlamCoordinator::IdleLocked(const Segment& segment) const {
 int SlamCoordinator::CurrentGenerationLocked() const {
   const Segment& main = *segments_[0];
   return main.correction != nullptr ? main.correction->generation : 0;
+}
+
+std::vector<SequentialLink> SlamCoordinator::sequential_links() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return segments_[0]->links;
 }
 
 std::vector<LoopEdge> SlamCoordinator::loops() const {

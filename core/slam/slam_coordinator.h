@@ -47,6 +47,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <unordered_map>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -150,16 +151,20 @@ class SlamCoordinator {
   // mapper it waits in the coordinator. `features` (SlamFrameResult::features) are kept for
   // relocalisation; null: this keyframe has none.
   // `unconfirmed`: SlamFrameResult::unconfirmed (loop closure's doubt in the edge into it).
+  // `camera`: the camera that took it (any number the caller keeps per camera, >= 0): loop
+  // closure's odometry edge into it comes from that camera's previous keyframe in the map
+  // (SequentialLink); -1: from the keyframe accepted just before.
   absl::Status AddKeyframe(const RgbdFrame& frame, const SE3& pose, const PinholeIntrinsics& k,
                            std::shared_ptr<const FrameFeatures> features = nullptr,
-                           int segment = 0, UnconfirmedMotion unconfirmed = {});
+                           int segment = 0, UnconfirmedMotion unconfirmed = {},
+                           int camera = -1);
 
   // Applies a camera's tracked frame (any thread): starts the segment it asked for, joins its
   // segment to the main map, queues its keyframe; `segment` is the camera's (0 at first),
-  // updated, and result->segment says where result->pose is. Returns whether mapping work
-  // was queued (a keyframe or a join).
+  // updated, and result->segment says where result->pose is; `camera` as for AddKeyframe.
+  // Returns whether mapping work was queued (a keyframe or a join).
   absl::StatusOr<bool> Accept(const RgbdFrame& frame, const PinholeIntrinsics& k,
-                              SlamFrameResult* result, int* segment);
+                              SlamFrameResult* result, int* segment, int camera = -1);
 
   // One bounded step of `mode` (StartMapper first). Step-runner.
   absl::StatusOr<SlamStepResult> Step(SlamStepMode mode);
@@ -188,6 +193,9 @@ class SlamCoordinator {
   std::shared_ptr<const SlamCorrection> correction() const;
   // The loop edges in the main map's pose graph now (keyframe indices; the viewer draws them).
   std::vector<LoopEdge> loops() const;
+  // The odometry edge into each keyframe of the main map's pose graph (the keyframes accepted
+  // in this run, in order: the saved ones are not in the graph): where it comes from, its doubt.
+  std::vector<SequentialLink> sequential_links() const;
   // The main map's keyframes in its newest published version as a map file keeps them
   // (MapFileState): the saved ones, then each keyframe mapping integrated into that version at
   // its refined pose with its features. Set before the publisher is called with the version,
@@ -206,8 +214,11 @@ class SlamCoordinator {
     std::vector<EarlyKeyframe> early;    // added before the mapper exists
     // Every accepted keyframe's features, in the order accepted (immutable once shared).
     std::vector<std::shared_ptr<const FrameFeatures>> features;
-    // ...and the motion into each the map did not confirm (LoopClosureGraph's doubt).
-    std::vector<UnconfirmedMotion> unconfirmed;
+    // ...and the odometry edge into each (LoopClosureGraph's), its camera (-1: not said),
+    // and each camera's newest keyframe here (the next one's edge comes from it).
+    std::vector<SequentialLink> links;
+    std::vector<int> cameras;
+    std::unordered_map<int, int> last_keyframe_of_camera;
     // A segment's keyframes as accepted (not the main map's): what a join moves. A copy of
     // what its mapper holds: the mapper's frames belong to the step-runner, a join happens on
     // a camera's thread.
@@ -255,8 +266,8 @@ class SlamCoordinator {
   absl::Status AddKeyframeLocked(const RgbdFrame& frame, const SE3& pose,
                                  const PinholeIntrinsics& k,
                                  std::shared_ptr<const FrameFeatures> features,
-                                 const UnconfirmedMotion& unconfirmed, Segment* to, bool keep,
-                                 int generation);
+                                 const UnconfirmedMotion& unconfirmed, int camera, Segment* to,
+                                 bool keep, int generation);
   // Moves `segment`'s keyframes into the main map at main_T_segment times their poses
   // (main_T_segment measured in the main map's frame `generation`).
   absl::Status JoinLocked(int segment, const SE3& main_T_segment, int generation);

@@ -232,7 +232,9 @@ absl::StatusOr<SlamFrameResult> SlamSession::ProcessFrame(RgbdFrame frame,
     }
     PLX_ASSIGN_OR_RETURN(SlamFrameResult out,
                          tracker_.Track(frame, k, prior, coordinator_.View(segment_)));
-    PLX_ASSIGN_OR_RETURN(const bool queued, coordinator_.Accept(frame, k, &out, &segment_));
+    // One camera: its keyframes are the map's in order (camera 0).
+    PLX_ASSIGN_OR_RETURN(const bool queued,
+                         coordinator_.Accept(frame, k, &out, &segment_, /*camera=*/0));
     if (queued) PLX_RETURN_IF_ERROR(AfterQueued(out.keyframe));
     {
       std::lock_guard<std::mutex> lock(mutex_);

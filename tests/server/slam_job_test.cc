@@ -184,7 +184,8 @@ class SlamJobTest : public ::testing::Test {
     keyframe.keyframe = true;
     keyframe.pose = *room_->ground_truth(i);
     int segment = 0;
-    return job.Accept(room_->frames()[i], room_->calibration().pinhole, &keyframe, &segment);
+    return job.Accept(room_->frames()[i], room_->calibration().pinhole, &keyframe, &segment,
+                      /*camera=*/0);
   }
   uint64_t StoreVersion() {
     absl::StatusOr<MapVersion> latest = maps_.Latest(kMap);

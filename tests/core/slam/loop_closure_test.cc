@@ -211,9 +211,9 @@ TEST_F(LoopClosureTest, ACorrectionGoesToTheEdgeTheMapDidNotConfirm) {
   absl::StatusOr<LoopCorrection> even = CorrectKeyframes(tracked, loops, Untimed());
   ASSERT_TRUE(even.ok()) << even.status();
   // Told which motion the map did not confirm (the whole step into keyframe 35).
-  std::vector<UnconfirmedMotion> unconfirmed(kKeyframes);
-  unconfirmed[kJump].Add(Truth(kJump - 1), Truth(kJump));
-  absl::StatusOr<LoopCorrection> told = CorrectKeyframes(tracked, loops, Untimed(), unconfirmed);
+  std::vector<SequentialLink> links(kKeyframes);
+  links[kJump].unconfirmed.Add(Truth(kJump - 1), Truth(kJump));
+  absl::StatusOr<LoopCorrection> told = CorrectKeyframes(tracked, loops, Untimed(), links);
   ASSERT_TRUE(told.ok()) << told.status();
   EXPECT_TRUE(told->rejected_loops.empty());
   const double before = MeanTranslationError(tracked);
@@ -223,8 +223,60 @@ TEST_F(LoopClosureTest, ACorrectionGoesToTheEdgeTheMapDidNotConfirm) {
   EXPECT_LT(placed, spread / 3.0) << "before " << before << " spread " << spread;
   EXPECT_LT(placed, 0.01) << "before " << before << " spread " << spread;
   // A doubt that is not a number is refused, not solved with.
-  unconfirmed[3].m = -1.0;
-  EXPECT_FALSE(CorrectKeyframes(tracked, loops, Untimed(), unconfirmed).ok());
+  links[3].unconfirmed.m = -1.0;
+  EXPECT_FALSE(CorrectKeyframes(tracked, loops, Untimed(), links).ok());
+}
+
+TEST_F(LoopClosureTest, ALoopOnOneCameraCorrectsItsChainAndLeavesTheOtherCamera) {
+  // Two cameras in one map, their keyframes accepted in turn (A0 B0 A1 B1 ...): A drifts, B
+  // (a rig's second camera, 30 cm beside A's path) tracks exactly and closes no loop. Loops on
+  // A's second lap measure A's truth.
+  const std::vector<SE3> drifted = DriftedPoses(0.006, 0.006);
+  const SE3 beside(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0.3, 0.0, 0.0));
+  std::vector<SE3> poses, truth;
+  std::vector<SequentialLink> chains;
+  for (int i = 0; i < kKeyframes; ++i) {
+    poses.push_back(drifted[i]);
+    truth.push_back(Truth(i));
+    chains.push_back({i > 0 ? 2 * (i - 1) : -1, {}});
+    poses.push_back(Truth(i) * beside);
+    truth.push_back(Truth(i) * beside);
+    chains.push_back({i > 0 ? 2 * (i - 1) + 1 : -1, {}});  // B0's: from A0, the one before
+  }
+  std::vector<LoopEdge> loops;
+  for (int q : {40, 50, 60}) {
+    loops.push_back({2 * (q - 30), 2 * q, Truth(q - 30).Inverse() * Truth(q)});
+  }
+  auto mean_error = [&](const std::vector<SE3>& p, int camera) {
+    double sum = 0.0;
+    for (int i = camera; i < 2 * kKeyframes; i += 2) {
+      sum += (p[i].translation() - truth[i].translation()).norm();
+    }
+    return sum / kKeyframes;
+  };
+  absl::StatusOr<LoopCorrection> chained = CorrectKeyframes(poses, loops, Untimed(), chains);
+  ASSERT_TRUE(chained.ok()) << chained.status();
+  // The same keyframes linked in the order accepted (what a caller that names no camera gets).
+  absl::StatusOr<LoopCorrection> interleaved = CorrectKeyframes(poses, loops, Untimed());
+  ASSERT_TRUE(interleaved.ok()) << interleaved.status();
+  // A alone, with the same loops: what A's chain should get.
+  std::vector<LoopEdge> own_loops;
+  for (int q : {40, 50, 60}) own_loops.push_back({q - 30, q, Truth(q - 30).Inverse() * Truth(q)});
+  absl::StatusOr<LoopCorrection> alone = CorrectKeyframes(drifted, own_loops, Untimed());
+  ASSERT_TRUE(alone.ok()) << alone.status();
+  const double a_before = mean_error(poses, 0);
+  const double a_alone = MeanTranslationError(alone->poses);
+  EXPECT_LT(a_alone, a_before / 2.0);
+  EXPECT_NEAR(mean_error(chained->poses, 0), a_alone, 1e-3) << "drifted by " << a_before;
+  // B's edges agree with B's poses: only B0's link to A0 (fixed) could move it, so it stays.
+  EXPECT_LT(mean_error(chained->poses, 1), 1e-3);
+  // Interleaved, every B keyframe sits between two of A's and follows A's correction.
+  EXPECT_GT(mean_error(interleaved->poses, 1), 0.01);
+  // A link from a keyframe that is not older is refused.
+  chains[5].from = 5;
+  EXPECT_FALSE(CorrectKeyframes(poses, loops, Untimed(), chains).ok());
+  chains[5].from = 2 * kKeyframes;
+  EXPECT_FALSE(CorrectKeyframes(poses, loops, Untimed(), chains).ok());
 }
 
 TEST_F(LoopClosureTest, LoopsThatAgreeWithThePosesWithinTheirNoiseMoveNothing) {

@@ -146,16 +146,17 @@ TEST_F(SlamTwoCameraRoomTest, TwoCamerasTrackInOneGrowingMap) {
   EXPECT_EQ(static_cast<int>(map->keyframe_poses().size()), p.keyframes);
 }
 
-// One camera's frame as SlamSession handles it: tracked in its segment's view, then accepted
-// (a keyframe, a new segment or a segment's join), the mapper run to the end of its work.
+// One camera's frame as the daemon's stream handles it: tracked in its segment's view, then
+// accepted as `camera`'s (a keyframe, a new segment or a segment's join), the mapper run to
+// the end of its work.
 SlamFrameResult ProcessInSegments(SlamTracker& tracker, SlamCoordinator& coordinator,
                                   const RgbdFrame& frame, const PinholeIntrinsics& k,
-                                  int* segment) {
+                                  int* segment, int camera) {
   absl::StatusOr<SlamFrameResult> r =
       tracker.Track(frame, k, std::nullopt, coordinator.View(*segment));
   EXPECT_TRUE(r.ok()) << r.status();
   if (!r.ok()) return SlamFrameResult();
-  absl::StatusOr<bool> queued = coordinator.Accept(frame, k, &*r, segment);
+  absl::StatusOr<bool> queued = coordinator.Accept(frame, k, &*r, segment, camera);
   EXPECT_TRUE(queued.ok()) << queued.status();
   if (queued.ok() && *queued) RunOut(coordinator, SlamStepMode::kMap);
   return *r;
@@ -184,7 +185,7 @@ TEST_F(SlamTwoCameraRoomTest, ASecondCameraStartingSomewhereUnknownEndsInTheFirs
   std::vector<StampedPose> a_trajectory, a_truth, b_truth;
   for (int i = 0; i < room->size(); ++i) {
     const RgbdFrame& fa = room->frames()[i];
-    const SlamFrameResult ra = ProcessInSegments(a, *map, fa, k, &a_segment);
+    const SlamFrameResult ra = ProcessInSegments(a, *map, fa, k, &a_segment, 0);
     a_trajectory.push_back({fa.timestamp, ra.pose});
     a_truth.push_back({fa.timestamp, *fa.ground_truth});
     if (i > kBStart) continue;
@@ -192,7 +193,7 @@ TEST_F(SlamTwoCameraRoomTest, ASecondCameraStartingSomewhereUnknownEndsInTheFirs
     fb.timestamp = room->timestamp(i);
     const SE3 truth = *fb.ground_truth;
     fb.ground_truth.reset();
-    SlamFrameResult rb = ProcessInSegments(b, *map, fb, k, &b_segment);
+    SlamFrameResult rb = ProcessInSegments(b, *map, fb, k, &b_segment, 1);
     rb.timestamp = fb.timestamp;
     b_results.push_back(rb);
     b_truth.push_back({fb.timestamp, truth});

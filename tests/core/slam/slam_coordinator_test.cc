@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -213,6 +214,46 @@ TEST_F(SlamCoordinatorTest, ThePublisherNumbersTheVersionsTheViewShows) {
   int total = 0;
   for (int n : new_keyframes) total += n;
   EXPECT_EQ(total, 2);
+}
+
+TEST_F(SlamCoordinatorTest, EachCamerasKeyframesChainToItsOwnInLoopClosuresGraph) {
+  const SlamSplitOptions split = SplitSlamOptions(SmallOptions(false));
+  SlamCoordinator c(split.mapper, split.gate);
+  int segment_a = 0, segment_b = 0, segment_unknown = 0;
+  int frame = 0;
+  // A keyframe of `camera` (-1: a caller that does not say); `change` sets up a segment start
+  // or a join on the result.
+  auto keyframe = [&](int camera, int* segment, double unconfirmed_m = 0.0,
+                      const std::function<void(SlamFrameResult*)>& change = nullptr) {
+    SlamFrameResult r;
+    r.keyframe = true;
+    r.pose = Pose(frame);
+    r.unconfirmed.m = unconfirmed_m;
+    if (change) change(&r);
+    ASSERT_TRUE(c.Accept(Frame(frame), K(), &r, segment, camera).ok());
+    ++frame;
+  };
+  keyframe(0, &segment_a);                   // main 0: the first
+  keyframe(1, &segment_b);                   // main 1: B's first, from the one before
+  keyframe(0, &segment_a);                   // main 2: from A's 0
+  keyframe(1, &segment_b, 0.25);             // main 3: from B's 1, with B's doubt
+  keyframe(-1, &segment_unknown);            // main 4: no camera, from the one before
+  keyframe(0, &segment_a, 0.0, [](SlamFrameResult* r) { r->new_segment = true; });
+  ASSERT_EQ(segment_a, 1);                   // A lost the map: its segment's 0
+  keyframe(0, &segment_a);                   // the segment's 1
+  keyframe(1, &segment_b);                   // main 5: from B's 3
+  keyframe(0, &segment_a, 0.0, [](SlamFrameResult* r) { r->main_T_segment = SE3::Identity(); });
+  ASSERT_EQ(segment_a, 0);
+  // The join moved A's segment in (main 6 and 7), then A's joining keyframe (main 8): A's
+  // chain starts again at the join, tied to the keyframe before it, not to A's main 2.
+  const std::vector<SequentialLink> links = c.sequential_links();
+  const std::vector<int> expected_from = {-1, -1, 0, 1, -1, 3, -1, 6, 7};
+  ASSERT_EQ(links.size(), expected_from.size());
+  for (size_t i = 0; i < links.size(); ++i) {
+    EXPECT_EQ(links[i].from, expected_from[i]) << "keyframe " << i;
+  }
+  EXPECT_EQ(links[3].unconfirmed.m, 0.25);
+  EXPECT_EQ(links[5].unconfirmed.m, 0.0);
 }
 
 }  // namespace
