@@ -256,5 +256,37 @@ TEST_F(SlamCoordinatorTest, EachCamerasKeyframesChainToItsOwnInLoopClosuresGraph
   EXPECT_EQ(links[5].unconfirmed.m, 0.0);
 }
 
+TEST_F(SlamCoordinatorTest, ANewSegmentGetsAVersionWhileTheMainMapStillHasWork) {
+  // A camera that lost the main map starts a segment and needs a version of it to track; the
+  // main map, busy with its iterations, must not hold that back until it runs out of work.
+  const SlamSplitOptions split = SplitSlamOptions(SmallOptions(false));
+  SlamCoordinator c(split.mapper, split.gate);
+  ASSERT_TRUE(c.StartMapper(backend_.get()).ok());
+  for (int i = 0; i < 3; ++i) AddKeyframe(c, i);
+  // The main map's keyframes are in; their iterations remain (30).
+  for (int i = 0; i < 200 && c.progress().pending_keyframes > 0; ++i) {
+    ASSERT_TRUE(c.Step(SlamStepMode::kMap).ok());
+  }
+  ASSERT_EQ(c.progress().pending_keyframes, 0);
+  ASSERT_FALSE(c.progress().idle);
+  SlamFrameResult lost;
+  lost.keyframe = true;
+  lost.new_segment = true;
+  lost.pose = Pose(10);
+  int segment = 0;
+  ASSERT_TRUE(c.Accept(Frame(10), K(), &lost, &segment, /*camera=*/0).ok());
+  ASSERT_EQ(segment, 1);
+  int steps = 0;
+  while (c.View(segment).map == nullptr && steps < 200) {
+    absl::StatusOr<SlamStepResult> r = c.Step(SlamStepMode::kMap);
+    ASSERT_TRUE(r.ok()) << r.status();
+    ++steps;
+  }
+  ASSERT_NE(c.View(segment).map, nullptr);
+  EXPECT_FALSE(c.progress().idle) << "the main map ran out of work first (" << steps
+                                  << " steps)";
+  EXPECT_TRUE(c.MayCameraProceed(segment, /*needs_version=*/true));
+}
+
 }  // namespace
 }  // namespace plx
