@@ -648,15 +648,19 @@ absl::StatusOr<SlamStepResult> SlamCoordinator::StepSegment(Segment* segment, bo
   }
   out.out_of_work =
       !mapper->has_work() || (drain && mapper->progress().pending_keyframes == 0);
-  // A segment's first keyframe is in but the segment has no version: its camera waits for one
-  // (the odometry no longer carries it), while SegmentToStep gives the main map's iterations
-  // the turn until the main map runs out of work, which on a busy map is minutes (a realtime
-  // replay hung there). The fused keyframe is a map to track against; publish it now.
-  const bool first_version = !main && mapper->latest().map == nullptr &&
-                             mapper->progress().keyframes_integrated > 0;
+  // A segment's keyframe is in but not in a version: SegmentToStep gives the main map's
+  // iterations the turn until the main map runs out of work (minutes on a busy map), so the
+  // segment would not be stepped, nor published, before then. Its camera needs the version:
+  // the first one to track at all (a realtime replay hung waiting for it), the later ones to
+  // track where its new keyframes reach. The fused keyframes are a map to track against;
+  // publish them now.
+  const bool unpublished_keyframes =
+      !main && mapper->progress().keyframes_integrated > segment->integrated_at_publish;
   // Out of work: what the last iterations changed is published now, not at the next keyframe
   // (a lock-step camera waits for exactly this).
-  if (out.out_of_work || first_version) PLX_RETURN_IF_ERROR(mapper->PublishIfChanged());
+  if (out.out_of_work || unpublished_keyframes) {
+    PLX_RETURN_IF_ERROR(mapper->PublishIfChanged());
+  }
 
   // Every new version of the main map gets the map's number (the publisher's, else the
   // mapper's own); a segment's versions keep the mapper's.

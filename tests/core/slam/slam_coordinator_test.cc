@@ -286,6 +286,18 @@ TEST_F(SlamCoordinatorTest, ANewSegmentGetsAVersionWhileTheMainMapStillHasWork) 
   EXPECT_FALSE(c.progress().idle) << "the main map ran out of work first (" << steps
                                   << " steps)";
   EXPECT_TRUE(c.MayCameraProceed(segment, /*needs_version=*/true));
+  // The segment's next keyframe reaches its camera as soon as it is in, too.
+  const std::shared_ptr<const PlenoxelMap> first = c.View(segment).map;
+  SlamFrameResult next;
+  next.keyframe = true;
+  next.pose = Pose(12);
+  ASSERT_TRUE(c.Accept(Frame(12), K(), &next, &segment, /*camera=*/0).ok());
+  for (steps = 0; c.View(segment).map == first && steps < 200; ++steps) {
+    ASSERT_TRUE(c.Step(SlamStepMode::kMap).ok());
+  }
+  EXPECT_NE(c.View(segment).map, first);
+  EXPECT_FALSE(c.progress().idle) << "the main map ran out of work first (" << steps
+                                  << " steps)";
 }
 
 }  // namespace
