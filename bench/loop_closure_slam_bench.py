@@ -3,7 +3,7 @@
 every sequence twice, with loop closure and with --no-loop-closure, same flags otherwise.
 
     /usr/bin/python3 bench/loop_closure_slam_bench.py [--cases teddy,infinitam,laps,...]
-        [--quick] [--deterministic] [--keep DIR] [--out FILE]
+        [--quick] [--deterministic | --realtime] [--keep DIR] [--out FILE]
 
 Cases: the real sequences (tum_fr3_teddy, infinitam_teddy) and synthetic ones made here: two
 laps of the room's circle (`laps`), the same with Kinect-like depth noise and holes
@@ -116,6 +116,8 @@ def run(args, name, dataset, work, loop_closure):
         cmd.append("--no-loop-closure")
     if args.deterministic:
         cmd.append("--deterministic")
+    if args.realtime:
+        cmd.append("--realtime")
     j = run_json("%s%s" % (name, "" if loop_closure else " (no loop closure)"), cmd,
                  args.timeout)
     times = frame_times(files["frames.csv"])
@@ -137,10 +139,13 @@ def fmt(value, spec, scale=1.0):
 
 def table_row(name, lc, r):
     false = r["false"]
-    spec = ("| %s | %s | %d | %d | %d | %d | %d | %s | %s | %s | %s | %s | %.0f | %.0f | "
+    spec = ("| %s | %s | %s | %d | %d | %d | %d | %s | %s | %s | %s | %s | %.0f | %.0f | "
             "%.2f | %s | %.1f | %.0f |")
     return spec % (
-        name, "on" if lc else "off", r["processed"], r["lost"], r["keyframes"],
+        name, "on" if lc else "off",
+        "%d" % r["processed"] if not r.get("dropped") else "%d (%d dropped)" % (
+            r["processed"], r["dropped"]),
+        r["lost"], r["keyframes"],
         r.get("loops_accepted", 0), r.get("loops_rejected", 0),
         "–" if false is None else "%d/%d" % false[:2],
         "–" if not false or not false[1] else "%.1f / %.2f" % (100 * false[2], false[3]),
@@ -164,6 +169,10 @@ def main():
     ap.add_argument("--deterministic", action="store_true",
                     help="map in lock-step (plenox slam --deterministic): the difference loop "
                          "closure makes without the CPU it takes from concurrent mapping")
+    ap.add_argument("--realtime", action="store_true",
+                    help="replay at the frames' timestamps, dropping what tracking cannot keep "
+                         "up with, as a live camera (plenox slam --realtime); default: every "
+                         "frame as fast as it is tracked")
     ap.add_argument("--loop-closure", choices=("both", "on", "off"), default="both",
                     help="run each case with and without loop closure (both), or one side "
                          "only (a change to loop closure alone leaves the 'off' rows as they "
@@ -177,14 +186,19 @@ def main():
     bad = [c for c in wanted if c not in CASE_KEYS]
     if bad:
         ap.error("unknown case(s) %s" % ", ".join(bad))
+    if args.deterministic and args.realtime:
+        ap.error("--deterministic maps in lock-step; a realtime replay cannot wait for it")
     args.plenox = os.path.abspath(args.plenox)
     args.data = os.path.abspath(args.data)
     args.prefix = []
     s = settings(args.quick)
     s["circle"] = 2 * 360  # the derived cases start from the two-lap circle
-    lines = ["Machine: %s; commit %s; %s UTC." % (
+    mode = ("lock-step" if args.deterministic else
+            "realtime replay" if args.realtime else "concurrent, every frame")
+    lines = ["Machine: %s; commit %s; %s UTC; %s." % (
                  machine_line(), git_commit(),
-                 datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M")),
+                 datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M"),
+                 mode),
              "",
              "| sequence | loop closure | frames | LOST | keyframes | loops | rejected | "
              "false/checked | worst loop error cm / deg | corrections (in place) | "
