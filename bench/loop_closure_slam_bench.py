@@ -9,7 +9,8 @@ Cases: the real sequences (tum_fr3_teddy, infinitam_teddy) and synthetic ones ma
 laps of the room's circle (`laps`), the same with Kinect-like depth noise and holes
 (`laps-noise`), at three times the motion per frame (`laps-fast`), the head-turning circle
 (`head-turns`), a figure eight through the room's centre, one turn and a quarter (`eight`),
-and a figure eight through two rooms joined by a doorway, 1.2 turns (`two-rooms`). Per run it reads the JSON (frames, LOST, keyframes, loops accepted and rejected,
+and a figure eight through two rooms joined by a doorway, 1.2 turns (`two-rooms`). Per run it
+reads the JSON (frames, LOST, keyframes, loops accepted and rejected,
 corrections, ATE of the online trajectory and of the trajectory in the map's final frame),
 --frames-out (the tracking times: median, p99, p99/median) and --loops-out: each loop edge is
 compared with the ground truth's relative pose between its two keyframes, and one more than
