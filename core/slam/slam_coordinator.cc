@@ -154,7 +154,7 @@ absl::Status SlamCoordinator::AddKeyframeLocked(const RgbdFrame& frame, const SE
     PLX_RETURN_IF_ERROR(to->rebuild->AddKeyframe(frame, to->rebuild_solve->Move(pose), k));
   }
   if (keep) {
-    to->kept.push_back({frame, pose, k});
+    to->kept.push_back({frame, pose, k, camera});
     to->kept.back().frame.ground_truth.reset();
   }
   to->features.push_back(std::move(features));
@@ -165,7 +165,6 @@ absl::Status SlamCoordinator::AddKeyframeLocked(const RgbdFrame& frame, const SE
     to->last_keyframe_of_camera[camera] = static_cast<int>(to->links.size());
   }
   to->links.push_back(link);
-  to->cameras.push_back(camera);
   ++to->progress.keyframes;
   ++to->progress.pending_keyframes;
   to->has_work = true;
@@ -202,12 +201,14 @@ absl::Status SlamCoordinator::JoinLocked(int segment, const SE3& main_T_segment,
   // is tied to the main map by the join (the keyframe before it), not by tracking from the
   // camera's keyframe before the loss.
   Segment& main = *segments_[0];
-  for (int camera : from.cameras) main.last_keyframe_of_camera.erase(camera);
+  for (const auto& [camera, last] : from.last_keyframe_of_camera) {
+    main.last_keyframe_of_camera.erase(camera);
+  }
   for (size_t i = 0; i < from.kept.size(); ++i) {
     const SE3 pose = i < refined.size() ? refined[i].pose : from.kept[i].pose;
     PLX_RETURN_IF_ERROR(AddKeyframeLocked(from.kept[i].frame, main_T_segment * pose,
                                           from.kept[i].intrinsics, from.features[i],
-                                          from.links[i].unconfirmed, from.cameras[i], &main,
+                                          from.links[i].unconfirmed, from.kept[i].camera, &main,
                                           /*keep=*/false, generation));
   }
   from.joined = true;

@@ -207,6 +207,7 @@ class SlamCoordinator {
     RgbdFrame frame;
     SE3 pose;
     PinholeIntrinsics intrinsics;
+    int camera = -1;  // Accept's (kept: a join chains the keyframes in the main map by it)
   };
   // One map: the main one (segments_[0]) or a camera's segment.
   struct Segment {
@@ -214,10 +215,9 @@ class SlamCoordinator {
     std::vector<EarlyKeyframe> early;    // added before the mapper exists
     // Every accepted keyframe's features, in the order accepted (immutable once shared).
     std::vector<std::shared_ptr<const FrameFeatures>> features;
-    // ...and the odometry edge into each (LoopClosureGraph's), its camera (-1: not said),
-    // and each camera's newest keyframe here (the next one's edge comes from it).
+    // ...and the odometry edge into each (LoopClosureGraph's), and each camera's newest
+    // keyframe here (the next one's edge comes from it).
     std::vector<SequentialLink> links;
-    std::vector<int> cameras;
     std::unordered_map<int, int> last_keyframe_of_camera;
     // A segment's keyframes as accepted (not the main map's): what a join moves. A copy of
     // what its mapper holds: the mapper's frames belong to the step-runner, a join happens on
