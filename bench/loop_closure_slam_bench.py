@@ -20,6 +20,7 @@ compared with the ground truth's relative pose between its two keyframes, and on
 import argparse
 import csv
 import datetime
+import json
 import os
 import sys
 import tempfile
@@ -121,6 +122,11 @@ def run(args, name, dataset, work, loop_closure):
         cmd.append("--realtime")
     j = run_json("%s%s" % (name, "" if loop_closure else " (no loop closure)"), cmd,
                  args.timeout)
+    with open(os.path.join(work, "result.json"), "w") as f:
+        json.dump(j, f, indent=1)
+    if loop_closure:
+        log("%s: %s sequential edges measured from the images, %s of them used by the last "
+            "solve" % (name, j.get("links_measured", "?"), j.get("last_measured_edges", "?")))
     times = frame_times(files["frames.csv"])
     ms = [t for t, _ in times]
     during = [t for t, rebuilding in times if rebuilding]

@@ -269,6 +269,8 @@ int RunSlam(const std::vector<std::string>& args) {
                       .Add("backend", backend->name())
                       .AddBool("deterministic", options->slam.deterministic)
                       .AddBool("realtime", options->realtime)
+                      .Add("links_measured", p.mapping.loops.links_measured)
+                      .Add("last_measured_edges", p.mapping.loops.last_measured_edges)
                       .Add("ms_per_frame_max", MaxFrameMilliseconds(result->results)));
   return kExitOk;
 }

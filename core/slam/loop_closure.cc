@@ -34,6 +34,64 @@ void SequentialSigmas(const SE3& motion, const UnconfirmedMotion& unconfirmed,
                     o.unconfirmed_sigma_per_rad * unconfirmed.rad;
 }
 
+// Steps 2-3 of a loop for one pair: `query` seen from `old` by the features' PnP, then the
+// dense odometry from that pose (from `without_features` when the features find none and it
+// is given). `query_pyramid` caches the query's pyramid across pairs.
+struct PairAlignment {
+  std::optional<SE3> old_T_query;  // none: rejected, `reason` says why
+  int inliers = 0;
+  double depth_inlier_fraction = 0.0;
+  std::string reason;
+};
+absl::StatusOr<PairAlignment> AlignPair(const LoopKeyframe& old, const LoopKeyframe& query,
+                                        const std::optional<SE3>& without_features,
+                                        std::optional<OdometryPyramid>* query_pyramid,
+                                        const LoopClosureOptions& options) {
+  PairAlignment out;
+  FeatureRelocaliserOptions matching = options.matching;
+  matching.candidate_keyframes = 1;
+  matching.min_inliers = std::max(matching.min_inliers, options.min_inliers);
+  // The old keyframe's points (in its camera: pose identity) seen by the query.
+  const std::optional<FeatureRelocalisation> pnp = RelocaliseByFeatures(
+      *query.features, {{old.features, SE3::Identity()}}, *query.intrinsics, matching);
+  if (!pnp && !without_features) {
+    out.reason = "too few feature inliers";
+    return out;
+  }
+  const SE3 start = pnp ? pnp->pose : *without_features;
+  if (!*query_pyramid) {
+    PLX_ASSIGN_OR_RETURN(*query_pyramid,
+                         BuildOdometryPyramid(*query.frame, *query.intrinsics, options.pyramid));
+  }
+  PLX_ASSIGN_OR_RETURN(const OdometryPyramid old_pyramid,
+                       BuildOdometryPyramid(*old.frame, *old.intrinsics, options.pyramid));
+  const OdometryPyramid& q = **query_pyramid;
+  if (old_pyramid.levels.size() != q.levels.size() ||
+      old_pyramid.levels[0].width != q.levels[0].width ||
+      old_pyramid.levels[0].height != q.levels[0].height) {
+    out.reason = "another camera's image size";
+    return out;
+  }
+  PLX_ASSIGN_OR_RETURN(const OdometryResult dense,
+                       EstimateOdometry(old_pyramid, q, start,
+                                        LoopOdometry(options.odometry, options)));
+  const SE3 shift = start.Inverse() * dense.reference_T_current;
+  const double shift_m = shift.translation().norm();
+  const double shift_rad = RotationAngleBetween(start, dense.reference_T_current);
+  if (!dense.ok || shift_m > options.max_dense_shift_m ||
+      shift_rad > options.max_dense_rotation_rad) {
+    out.reason = absl::StrFormat(
+        "dense check failed (%s; %.1f cm, %.1f deg from the %s pose)",
+        dense.ok ? "converged" : dense.reason, 100 * shift_m, shift_rad * 180.0 / M_PI,
+        pnp ? "features'" : "given");
+    return out;
+  }
+  out.old_T_query = dense.reference_T_current;
+  out.inliers = pnp ? pnp->inliers : 0;
+  out.depth_inlier_fraction = dense.depth_inlier_fraction;
+  return out;
+}
+
 }  // namespace
 
 absl::Status ValidateLoopClosureOptions(const LoopClosureOptions& o) {
@@ -92,71 +150,73 @@ absl::StatusOr<LoopSearch> SearchLoop(int query, const std::vector<LoopKeyframe>
   search.proposed = static_cast<int>(ranked.size());
   if (ranked.empty()) return search;
 
-  FeatureRelocaliserOptions matching = options.matching;
-  matching.candidate_keyframes = 1;
-  matching.min_inliers = std::max(matching.min_inliers, options.min_inliers);
-  const OdometryOptions odometry = LoopOdometry(options.odometry, options);
   std::optional<OdometryPyramid> query_pyramid;
   for (int r : ranked) {
-    const LoopKeyframe& old = keyframes[older_index[r]];
-    // 2. Features: the old keyframe's points (in its camera: pose identity) seen by the query.
-    const std::optional<FeatureRelocalisation> pnp =
-        RelocaliseByFeatures(*q.features, {older[r]}, *q.intrinsics, matching);
-    if (!pnp) {
+    const int old = older_index[r];
+    PLX_ASSIGN_OR_RETURN(const PairAlignment aligned,
+                         AlignPair(keyframes[old], q, std::nullopt, &query_pyramid, options));
+    if (!aligned.old_T_query) {
       ++search.rejected;
-      search.reason = absl::StrFormat("keyframe %d: too few feature inliers", older_index[r]);
+      search.reason = absl::StrFormat("keyframe %d: %s", old, aligned.reason);
       continue;
     }
-    // 3. Dense: the query aligned to the old keyframe from the features' pose.
-    if (!query_pyramid) {
-      PLX_ASSIGN_OR_RETURN(query_pyramid,
-                           BuildOdometryPyramid(*q.frame, *q.intrinsics, options.pyramid));
-    }
-    PLX_ASSIGN_OR_RETURN(const OdometryPyramid old_pyramid,
-                         BuildOdometryPyramid(*old.frame, *old.intrinsics, options.pyramid));
-    if (old_pyramid.levels.size() != query_pyramid->levels.size() ||
-        old_pyramid.levels[0].width != query_pyramid->levels[0].width ||
-        old_pyramid.levels[0].height != query_pyramid->levels[0].height) {
-      ++search.rejected;
-      search.reason = absl::StrFormat("keyframe %d: another camera's image size", older_index[r]);
-      continue;
-    }
-    PLX_ASSIGN_OR_RETURN(const OdometryResult dense,
-                         EstimateOdometry(old_pyramid, *query_pyramid, pnp->pose, odometry));
-    const SE3 shift = pnp->pose.Inverse() * dense.reference_T_current;
-    const double shift_m = shift.translation().norm();
-    const double shift_rad = RotationAngleBetween(pnp->pose, dense.reference_T_current);
-    if (!dense.ok || shift_m > options.max_dense_shift_m ||
-        shift_rad > options.max_dense_rotation_rad) {
-      ++search.rejected;
-      search.reason = absl::StrFormat(
-          "keyframe %d: dense check failed (%s; %.1f cm, %.1f deg from the features' pose)",
-          older_index[r], dense.ok ? "converged" : dense.reason, 100 * shift_m,
-          shift_rad * 180.0 / M_PI);
-      continue;
-    }
-    if (!search.loop || pnp->inliers > search.loop->inliers) {
-      search.loop = LoopEdge{older_index[r], query, dense.reference_T_current, pnp->inliers,
-                             dense.depth_inlier_fraction};
+    if (!search.loop || aligned.inliers > search.loop->inliers) {
+      search.loop = LoopEdge{old, query, *aligned.old_T_query, aligned.inliers,
+                             aligned.depth_inlier_fraction};
     }
   }
   return search;
 }
 
-std::vector<PoseGraphEdge> LoopClosureGraph(const std::vector<SE3>& poses,
-                                            const std::vector<LoopEdge>& loops,
-                                            const LoopClosureOptions& options,
-                                            const std::vector<SequentialLink>& links) {
-  std::vector<PoseGraphEdge> edges;
+absl::StatusOr<std::optional<SE3>> MeasureSequentialLink(const LoopKeyframe& from,
+                                                         const LoopKeyframe& to,
+                                                         const LoopClosureOptions& options) {
+  if (from.features == nullptr || from.frame == nullptr || from.intrinsics == nullptr ||
+      to.features == nullptr || to.frame == nullptr || to.intrinsics == nullptr) {
+    return std::optional<SE3>();
+  }
+  // Consecutive keyframes are near each other, and where tracking did not slip its relative
+  // pose is a start inside the dense alignment's basin: a pair the features cannot match (a
+  // turn that leaves too few shared keypoints) is aligned from it. Where tracking slipped by
+  // more than the basin, the dense check (max_dense_shift_m from its start) refuses the pair
+  // or lands near the tracked pose, which then keeps its edge.
+  std::optional<OdometryPyramid> to_pyramid;
+  PLX_ASSIGN_OR_RETURN(const PairAlignment aligned,
+                       AlignPair(from, to, from.pose.Inverse() * to.pose, &to_pyramid, options));
+  return aligned.old_T_query;
+}
+
+LoopClosureEdges LoopClosureGraph(const std::vector<SE3>& poses,
+                                  const std::vector<LoopEdge>& loops,
+                                  const LoopClosureOptions& options,
+                                  const std::vector<SequentialLink>& links) {
+  LoopClosureEdges out;
+  std::vector<PoseGraphEdge>& edges = out.edges;
   edges.reserve(poses.size() + loops.size());
+  const auto spanned = [&loops](int from, int to) {
+    return std::any_of(loops.begin(), loops.end(), [&](const LoopEdge& loop) {
+      return std::min(loop.from, loop.to) <= from && to <= std::max(loop.from, loop.to);
+    });
+  };
+  static const SequentialLink kUnlinked;  // from the keyframe before, no doubt
   for (size_t i = 1; i < poses.size(); ++i) {
-    const SequentialLink link = i < links.size() ? links[i] : SequentialLink{};
+    const SequentialLink& link = i < links.size() ? links[i] : kUnlinked;
     PoseGraphEdge edge;
     edge.from = link.from >= 0 && link.from < static_cast<int>(i) ? link.from
                                                                     : static_cast<int>(i - 1);
     edge.to = static_cast<int>(i);
     edge.from_T_to = poses[edge.from].Inverse() * poses[i];
     SequentialSigmas(edge.from_T_to, link.unconfirmed, options, &edge);
+    if (link.measured && spanned(edge.from, edge.to)) {
+      PoseGraphEdge measured = edge;  // judged at the tracked edge's sigmas...
+      measured.from_T_to = *link.measured;
+      if (PoseGraphEdgeResidual(poses, measured) > options.confirm_residual) {
+        measured.sigma_m = options.loop_sigma_m;  // ...and as sure as a loop's alignment
+        measured.sigma_rad = options.loop_sigma_rad;
+        edge = measured;
+        ++out.measured;
+      }
+    }
     edges.push_back(edge);
   }
   for (const LoopEdge& loop : loops) {
@@ -169,7 +229,7 @@ std::vector<PoseGraphEdge> LoopClosureGraph(const std::vector<SE3>& poses,
     edge.loop = true;
     edges.push_back(edge);
   }
-  return edges;
+  return out;
 }
 
 absl::StatusOr<LoopCorrection> CorrectKeyframes(
@@ -189,14 +249,20 @@ absl::StatusOr<LoopCorrection> CorrectKeyframes(
     if (!(u.m >= 0.0 && std::isfinite(u.m) && u.rad >= 0.0 && std::isfinite(u.rad))) {
       return absl::InvalidArgumentError("a keyframe's unconfirmed motion must be finite, >= 0");
     }
+    if (links[i].measured && !links[i].measured->IsFinite()) {
+      return absl::InvalidArgumentError(
+          absl::StrFormat("keyframe %d's measured sequential edge is not finite", i));
+    }
     if (links[i].from < -1 || links[i].from >= static_cast<int>(std::min(i, poses.size()))) {
       return absl::InvalidArgumentError(absl::StrFormat(
           "keyframe %d's sequential edge comes from %d, not an older keyframe", i, links[i].from));
     }
   }
-  const std::vector<PoseGraphEdge> edges = LoopClosureGraph(poses, loops, options, links);
+  const LoopClosureEdges graph = LoopClosureGraph(poses, loops, options, links);
+  const std::vector<PoseGraphEdge>& edges = graph.edges;
+  correction.measured_edges = graph.measured;
   const int first_loop = static_cast<int>(poses.size()) - 1;
-  const bool all_confirm = std::all_of(
+  const bool all_confirm = graph.measured == 0 && std::all_of(
       edges.begin() + first_loop, edges.end(), [&](const PoseGraphEdge& loop) {
         return PoseGraphEdgeResidual(poses, loop) <= options.confirm_residual;
       });

@@ -119,8 +119,8 @@ absl::StatusOr<LoopSearch> SearchLoop(int query, const std::vector<LoopKeyframe>
                                       const std::vector<double>& timestamps,
                                       const LoopClosureOptions& options);
 
-// The odometry edge into one keyframe of the graph: which keyframe it comes from and how much
-// of the motion between them the map did not confirm.
+// The odometry edge into one keyframe of the graph: which keyframe it comes from, how much of
+// the motion between them the map did not confirm, and what the two keyframes' images say.
 struct SequentialLink {
   // The same camera's previous keyframe in this map (an index below this keyframe's), so that
   // with several cameras in one map each camera's drift stays on its own chain; -1: the
@@ -128,17 +128,42 @@ struct SequentialLink {
   // tied to the others when it was accepted, or a caller that does not know the camera).
   int from = -1;
   UnconfirmedMotion unconfirmed;
+  // from_T_to as MeasureSequentialLink aligned the two keyframes; none: not measured, or they
+  // could not be aligned.
+  std::optional<SE3> measured;
+};
+
+// Aligns keyframe `to` to keyframe `from` as a loop is verified (steps 2-3 above: the
+// features' PnP, then the dense odometry from it, with the same gates; when the features match
+// too few, the dense odometry starts from the poses' relative pose): none when they do not
+// pass. Tracking's relative pose between a camera's consecutive
+// keyframes is wrong where tracking slipped (a jump onto an older part of the map, an
+// odometry-carried stretch); this is the same motion measured from the images alone.
+absl::StatusOr<std::optional<SE3>> MeasureSequentialLink(const LoopKeyframe& from,
+                                                         const LoopKeyframe& to,
+                                                         const LoopClosureOptions& options);
+
+struct LoopClosureEdges {
+  // Sequential edges first (edges[i - 1] into keyframe i), then the loops in the order given.
+  std::vector<PoseGraphEdge> edges;
+  // Sequential edges that are a measurement (SequentialLink::measured) instead of the poses'
+  // relative pose: the poses disagree with it beyond confirm_residual, so a solve is due.
+  int measured = 0;
 };
 
 // The pose graph over `poses` (keyframes in order): one sequential edge into each keyframe but
 // the first, from links[i].from (their current relative pose, the options' sigmas, wider by
 // links[i].unconfirmed; `links` empty or shorter: from the keyframe before, no doubt), then
 // one edge per loop. Every keyframe is joined to keyframe 0 through earlier ones, so the graph
-// is connected.
-std::vector<PoseGraphEdge> LoopClosureGraph(const std::vector<SE3>& poses,
-                                            const std::vector<LoopEdge>& loops,
-                                            const LoopClosureOptions& options,
-                                            const std::vector<SequentialLink>& links = {});
+// is connected. A link's measurement replaces the poses' relative pose (at the loops' sigmas)
+// where the two disagree by more than confirm_residual of the edge's own sigmas and a loop
+// spans the edge (its keyframes lie between a loop's two): only a loop says whether the poses
+// before the edge or after it are the wrong ones; outside every loop the poses, tied to the
+// map by tracking, are kept.
+LoopClosureEdges LoopClosureGraph(const std::vector<SE3>& poses,
+                                  const std::vector<LoopEdge>& loops,
+                                  const LoopClosureOptions& options,
+                                  const std::vector<SequentialLink>& links = {});
 
 struct LoopCorrection {
   std::vector<SE3> poses;          // every keyframe's corrected pose
@@ -149,13 +174,14 @@ struct LoopCorrection {
   int iterations = 0;
   // The shift is large enough to rebuild the map at the new poses (min_correction_*).
   bool significant = false;
-  // Every loop agreed with the poses within confirm_residual: nothing was solved, `poses` are
-  // the poses given.
+  // Every loop agreed with the poses within confirm_residual (and no measured sequential
+  // edge disagreed): nothing was solved, `poses` are the poses given.
   bool confirmed = false;
+  int measured_edges = 0;  // LoopClosureEdges::measured
 };
 
 // Solves LoopClosureGraph with keyframe 0 fixed (step 4), unless every loop confirms the poses
-// (confirm_residual). InvalidArgument for a loop or link naming a keyframe outside the graph,
+// (confirm_residual) and no sequential edge is a measurement that disagrees with them. InvalidArgument for a loop or link naming a keyframe outside the graph,
 // a link from a keyframe not older than its own, or a negative or non-finite doubt.
 absl::StatusOr<LoopCorrection> CorrectKeyframes(const std::vector<SE3>& poses,
                                                 const std::vector<LoopEdge>& loops,

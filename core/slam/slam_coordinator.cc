@@ -158,7 +158,8 @@ absl::Status SlamCoordinator::AddKeyframeLocked(const RgbdFrame& frame, const SE
     to->kept.back().frame.ground_truth.reset();
   }
   to->features.push_back(std::move(features));
-  SequentialLink link{-1, unconfirmed};
+  SequentialLink link;
+  link.unconfirmed = unconfirmed;
   if (camera >= 0) {
     const auto last = to->last_keyframe_of_camera.find(camera);
     if (last != to->last_keyframe_of_camera.end()) link.from = last->second;
@@ -350,6 +351,22 @@ absl::Status SlamCoordinator::CloseLoops(SlamStepMode mode) {
     }
     SlamLoopCounts found;
     for (int q = main.loop_checked; q < integrated; ++q) {
+      // The sequential edge into q measured from the two keyframes' images: the solve takes it
+      // where tracking's relative pose slipped (LoopClosureGraph).
+      int from = -1;
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (q < static_cast<int>(main.links.size())) {
+          from = main.links[q].from >= 0 ? main.links[q].from : q - 1;
+        }
+      }
+      if (from >= 0) {
+        PLX_ASSIGN_OR_RETURN(std::optional<SE3> measured,
+                             MeasureSequentialLink(keyframes[from], keyframes[q], options));
+        found.links_measured += measured.has_value();
+        std::lock_guard<std::mutex> lock(mutex_);
+        main.links[q].measured = std::move(measured);
+      }
       PLX_ASSIGN_OR_RETURN(const LoopSearch search, SearchLoop(q, keyframes, timestamps, options));
       ++found.checked;
       found.proposed += search.proposed;
@@ -367,6 +384,7 @@ absl::Status SlamCoordinator::CloseLoops(SlamStepMode mode) {
     loop_counts_.proposed += found.proposed;
     loop_counts_.rejected += found.rejected;
     loop_counts_.verified += found.verified;
+    loop_counts_.links_measured += found.links_measured;
   }
   // A rebuild costs about as much as mapping its keyframes again: one that would start soon
   // after the last waits for min_keyframes_between_rebuilds more (or the end of the run), the
@@ -431,6 +449,7 @@ absl::Status SlamCoordinator::CorrectAndRebuild(SlamMapper* mapper) {
     loop_counts_.accepted = static_cast<int>(kept.size());
     loop_counts_.last_solve_ms = solve->solve_ms;
     loop_counts_.last_shift_m = correction.max_shift_m;
+    loop_counts_.last_measured_edges = correction.measured_edges;
     // A keyframe accepted since the poses were read is not in the mapper's keyframes yet
     // (nor in the solve): the next step solves again.
     if (mapper->progress().keyframes != static_cast<int>(poses.size())) {

@@ -86,6 +86,10 @@ struct SlamLoopCounts {
   int rebuild_iteration_budget = 0;
   double last_solve_ms = 0.0;  // the last pose-graph solve
   double last_shift_m = 0.0;   // the largest keyframe move it made
+  // Sequential edges the two keyframes' images aligned (MeasureSequentialLink), and how many
+  // of them the last solve used instead of tracking's relative pose (LoopClosureEdges).
+  int links_measured = 0;
+  int last_measured_edges = 0;
   // The last rebuild's seed: keyframes the solve moved (fused and trained again) and bricks of
   // the old map it kept and dropped (all dropped for a rebuild from nothing).
   int last_moved_keyframes = 0;

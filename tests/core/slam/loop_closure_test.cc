@@ -9,6 +9,7 @@
 
 #include <cmath>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "core/cpu/cpu_backend.h"
@@ -227,6 +228,66 @@ TEST_F(LoopClosureTest, ACorrectionGoesToTheEdgeTheMapDidNotConfirm) {
   EXPECT_FALSE(CorrectKeyframes(tracked, loops, Untimed(), links).ok());
 }
 
+TEST_F(LoopClosureTest, AJumpBackOntoTheOldMapIsMeasuredAndTheDriftBeforeItCorrected) {
+  // The two-room run's shape: a stretch carried by the odometry alone (keyframes 20-34) slid
+  // sideways, 20 cm by its end; then tracking found the first lap's map again and the pose
+  // jumped back onto it (35 on exact). Loops from the start to after the jump agree with the
+  // poses, so they say nothing is wrong; the edge across the jump holds the 20 cm.
+  constexpr int kJump = 35;
+  std::vector<SE3> tracked;
+  for (int i = 0; i < kKeyframes; ++i) {
+    const double slide = i >= 20 && i < kJump ? 0.2 * (i - 19) / 15.0 : 0.0;
+    tracked.push_back(SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(slide, 0.0, 0.0)) *
+                      Truth(i));
+  }
+  std::vector<LoopEdge> loops;
+  for (int q : {36, 40, 45}) loops.push_back({q - 36, q, Truth(q - 36).Inverse() * Truth(q)});
+  // Every edge measured (the truth but the jump's, which the images measure here from the
+  // tracked poses, 20 cm wrong), the stretch flagged as unconfirmed motion.
+  std::vector<SequentialLink> links(kKeyframes);
+  for (int i = 1; i < kKeyframes; ++i) {
+    links[i].measured = Truth(i - 1).Inverse() * Truth(i);
+    if (i >= 20 && i < kJump) links[i].unconfirmed.Add(Truth(i - 1), Truth(i));
+  }
+  const std::vector<LoopKeyframe> keyframes = Keyframes(tracked);
+  absl::StatusOr<std::optional<SE3>> jump =
+      MeasureSequentialLink(keyframes[kJump - 1], keyframes[kJump], LoopClosureOptions{});
+  ASSERT_TRUE(jump.ok()) << jump.status();
+  ASSERT_TRUE(jump->has_value());
+  const SE3 truth = Truth(kJump - 1).Inverse() * Truth(kJump);
+  // The dense alignment's millimetres, as a loop's (TheSecondLapFinds...).
+  EXPECT_LT(((*jump)->translation() - truth.translation()).norm(), 0.01);
+  EXPECT_LT(RotationAngleBetween(**jump, truth), 0.01);
+  links[kJump].measured = *jump;
+
+  absl::StatusOr<LoopCorrection> unmeasured = CorrectKeyframes(tracked, loops, Untimed());
+  ASSERT_TRUE(unmeasured.ok()) << unmeasured.status();
+  EXPECT_TRUE(unmeasured->confirmed);
+  absl::StatusOr<LoopCorrection> c = CorrectKeyframes(tracked, loops, Untimed(), links);
+  ASSERT_TRUE(c.ok()) << c.status();
+  // Only the jump's measurement disagrees with tracking beyond its doubt: the stretch's edges
+  // moved within what unconfirmed motion allows, the others agree.
+  EXPECT_EQ(c->measured_edges, 1);
+  EXPECT_FALSE(c->confirmed);
+  EXPECT_TRUE(c->rejected_loops.empty());
+  const double before = MeanTranslationError(tracked);
+  EXPECT_GT(before, 0.02);
+  EXPECT_LT(MeanTranslationError(c->poses), before / 5.0) << "before " << before;
+  for (int i = kJump; i < kKeyframes; ++i) {  // what tracking put on the old map stays there
+    EXPECT_LT((c->poses[i].translation() - Truth(i).translation()).norm(), 0.005) << i;
+  }
+  // No loop spans the jump: which side is wrong is unknown, and the poses stay.
+  const std::vector<LoopEdge> early = {{0, 12, Truth(0).Inverse() * Truth(12)}};
+  absl::StatusOr<LoopCorrection> unspanned = CorrectKeyframes(tracked, early, Untimed(), links);
+  ASSERT_TRUE(unspanned.ok()) << unspanned.status();
+  EXPECT_EQ(unspanned->measured_edges, 0);
+  EXPECT_EQ(unspanned->max_shift_m, 0.0);
+  // A measurement that is not a pose is refused.
+  links[3].measured = SE3(Eigen::Quaterniond::Identity(),
+                          Eigen::Vector3d(std::nan(""), 0.0, 0.0));
+  EXPECT_FALSE(CorrectKeyframes(tracked, loops, Untimed(), links).ok());
+}
+
 TEST_F(LoopClosureTest, ALoopOnOneCameraCorrectsItsChainAndLeavesTheOtherCamera) {
   // Two cameras in one map, their keyframes accepted in turn (A0 B0 A1 B1 ...): A drifts, B
   // (a rig's second camera, 30 cm beside A's path) tracks exactly and closes no loop. Loops on
@@ -238,10 +299,10 @@ TEST_F(LoopClosureTest, ALoopOnOneCameraCorrectsItsChainAndLeavesTheOtherCamera)
   for (int i = 0; i < kKeyframes; ++i) {
     poses.push_back(drifted[i]);
     truth.push_back(Truth(i));
-    chains.push_back({i > 0 ? 2 * (i - 1) : -1, {}});
+    chains.push_back({i > 0 ? 2 * (i - 1) : -1, {}, {}});
     poses.push_back(Truth(i) * beside);
     truth.push_back(Truth(i) * beside);
-    chains.push_back({i > 0 ? 2 * (i - 1) + 1 : -1, {}});  // B0's: from A0, the one before
+    chains.push_back({i > 0 ? 2 * (i - 1) + 1 : -1, {}, {}});  // B0's: from A0, the one before
   }
   std::vector<LoopEdge> loops;
   for (int q : {40, 50, 60}) {
@@ -347,6 +408,12 @@ TEST_F(LoopClosureTest, TheCoordinatorClosesTheLoopAndPublishesTheCorrectedMap) 
   const SlamMapperProgress p = coordinator.progress();
   EXPECT_GE(p.loops.accepted, 1);
   EXPECT_GE(p.loops.corrections, 1);
+  // Each keyframe's edge from the one before was measured from the images (60 edges; a pair
+  // the checks refuse goes unmeasured), and none replaced tracking's: the drift per keyframe
+  // is within the sequential edge's doubt.
+  EXPECT_GE(p.loops.links_measured, kKeyframes * 3 / 4);
+  EXPECT_LE(p.loops.links_measured, kKeyframes - 1);
+  EXPECT_EQ(p.loops.last_measured_edges, 0);
   EXPECT_EQ(correction->generation, p.loops.corrections);
   EXPECT_GT(correction->map_version, version_before_correction);
   EXPECT_EQ(coordinator.latest().version, p.map_version);
