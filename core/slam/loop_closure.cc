@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 #include <utility>
 
 #include "absl/strings/str_format.h"
@@ -90,6 +91,25 @@ absl::StatusOr<PairAlignment> AlignPair(const LoopKeyframe& old, const LoopKeyfr
   out.inliers = pnp ? pnp->inliers : 0;
   out.depth_inlier_fraction = dense.depth_inlier_fraction;
   return out;
+}
+
+// Whether edges[e] lies on a cycle of the graph over `nodes` nodes: its two ends stay joined
+// without it (union-find over the other edges).
+bool OnACycle(int nodes, const std::vector<PoseGraphEdge>& edges, size_t e) {
+  std::vector<int> parent(nodes);
+  std::iota(parent.begin(), parent.end(), 0);
+  const auto root = [&parent](int n) {
+    while (parent[n] != n) n = parent[n] = parent[parent[n]];
+    return n;
+  };
+  const auto inside = [nodes](const PoseGraphEdge& edge) {
+    return edge.from >= 0 && edge.to >= 0 && edge.from < nodes && edge.to < nodes;
+  };
+  if (!inside(edges[e])) return false;
+  for (size_t k = 0; k < edges.size(); ++k) {
+    if (k != e && inside(edges[k])) parent[root(edges[k].from)] = root(edges[k].to);
+  }
+  return root(edges[e].from) == root(edges[e].to);
 }
 
 }  // namespace
@@ -193,12 +213,9 @@ LoopClosureEdges LoopClosureGraph(const std::vector<SE3>& poses,
   LoopClosureEdges out;
   std::vector<PoseGraphEdge>& edges = out.edges;
   edges.reserve(poses.size() + loops.size());
-  const auto spanned = [&loops](int from, int to) {
-    return std::any_of(loops.begin(), loops.end(), [&](const LoopEdge& loop) {
-      return std::min(loop.from, loop.to) <= from && to <= std::max(loop.from, loop.to);
-    });
-  };
   static const SequentialLink kUnlinked;  // from the keyframe before, no doubt
+  std::vector<PoseGraphEdge> measured(poses.size());  // [i]: into keyframe i, if it disagrees
+  std::vector<bool> disagrees(poses.size(), false);
   for (size_t i = 1; i < poses.size(); ++i) {
     const SequentialLink& link = i < links.size() ? links[i] : kUnlinked;
     PoseGraphEdge edge;
@@ -207,15 +224,12 @@ LoopClosureEdges LoopClosureGraph(const std::vector<SE3>& poses,
     edge.to = static_cast<int>(i);
     edge.from_T_to = poses[edge.from].Inverse() * poses[i];
     SequentialSigmas(edge.from_T_to, link.unconfirmed, options, &edge);
-    if (link.measured && spanned(edge.from, edge.to)) {
-      PoseGraphEdge measured = edge;  // judged at the tracked edge's sigmas...
-      measured.from_T_to = *link.measured;
-      if (PoseGraphEdgeResidual(poses, measured) > options.confirm_residual) {
-        measured.sigma_m = options.loop_sigma_m;  // ...and as sure as a loop's alignment
-        measured.sigma_rad = options.loop_sigma_rad;
-        edge = measured;
-        ++out.measured;
-      }
+    if (link.measured) {
+      measured[i] = edge;  // judged at the tracked edge's sigmas...
+      measured[i].from_T_to = *link.measured;
+      disagrees[i] = PoseGraphEdgeResidual(poses, measured[i]) > options.confirm_residual;
+      measured[i].sigma_m = options.loop_sigma_m;  // ...and as sure as a loop's alignment
+      measured[i].sigma_rad = options.loop_sigma_rad;
     }
     edges.push_back(edge);
   }
@@ -228,6 +242,12 @@ LoopClosureEdges LoopClosureGraph(const std::vector<SE3>& poses,
     edge.sigma_rad = options.loop_sigma_rad;
     edge.loop = true;
     edges.push_back(edge);
+  }
+  for (size_t i = 1; i < poses.size(); ++i) {
+    if (disagrees[i] && OnACycle(static_cast<int>(poses.size()), edges, i - 1)) {
+      edges[i - 1] = measured[i];
+      ++out.measured;
+    }
   }
   return out;
 }

@@ -156,10 +156,11 @@ struct LoopClosureEdges {
 // links[i].unconfirmed; `links` empty or shorter: from the keyframe before, no doubt), then
 // one edge per loop. Every keyframe is joined to keyframe 0 through earlier ones, so the graph
 // is connected. A link's measurement replaces the poses' relative pose (at the loops' sigmas)
-// where the two disagree by more than confirm_residual of the edge's own sigmas and a loop
-// spans the edge (its keyframes lie between a loop's two): only a loop says whether the poses
-// before the edge or after it are the wrong ones; outside every loop the poses, tied to the
-// map by tracking, are kept.
+// where the two disagree by more than confirm_residual of the edge's own sigmas and the edge
+// lies on a cycle (a loop closes a path through it): only a loop says whether the poses before
+// the edge or after it are the wrong ones; on an edge no loop closes over (another camera's
+// chain beside a loop, keyframes after the newest loop) the poses, tied to the map by
+// tracking, are kept.
 LoopClosureEdges LoopClosureGraph(const std::vector<SE3>& poses,
                                   const std::vector<LoopEdge>& loops,
                                   const LoopClosureOptions& options,
@@ -181,8 +182,10 @@ struct LoopCorrection {
 };
 
 // Solves LoopClosureGraph with keyframe 0 fixed (step 4), unless every loop confirms the poses
-// (confirm_residual) and no sequential edge is a measurement that disagrees with them. InvalidArgument for a loop or link naming a keyframe outside the graph,
-// a link from a keyframe not older than its own, or a negative or non-finite doubt.
+// (confirm_residual) and no sequential edge is a measurement that disagrees with them.
+// InvalidArgument for a loop or link naming a keyframe outside the graph, a link from a
+// keyframe not older than its own, a negative or non-finite doubt, or a measurement that is
+// not finite.
 absl::StatusOr<LoopCorrection> CorrectKeyframes(const std::vector<SE3>& poses,
                                                 const std::vector<LoopEdge>& loops,
                                                 const LoopClosureOptions& options,

@@ -333,6 +333,17 @@ TEST_F(LoopClosureTest, ALoopOnOneCameraCorrectsItsChainAndLeavesTheOtherCamera)
   EXPECT_LT(mean_error(chained->poses, 1), 1e-3);
   // Interleaved, every B keyframe sits between two of A's and follows A's correction.
   EXPECT_GT(mean_error(interleaved->poses, 1), 0.01);
+  // A measurement on B's chain that disagrees with B's poses by 10 cm, between two keyframes
+  // that lie between a loop's two: no loop closes over B's chain, so it cannot say whether B's
+  // keyframes before it or after it are wrong, and B stays.
+  std::vector<SequentialLink> measured_b = chains;
+  measured_b[2 * 45 + 1].measured =
+      poses[2 * 44 + 1].Inverse() * poses[2 * 45 + 1] *
+      SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0.1, 0.0, 0.0));
+  absl::StatusOr<LoopCorrection> b_kept = CorrectKeyframes(poses, loops, Untimed(), measured_b);
+  ASSERT_TRUE(b_kept.ok()) << b_kept.status();
+  EXPECT_EQ(b_kept->measured_edges, 0);
+  EXPECT_LT(mean_error(b_kept->poses, 1), 1e-3);
   // A link from a keyframe that is not older is refused.
   chains[5].from = 5;
   EXPECT_FALSE(CorrectKeyframes(poses, loops, Untimed(), chains).ok());
