@@ -194,6 +194,19 @@ int RunSlam(const std::vector<std::string>& args) {
         line.Update(SlamFinishingText(
             p, std::chrono::duration<double>(std::chrono::steady_clock::now() - *finish_start)
                    .count()));
+      },
+      [&](const SlamDatasetResult& streamed) {
+        // The online trajectory (and the per-frame lines) are final once the last frame is
+        // tracked: written now, before the map's finishing (minutes after a long run), so an
+        // interrupt there loses only the map. Written again below with the rest; a failure
+        // here is said and left to that write to report.
+        const std::string header =
+            SlamTrajectoryHeader(dataset->name(), "", streamed.started_from_ground_truth);
+        absl::Status s = WriteTumTrajectory(report.trajectory, streamed.trajectory, header);
+        if (s.ok() && !flags.GetString("frames-out").empty()) {
+          s = WriteFramesCsv(flags.GetString("frames-out"), streamed.results);
+        }
+        if (!s.ok()) line.Update(absl::StrCat("slam: not written before finishing: ", s.message()));
       });
   if (!result.ok()) return ReportError(kCommand, result.status());
   const std::string header =

@@ -24,7 +24,8 @@ absl::StatusOr<SlamDatasetResult> RunSlamOnDataset(
     const RgbdDataset& dataset, Backend& tracking_backend,
     const SlamSession::BackendFactory& make_mapping_backend, const SlamDatasetOptions& options,
     const std::function<bool(const SlamFrameResult&)>& progress,
-    const std::function<void(const SlamProgress&)>& finishing) {
+    const std::function<void(const SlamProgress&)>& finishing,
+    const std::function<void(const SlamDatasetResult&)>& streamed) {
   if (dataset.size() == 0) return absl::InvalidArgumentError("the dataset has no frames");
   if (options.realtime && !(options.speed > 0.0 && std::isfinite(options.speed))) {
     return absl::InvalidArgumentError(
@@ -75,6 +76,7 @@ absl::StatusOr<SlamDatasetResult> RunSlamOnDataset(
   }
   out.stream_s = SecondsSince(wall_start);
   out.trajectory = PosesInMainMap(out.results);
+  if (streamed) streamed(out);
   if (finishing) {
     // Finish blocks until the map is done; progress() may be read from any thread meanwhile.
     finishing(session->progress());

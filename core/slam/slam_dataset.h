@@ -55,10 +55,15 @@ struct SlamDatasetResult {
 // frame the session finishes its map (the iterations mapping still owes, a loop correction's
 // rebuild: on a long run minutes); `finishing(progress)` hears how that goes, once when it
 // starts, every options.finishing_report_s while it runs, and once when it is done.
+// `streamed(result)` is called once after the last frame, before the map is finished, with
+// what the stream decided (trajectory, results, frames, dropped, stream_s; the rest is filled
+// in at the end): the online trajectory is final then, so a caller can keep it before minutes
+// of finishing that an interrupt would lose.
 absl::StatusOr<SlamDatasetResult> RunSlamOnDataset(
     const RgbdDataset& dataset, Backend& tracking_backend,
     const SlamSession::BackendFactory& make_mapping_backend, const SlamDatasetOptions& options,
     const std::function<bool(const SlamFrameResult&)>& progress = nullptr,
-    const std::function<void(const SlamProgress&)>& finishing = nullptr);
+    const std::function<void(const SlamProgress&)>& finishing = nullptr,
+    const std::function<void(const SlamDatasetResult&)>& streamed = nullptr);
 
 }  // namespace plx

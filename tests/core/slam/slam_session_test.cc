@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "core/cpu/cpu_backend.h"
@@ -143,6 +144,43 @@ TEST_F(SlamSessionTest, FinishingTheMapIsReportedUntilItsBudgetIsSpent) {
   options.finishing_report_s = 0.0;
   EXPECT_EQ(RunSlamOnDataset(*dataset_, *backend_, CpuFactory(), options).status().code(),
             absl::StatusCode::kInvalidArgument);
+}
+
+TEST_F(SlamSessionTest, TheStreamsTrajectoryIsHandedOverBeforeTheMapIsFinished) {
+  SlamDatasetOptions options;
+  options.slam = TestOptions();
+  options.max_frames = 20;
+  std::vector<std::string> events;
+  std::vector<StampedPose> streamed_trajectory;
+  int streamed_results = 0;
+  absl::StatusOr<SlamDatasetResult> result = RunSlamOnDataset(
+      *dataset_, *backend_, CpuFactory(), options,
+      [&](const SlamFrameResult&) {
+        events.push_back("frame");
+        return true;
+      },
+      [&](const SlamProgress&) { events.push_back("finishing"); },
+      [&](const SlamDatasetResult& streamed) {
+        events.push_back("streamed");
+        streamed_trajectory = streamed.trajectory;
+        streamed_results = static_cast<int>(streamed.results.size());
+      });
+  ASSERT_TRUE(result.ok()) << result.status();
+  // After every frame, before the first word of the finishing, and once.
+  ASSERT_GE(events.size(), 22u);
+  for (int i = 0; i < 20; ++i) EXPECT_EQ(events[i], "frame") << i;
+  EXPECT_EQ(events[20], "streamed");
+  EXPECT_EQ(std::count(events.begin(), events.end(), "streamed"), 1);
+  EXPECT_EQ(events[21], "finishing");
+  // Finishing the map changes no online pose: what was handed over is the final trajectory.
+  EXPECT_EQ(streamed_results, 20);
+  ASSERT_EQ(streamed_trajectory.size(), result->trajectory.size());
+  for (size_t i = 0; i < streamed_trajectory.size(); ++i) {
+    EXPECT_EQ(streamed_trajectory[i].timestamp, result->trajectory[i].timestamp) << i;
+    EXPECT_TRUE(streamed_trajectory[i].pose.translation() ==
+                result->trajectory[i].pose.translation())
+        << i;
+  }
 }
 
 TEST_F(SlamSessionTest, StartsAtTheGivenInitialPose) {
