@@ -29,6 +29,10 @@ absl::Status ValidateMappingSessionOptions(const MappingSessionOptions& o) {
   if (o.chunk_iterations <= 0 || !(o.chunk_seconds > 0.0)) {
     return absl::InvalidArgumentError("a mapping step needs positive chunk limits");
   }
+  if (o.iterations_after_integration < 1) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "iterations_after_integration must be at least 1, got ", o.iterations_after_integration));
+  }
   if (o.max_clones_per_iteration < 0) {
     return absl::InvalidArgumentError("max_clones_per_iteration must not be negative");
   }
@@ -118,11 +122,12 @@ absl::StatusOr<MappingStepResult> MappingSession::Step(bool finish) {
   return CatchAllocationFailure("mapping step", [&]() -> absl::StatusOr<MappingStepResult> {
     MappingStepResult result;
     std::optional<PendingKeyframe> next;
-    // A keyframe just integrated gets one chunk before the next queued keyframe starts (the
-    // order of work before integration was sliced), so a queue of keyframes does not hold the
-    // optimisation back.
-    const bool chunk_first = chunk_before_next_keyframe_ && BudgetLeft();
-    chunk_before_next_keyframe_ = false;
+    // A keyframe just integrated gets its iterations_after_integration before the next queued
+    // keyframe starts (at least one chunk, the order of work before integration was sliced),
+    // so a queue of keyframes does not hold the optimisation back and the region it added is
+    // fitted before trackers see it.
+    const bool chunk_first = owed_after_integration_ > 0 && BudgetLeft();
+    if (!chunk_first) owed_after_integration_ = 0;
     if (!mapper_->integrating() && !chunk_first) {
       std::lock_guard<std::mutex> lock(mutex_);
       if (!pending_.empty()) {
@@ -148,6 +153,7 @@ absl::StatusOr<MappingStepResult> MappingSession::Step(bool finish) {
                             options_.chunk_iterations, options_.chunk_seconds));
       last_ = summary.last;
       result.iterations = mapper_->iterations_done() - before;
+      owed_after_integration_ = std::max(0, owed_after_integration_ - result.iterations);
       changed_since_publish_ = changed_since_publish_ || result.iterations > 0;
       result.optimize_s = NowSeconds() - start;
     }
@@ -156,7 +162,7 @@ absl::StatusOr<MappingStepResult> MappingSession::Step(bool finish) {
     // between an integration and its first chunk: the version comes after that chunk, as it did
     // when both ran in one step (publishing first would make the chunk clone, or with a clone
     // cap defer, the bricks it writes).
-    const bool chunk_follows = chunk_before_next_keyframe_ && BudgetLeft();
+    const bool chunk_follows = owed_after_integration_ > 0 && BudgetLeft();
     if (!mapper_->integrating() && !chunk_follows) {
       const double now = NowSeconds();
       const double gap = std::max(options_.min_publish_interval_s, 10.0 * last_publish_cost_s_);
@@ -182,7 +188,7 @@ absl::Status MappingSession::IntegrateSlice(double max_seconds, MappingStepResul
   changed_since_publish_ = true;
   mapper_->set_max_iterations(Budget());
   result->keyframes_integrated = 1;
-  chunk_before_next_keyframe_ = true;
+  owed_after_integration_ = options_.iterations_after_integration;
   return absl::OkStatus();
 }
 

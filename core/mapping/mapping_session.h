@@ -43,6 +43,14 @@ struct MappingSessionOptions {
   // wait a tracking frame may see, whatever the mapping work is.
   int chunk_iterations = 10;
   double chunk_seconds = 0.05;
+  // Iterations a keyframe just integrated gets (in chunks as above) before the map is published
+  // with it and before the next keyframe's integration starts, while the budget lasts. A fused
+  // but unfitted region renders surfaces seen at a grazing angle in front of where they are,
+  // and a camera tracked against it lands about a centimetre off, adds a keyframe there, and
+  // the next frames track against that: SLAM that outruns its mapping slides. The first
+  // iterations remove most of the bias; more of them cost keyframes while mapping is behind
+  // (docs/BENCHMARKS.md, "Fitted before it is published"). 1: one chunk, as before.
+  int iterations_after_integration = 3;
   // Copy-on-write clones per iteration (MapperOptions::max_clones_per_iteration): 1024 bricks
   // are 56 MB, so the first iterations after a publish stay about as long as the others
   // instead of one of them cloning a third of the map.
@@ -157,7 +165,8 @@ class MappingSession {
   int earning_integrated_ = 0;     // of them, those that earn iterations
   int granted_iterations_ = 0;     // GrantIterations' sum
   bool integrating_earns_ = true;  // the keyframe being integrated earns iterations
-  bool chunk_before_next_keyframe_ = false;  // the last step completed an integration
+  // Iterations still owed to the keyframe integrated last (iterations_after_integration).
+  int owed_after_integration_ = 0;
   MappingProgress last_;
   std::shared_ptr<const PlenoxelMap> latest_;
   int published_versions_ = 0;

@@ -417,12 +417,23 @@ TEST_F(MappingSessionTest, StepsIntegrateInSlicesWithoutOptimisingOrPublishing) 
     EXPECT_GT(steps, 10);
     EXPECT_EQ(sliced.progress().keyframes_integrated, integrated + 1);
     EXPECT_EQ(step->published, nullptr) << "published before the keyframe's first chunk";
-    // The next step of each is that chunk (one iteration), and then the version is due.
-    absl::StatusOr<MappingStepResult> whole_chunk = whole.Step();
-    absl::StatusOr<MappingStepResult> sliced_chunk = sliced.Step();
-    ASSERT_TRUE(whole_chunk.ok() && sliced_chunk.ok());
-    EXPECT_EQ(sliced_chunk->iterations, 1);
-    EXPECT_EQ(whole_chunk->iterations, 1);
+    // The next steps of each are the keyframe's iterations_after_integration (one iteration a
+    // chunk): no version and no next keyframe before the last of them, then the version is due.
+    const int owed = SliceSessionOptions(10.0).iterations_after_integration;
+    ASSERT_GE(owed, 2);
+    absl::StatusOr<MappingStepResult> whole_chunk, sliced_chunk;
+    for (int chunk = 1; chunk <= owed; ++chunk) {
+      SCOPED_TRACE(chunk);
+      whole_chunk = whole.Step();
+      sliced_chunk = sliced.Step();
+      ASSERT_TRUE(whole_chunk.ok() && sliced_chunk.ok());
+      EXPECT_EQ(sliced_chunk->iterations, 1);
+      EXPECT_EQ(whole_chunk->iterations, 1);
+      if (chunk < owed) {
+        EXPECT_EQ(whole_chunk->published, nullptr) << "published before the keyframe's iterations";
+        EXPECT_EQ(sliced_chunk->published, nullptr);
+      }
+    }
     ASSERT_NE(whole_chunk->published, nullptr);
     ASSERT_NE(sliced_chunk->published, nullptr);
     ExpectSameMap(*whole_chunk->published, *sliced_chunk->published);
@@ -433,6 +444,37 @@ TEST_F(MappingSessionTest, StepsIntegrateInSlicesWithoutOptimisingOrPublishing) 
     EXPECT_EQ(sliced.progress().iterations, whole.progress().iterations);
     ExpectSameMap(*whole.latest(), *sliced.latest());
   }
+}
+
+TEST_F(MappingSessionTest, AQueuedKeyframeWaitsForTheIterationsOfTheOneIntegratedBeforeIt) {
+  // Fused but unfitted map is what trackers slide on: the keyframe just integrated gets its
+  // iterations_after_integration before anything else, even with another keyframe waiting.
+  const std::unique_ptr<Backend> backend = DeterministicBackend();
+  const MappingSessionOptions options = SliceSessionOptions(10.0);  // one iteration a chunk
+  auto created = MappingSession::Create(options, backend.get(), nullptr);
+  ASSERT_TRUE(created.ok()) << created.status();
+  MappingSession& session = **created;
+  ASSERT_TRUE(AddKeyframe(session, 0).ok());
+  ASSERT_TRUE(AddKeyframe(session, 10).ok());
+  absl::StatusOr<MappingStepResult> step = session.Step();
+  ASSERT_TRUE(step.ok()) << step.status();
+  ASSERT_EQ(step->keyframes_integrated, 1);
+  for (int chunk = 1; chunk <= options.iterations_after_integration; ++chunk) {
+    step = session.Step();
+    ASSERT_TRUE(step.ok()) << step.status();
+    EXPECT_EQ(step->keyframes_integrated, 0) << "chunk " << chunk;
+    EXPECT_EQ(step->iterations, 1) << "chunk " << chunk;
+    EXPECT_EQ(session.progress().keyframes_integrated, 1) << "chunk " << chunk;
+  }
+  step = session.Step();
+  ASSERT_TRUE(step.ok()) << step.status();
+  EXPECT_EQ(step->keyframes_integrated, 1) << "the queued keyframe comes next";
+  EXPECT_EQ(step->iterations, 0);
+
+  MappingSessionOptions bad = options;
+  bad.iterations_after_integration = 0;
+  EXPECT_EQ(MappingSession::Create(bad, backend.get(), nullptr).status().code(),
+            absl::StatusCode::kInvalidArgument);
 }
 
 }  // namespace
