@@ -181,6 +181,7 @@ int RunSlam(const std::vector<std::string>& args) {
   int lost = 0;
   const int frames = SlamFrameCount(*dataset, *options);
   std::optional<std::chrono::steady_clock::time_point> finish_start;
+  absl::Status streamed_write;  // of the trajectory and --frames-out, when the stream ended
   absl::StatusOr<SlamDatasetResult> result = RunSlamOnDataset(
       *dataset, *backend, mapping_backend, *options,
       [&](const SlamFrameResult& r) {
@@ -198,22 +199,21 @@ int RunSlam(const std::vector<std::string>& args) {
       [&](const SlamDatasetResult& streamed) {
         // The online trajectory (and the per-frame lines) are final once the last frame is
         // tracked: written now, before the map's finishing (minutes after a long run), so an
-        // interrupt there loses only the map. Written again below with the rest; a failure
-        // here is said and left to that write to report.
-        const std::string header =
-            SlamTrajectoryHeader(dataset->name(), "", streamed.started_from_ground_truth);
-        absl::Status s = WriteTumTrajectory(report.trajectory, streamed.trajectory, header);
-        if (s.ok() && !flags.GetString("frames-out").empty()) {
-          s = WriteFramesCsv(flags.GetString("frames-out"), streamed.results);
+        // interrupt there loses only the map. A failure is said now and reported at the end.
+        streamed_write = WriteTumTrajectory(
+            report.trajectory, streamed.trajectory,
+            SlamTrajectoryHeader(dataset->name(), "", streamed.started_from_ground_truth));
+        if (streamed_write.ok() && !flags.GetString("frames-out").empty()) {
+          streamed_write = WriteFramesCsv(flags.GetString("frames-out"), streamed.results);
         }
-        if (!s.ok()) line.Update(absl::StrCat("slam: not written before finishing: ", s.message()));
+        if (!streamed_write.ok()) {
+          line.Update(absl::StrCat("slam: not written: ", streamed_write.message()));
+        }
       });
   if (!result.ok()) return ReportError(kCommand, result.status());
+  if (!streamed_write.ok()) return ReportError(kCommand, streamed_write);
   const std::string header =
       SlamTrajectoryHeader(dataset->name(), "", result->started_from_ground_truth);
-  if (absl::Status s = WriteTumTrajectory(report.trajectory, result->trajectory, header); !s.ok()) {
-    return ReportError(kCommand, s);
-  }
   // Each frame kept where it was relative to its keyframe, that keyframe at its final pose.
   const std::vector<StampedPose> corrected = CorrectedPoses(result->results, result->keyframes);
   if (!report.corrected_trajectory.empty()) {
@@ -242,11 +242,6 @@ int RunSlam(const std::vector<std::string>& args) {
   if (!flags.GetString("loops-out").empty()) {
     if (absl::Status s = WriteLoops(flags.GetString("loops-out"), result->loops, result->keyframes);
         !s.ok()) {
-      return ReportError(kCommand, s);
-    }
-  }
-  if (!flags.GetString("frames-out").empty()) {
-    if (absl::Status s = WriteFramesCsv(flags.GetString("frames-out"), result->results); !s.ok()) {
       return ReportError(kCommand, s);
     }
   }
