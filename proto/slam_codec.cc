@@ -86,6 +86,7 @@ absl::StatusOr<SlamOptions> SlamOptionsFromProto(const pb::SlamOptions& o, float
         "options: realtime and deterministic exclude each other (lock-step waits for mapping)");
   }
   s.deterministic = o.deterministic();
+  s.live_source = o.realtime();
   s.loop_closure.enabled = !o.has_loop_closure() || o.loop_closure();
   if (o.has_max_pending_keyframes()) {
     if (o.max_pending_keyframes() > static_cast<uint32_t>(kMaxPendingKeyframes)) {

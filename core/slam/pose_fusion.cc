@@ -42,6 +42,15 @@ CheckedPose ApplyFeatureCheck(const FusedPose& fused, bool features_found,
   return out;
 }
 
+FusedPose ChainedToUnconfirmedPose(FusedPose fused) {
+  if (fused.state == SlamState::kLost || fused.confirm) return fused;
+  fused.confirm = true;
+  fused.may_be_keyframe = false;
+  const char* why = "the pose follows from one the keyframes' features did not confirm";
+  fused.reason = fused.reason.empty() ? why : absl::StrCat(fused.reason, "; ", why);
+  return fused;
+}
+
 FusedPose FusePoses(const TrackingResult& map, const std::optional<OdometryPose>& odometry,
                     const PoseFusionOptions& options) {
   FusedPose out;

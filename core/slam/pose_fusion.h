@@ -85,6 +85,16 @@ struct CheckedPose {
 };
 CheckedPose ApplyFeatureCheck(const FusedPose& fused, bool features_found, bool features_agree);
 
+// A frame whose pose follows from an earlier map pose the features did not confirm (the
+// odometry is relative to it, and the map tracker starts there): the earlier pose may be a
+// wrong place the map explains (after a jump in the stream, the map tracker can settle tens of
+// centimetres off on a view it explains well) and every pose chained to it then is as wrong,
+// tracked OK frame after frame. Such a frame needs the same confirmation as the first one
+// (`confirm`), and is no keyframe before it (a keyframe there would fuse the view at the wrong
+// place). SlamTracker keeps the chain unconfirmed until the features agree with a pose of it or
+// move the camera to a place they and the map verify.
+FusedPose ChainedToUnconfirmedPose(FusedPose fused);
+
 // Whether two estimates of a frame's pose are the same within the options' tolerances.
 bool PosesAgree(const SE3& a, const SE3& b, const PoseFusionOptions& options);
 

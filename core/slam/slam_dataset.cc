@@ -40,6 +40,7 @@ absl::StatusOr<SlamDatasetResult> RunSlamOnDataset(
   out.frames = options.max_frames > 0 ? std::min(options.max_frames, dataset.size())
                                       : dataset.size();
   SlamOptions slam = options.slam;
+  slam.live_source = slam.live_source || options.realtime;
   const std::optional<SE3> start = dataset.ground_truth(0);
   if (options.start_from_ground_truth && start) {
     slam.initial_pose = *start;

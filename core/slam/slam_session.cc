@@ -56,6 +56,10 @@ absl::Status ValidateSlamOptions(const SlamOptions& o) {
                                                    kMaxPendingKeyframes, "], got ",
                                                    o.max_pending_keyframes));
   }
+  if (o.live_source && o.deterministic) {
+    return absl::InvalidArgumentError(
+        "live_source and deterministic exclude each other (lock-step waits for mapping)");
+  }
   if (o.mapping_nice < 0 || o.mapping_nice > 19) {
     return absl::InvalidArgumentError(
         absl::StrCat("mapping_nice must be in [0, 19], got ", o.mapping_nice));

@@ -78,6 +78,16 @@ struct SlamOptions {
   // Without a bound, tracking outruns mapping, views go unmapped and tracking is lost.
   // At most kMaxPendingKeyframes; lock-step (deterministic) ignores it (nothing is pending).
   int max_pending_keyframes = 1;
+  // The frames come at the sensor's pace whatever the tracker does (a live camera, a realtime
+  // replay, a daemon stream with realtime): a frame never waits for mapping. A keyframe that
+  // mapping has no room for stays deferred for as long as mapping is behind, instead of being
+  // taken after SlamTrackerOptions::max_deferred_frames with its frame waiting: meanwhile the
+  // sensor's frames are dropped, and the next frame tracked comes after a jump (seconds, on 2
+  // cores) that neither the odometry nor the map tracker's basin bridges (docs/BENCHMARKS.md,
+  // "A live camera never waits for mapping"). A replay as fast as the engine goes (false) waits
+  // instead, or it would outrun mapping for the whole run. Not with deterministic; with
+  // max_pending_keyframes 0 each keyframe's frame still waits for its integration (asked for).
+  bool live_source = false;
   // Concurrent mode: the mapping thread's nice increment (Linux; 0 = same priority as the
   // tracker). Its backend's worker threads inherit it. 10 by default, as the daemon's mapping
   // worker: at the same priority the tracker's and the mapper's threads share 2 cores evenly

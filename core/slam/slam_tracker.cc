@@ -490,6 +490,8 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   tracker_.set_map(tracked_map_.get());
   std::optional<TrackingResult> result;
   bool may_be_keyframe = false;
+  // The frame's pose is a map pose (or chained to one) that the features did not confirm.
+  bool unconfirmed_pose = false;
   if (view.map == nullptr) {
     // Keyframe 0 (of the map or of a segment) is still being integrated.
     stage = Clock::now();
@@ -591,7 +593,8 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
           from_odometry ? OdometryStartIterations(options_) : options_.tracker.iterations);
       PLX_ASSIGN_OR_RETURN(TrackingResult tracked, tracker_.Track(frame, k, map_start));
       out.timings.map_ms += MillisecondsSince(stage);
-      const FusedPose fused = FusePoses(tracked, odometry, options_.fusion);
+      FusedPose fused = FusePoses(tracked, odometry, options_.fusion);
+      if (unconfirmed_chain_) fused = ChainedToUnconfirmedPose(std::move(fused));
       // The map tracker's motion model follows the pose given out when it is not its own.
       if (fused.source == PoseSource::kOdometry) tracker_.Reset(fused.pose, frame.timestamp);
       out.state = fused.state;
@@ -638,6 +641,7 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
           out.state = checked.state;
           out.reason = checked.reason;
           may_be_keyframe = checked.may_be_keyframe;
+          unconfirmed_pose = fused.confirm && !(found && !elsewhere);
         }
       }
     }
@@ -675,6 +679,14 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   } else if (out.state != SlamState::kOk && out.state != SlamState::kLost && last_good_pose_) {
     unconfirmed_.Add(*last_good_pose_, out.pose);
   }
+  // The next frames' poses follow from this one (the odometry's reference, the map tracker's
+  // start): they stay unconfirmed with it (ChainedToUnconfirmedPose) until the features place
+  // one of them. A LOST frame ends the chain (relocalisation verifies its place), so does a
+  // new segment (a frame of its own) or a join (verified).
+  // Without feature relocalisation nothing could confirm the chain: the rule is the frame's
+  // own (FusedPose::confirm), as it was.
+  unconfirmed_chain_ = options_.feature_relocalisation && unconfirmed_pose &&
+                       out.state != SlamState::kLost && !out.new_segment && !out.main_T_segment;
   if (out.state == SlamState::kLost) {
     if (!lost_) relocalisation_cursor_ = 0;  // a new loss starts at the likeliest pose
     lost_ = true;

@@ -382,6 +382,9 @@ class SlamTracker {
   int relocalisation_cursor_ = 0;  // the next attempt near the last good pose
   int lost_with_depth_ = 0;  // LOST frames in a row that had depth to start a segment
   int checks_to_skip_ = 0;  // skip_checks_after_failed_check, counting down
+  // The last frame's pose was a map pose the features did not confirm, or chained to one
+  // (core/slam/pose_fusion.h, ChainedToUnconfirmedPose): the next frame's needs confirming.
+  bool unconfirmed_chain_ = false;
   int deferred_frames_ = 0;  // frames in a row that deferred a keyframe (max_deferred_frames)
   int frames_in_segment_ = 0;  // frames tracked since the camera started its segment
   double carry_start_ = 0.0;  // keyframe 0's timestamp (of the map or the camera's segment)

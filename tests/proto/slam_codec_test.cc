@@ -112,6 +112,9 @@ TEST(SlamCodecTest, ChosenOptionsRoundTrip) {
   ASSERT_TRUE(got.ok()) << got.status();
   ExpectSameWireSettings(*got, want);
   EXPECT_TRUE(SlamMappingOptionsChosen(wire));
+  // A realtime stream is a live source: its frames never wait for mapping.
+  EXPECT_TRUE(got->live_source);
+  EXPECT_EQ(SplitSlamOptions(*got).tracker.max_deferred_frames, 0);
 }
 
 TEST(SlamCodecTest, LockStepWithoutABoundIgnoresTheDefaultOne) {
@@ -120,6 +123,7 @@ TEST(SlamCodecTest, LockStepWithoutABoundIgnoresTheDefaultOne) {
   const absl::StatusOr<SlamOptions> got = SlamOptionsFromProto(wire, kVoxel, kMaxMapBytes);
   ASSERT_TRUE(got.ok()) << got.status();
   EXPECT_TRUE(got->deterministic);
+  EXPECT_FALSE(got->live_source);
   EXPECT_EQ(SplitSlamOptions(*got).gate.max_pending_keyframes, 0);
 }
 

@@ -21,6 +21,7 @@
 #include "core/slam/slam_tracker.h"
 #include "core/synthetic/synthetic_scene.h"
 #include "core/synthetic/synthetic_sequence.h"
+#include "tests/core/slam/run_mapping_out.h"
 #include "tests/core/slam/slam_test_options.h"
 #include "tests/synthetic_room.h"
 
@@ -32,15 +33,6 @@ constexpr int kWidth = 160;
 constexpr int kHeight = 120;
 
 SlamOptions TestOptions() { return testing::SmallLockStepSlamOptions(); }
-
-void RunOut(SlamCoordinator& coordinator) {
-  for (int i = 0; i < 100000; ++i) {
-    absl::StatusOr<SlamStepResult> step = coordinator.Step(SlamStepMode::kMap);
-    ASSERT_TRUE(step.ok()) << step.status();
-    if (step->out_of_work) return;
-  }
-  FAIL() << "mapping never ran out of work";
-}
 
 // A map that maps only when stepped (not in lock-step, which would map keyframe 0 before the
 // camera's next frame) and one camera starting at the room's first true pose.
@@ -179,7 +171,7 @@ TEST(SlamMapSegmentTest, TheNextKeyframeCarriesTheMotionTheMapDidNotConfirm) {
   for (int i = 0; i < room->size(); ++i) {
     if (i == 3) {
       ASSERT_TRUE(map.StartMapper(backend.get()).ok());
-      RunOut(map);
+      testing::RunMappingOut(map);
     }
     absl::StatusOr<SlamFrameResult> r =
         camera.Track(room->frames()[i], k, std::nullopt, map.View(segment));
@@ -194,7 +186,7 @@ TEST(SlamMapSegmentTest, TheNextKeyframeCarriesTheMotionTheMapDidNotConfirm) {
     if (!r->keyframe) {
       EXPECT_EQ(r->unconfirmed.m, 0.0) << "frame " << i;
     }
-    if (i >= 3 && r->keyframe) RunOut(map);
+    if (i >= 3 && r->keyframe) testing::RunMappingOut(map);
   }
   ASSERT_GE(keyframes.size(), 3u) << "the camera moved ~35 cm: keyframes every 10 cm";
   ASSERT_TRUE(all_ok_after_carry) << "the frames after the carried ones track OK";
@@ -226,7 +218,7 @@ TEST(SlamMapSegmentTest, CoordinatorKeepsASegmentApartAndJoinsItByTheTransform) 
   first.keyframe = true;
   first.pose = *room->ground_truth(0);
   ASSERT_TRUE(map.Accept(room->frames()[0], k, &first, &segment).ok());
-  RunOut(map);
+  testing::RunMappingOut(map);
   const int main_versions = published;
   ASSERT_GE(main_versions, 1);
 
@@ -251,7 +243,7 @@ TEST(SlamMapSegmentTest, CoordinatorKeepsASegmentApartAndJoinsItByTheTransform) 
   ASSERT_NE(view.main, nullptr);
   EXPECT_EQ(view.main->accepted_keyframes.size(), 1u);
   EXPECT_FALSE(map.MayCameraProceed(1, /*needs_version=*/true));
-  RunOut(map);
+  testing::RunMappingOut(map);
   view = map.View(1);
   ASSERT_NE(view.map, nullptr) << "the segment's mapper integrated and published it";
   EXPECT_EQ(published, main_versions) << "only the main map reaches the publisher";
@@ -275,7 +267,7 @@ TEST(SlamMapSegmentTest, CoordinatorKeepsASegmentApartAndJoinsItByTheTransform) 
   }
   EXPECT_EQ(map.View(1).segment, 0) << "a joined segment's view is the main map's";
   EXPECT_FALSE(map.AddKeyframe(room->frames()[7], joining.pose, k, nullptr, 1).ok());
-  RunOut(map);
+  testing::RunMappingOut(map);
   EXPECT_EQ(map.progress().keyframes_integrated, 4);
   EXPECT_GT(published, main_versions);
 }
@@ -306,7 +298,7 @@ TEST(SlamMapSegmentTest, ALostCameraInUnseenSpaceStartsASegmentAndJoinsTheMapWhe
     ASSERT_TRUE(r.ok()) << r.status();
     absl::StatusOr<bool> queued = map.Accept(frame, k, &*r, &segment);
     ASSERT_TRUE(queued.ok()) << queued.status();
-    if (*queued) RunOut(map);
+    if (*queued) testing::RunMappingOut(map);
     if (r->new_segment) started_at = index;
     if (r->main_T_segment) joined_at = index;
     if (joined_at && frame.ground_truth) after_join.push_back({r->pose, *frame.ground_truth});

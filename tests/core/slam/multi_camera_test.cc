@@ -15,6 +15,7 @@
 #include "core/slam/slam_coordinator.h"
 #include "core/slam/slam_session.h"
 #include "core/slam/slam_tracker.h"
+#include "tests/core/slam/run_mapping_out.h"
 #include "tests/core/slam/slam_test_options.h"
 #include "tests/synthetic_room.h"
 
@@ -33,15 +34,6 @@ std::unique_ptr<SlamCoordinator> StartedCoordinator(const SlamOptions& options, 
   return started.ok() ? std::move(coordinator) : nullptr;
 }
 
-// Steps in `mode` until the coordinator is out of work (it then has published what changed).
-void RunOut(SlamCoordinator& coordinator, SlamStepMode mode) {
-  for (;;) {
-    absl::StatusOr<SlamStepResult> step = coordinator.Step(mode);
-    ASSERT_TRUE(step.ok()) << step.status();
-    if (step->out_of_work) return;
-  }
-}
-
 double AteRmse(const std::vector<StampedPose>& estimate, const std::vector<StampedPose>& gt) {
   absl::StatusOr<TrajectoryEvalResult> eval = EvaluateTrajectory(estimate, gt);
   EXPECT_TRUE(eval.ok()) << eval.status();
@@ -57,7 +49,7 @@ SlamFrameResult Process(SlamTracker& tracker, SlamCoordinator& coordinator, cons
   if (!r.ok()) return SlamFrameResult();
   if (r->keyframe) {
     EXPECT_TRUE(coordinator.AddKeyframe(frame, r->pose, k, r->features).ok());
-    RunOut(coordinator, SlamStepMode::kMap);
+    testing::RunMappingOut(coordinator, SlamStepMode::kMap);
     EXPECT_TRUE(coordinator.MayCameraProceed()) << "lock-step mapping left work";
   }
   return *r;
@@ -126,7 +118,7 @@ TEST_F(SlamTwoCameraRoomTest, TwoCamerasTrackInOneGrowingMap) {
     b_trajectory.push_back({fb.timestamp, rb.pose});
     b_truth.push_back({fb.timestamp, truth});
   }
-  RunOut(*map, SlamStepMode::kFinish);
+  testing::RunMappingOut(*map, SlamStepMode::kFinish);
 
   const double ate_a = AteRmse(a_trajectory, a_truth);
   const double ate_b = AteRmse(b_trajectory, b_truth);
@@ -158,7 +150,7 @@ SlamFrameResult ProcessInSegments(SlamTracker& tracker, SlamCoordinator& coordin
   if (!r.ok()) return SlamFrameResult();
   absl::StatusOr<bool> queued = coordinator.Accept(frame, k, &*r, segment, camera);
   EXPECT_TRUE(queued.ok()) << queued.status();
-  if (queued.ok() && *queued) RunOut(coordinator, SlamStepMode::kMap);
+  if (queued.ok() && *queued) testing::RunMappingOut(coordinator, SlamStepMode::kMap);
   return *r;
 }
 
@@ -198,7 +190,7 @@ TEST_F(SlamTwoCameraRoomTest, ASecondCameraStartingSomewhereUnknownEndsInTheFirs
     b_results.push_back(rb);
     b_truth.push_back({fb.timestamp, truth});
   }
-  RunOut(*map, SlamStepMode::kFinish);
+  testing::RunMappingOut(*map, SlamStepMode::kFinish);
   EXPECT_EQ(a_segment, 0);
   EXPECT_EQ(b_segment, 0) << "camera B never joined the map";
   // B's poses from the frame it joined on (relocalised into the map, or its segment joined).
@@ -346,7 +338,7 @@ TEST(SlamMultiCameraTest, AKeyframeWaitingForMappingDefersTheNextOneInsteadOfSta
     return *r;
   };
   ASSERT_TRUE(track(0).keyframe);
-  RunOut(map, SlamStepMode::kMap);
+  testing::RunMappingOut(map, SlamStepMode::kMap);
 
   // Up to the next keyframe, with mapping kept up to date. Its frames started the map tracker
   // at the odometry's pose: half the 8 iterations.
@@ -357,7 +349,7 @@ TEST(SlamMultiCameraTest, AKeyframeWaitingForMappingDefersTheNextOneInsteadOfSta
       EXPECT_LE(r.tracking.iterations, 4) << "frame " << i;
     }
     if (r.keyframe) break;
-    RunOut(map, SlamStepMode::kMap);
+    testing::RunMappingOut(map, SlamStepMode::kMap);
   }
   ASSERT_LT(i, 40) << "no second keyframe on the path";
   ASSERT_EQ(map.progress().pending_keyframes, 1);
@@ -375,7 +367,7 @@ TEST(SlamMultiCameraTest, AKeyframeWaitingForMappingDefersTheNextOneInsteadOfSta
   EXPECT_EQ(map.progress().pending_keyframes, 1);
 
   // Mapping catches up: the camera, far from every keyframe by now, takes the next frame.
-  RunOut(map, SlamStepMode::kMap);
+  testing::RunMappingOut(map, SlamStepMode::kMap);
   const SlamFrameResult next = track(i);
   EXPECT_TRUE(next.keyframe) << next.reason;
 }
@@ -410,7 +402,7 @@ TEST(SlamMultiCameraTest, AKeyframeDeferredTooLongIsTakenAndTheCameraWaitsForMap
     const bool deferred = r->reason.find("keyframe deferred") != std::string::npos;
     if (r->keyframe) {
       ASSERT_TRUE(map.AddKeyframe(room->frames()[i], r->pose, k, r->features).ok());
-      if (++keyframes == 1) RunOut(map, SlamStepMode::kMap);
+      if (++keyframes == 1) testing::RunMappingOut(map, SlamStepMode::kMap);
       if (keyframes > 2) forced_at = i;
     }
     if (keyframes == 2 && !r->keyframe) {
@@ -428,7 +420,7 @@ TEST(SlamMultiCameraTest, AKeyframeDeferredTooLongIsTakenAndTheCameraWaitsForMap
   // Two keyframes wait now: over the gate's bound, so the caller holds the camera.
   EXPECT_EQ(map.progress().pending_keyframes, 2);
   EXPECT_FALSE(map.MayCameraProceed());
-  RunOut(map, SlamStepMode::kMap);
+  testing::RunMappingOut(map, SlamStepMode::kMap);
   EXPECT_TRUE(map.MayCameraProceed());
 }
 

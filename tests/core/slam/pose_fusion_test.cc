@@ -112,6 +112,38 @@ TEST(PoseFusionTest, AMapPoseToConfirmIsOkOnlyWhenTheFeaturesAgree) {
   }
 }
 
+TEST(PoseFusionTest, APoseChainedToAnUnconfirmedOneNeedsConfirmingAndIsNoKeyframe) {
+  // The odometry tracked from the previous frame and the map agrees, but the previous frame's
+  // pose was one the features did not confirm: so is this one.
+  const FusedPose f = ChainedToUnconfirmedPose(
+      FusePoses(Map(TrackingState::kOk, TrackingCause::kNone, 1.0), Odometry(true, 1.0),
+                PoseFusionOptions()));
+  EXPECT_EQ(f.state, SlamState::kOk);
+  EXPECT_EQ(f.pose.translation().x(), 1.0);
+  EXPECT_TRUE(f.confirm);
+  EXPECT_FALSE(f.may_be_keyframe);
+  EXPECT_NE(f.reason.find("did not confirm"), std::string::npos) << f.reason;
+  const CheckedPose agreed = ApplyFeatureCheck(f, true, true);
+  EXPECT_EQ(agreed.state, SlamState::kOk);
+  EXPECT_TRUE(agreed.may_be_keyframe);
+  const CheckedPose refused = ApplyFeatureCheck(f, false, false);
+  EXPECT_EQ(refused.state, SlamState::kDegraded);
+  EXPECT_FALSE(refused.may_be_keyframe);
+  // An unmapped view carried by the odometry (a keyframe otherwise): no keyframe either.
+  const FusedPose unmapped = ChainedToUnconfirmedPose(
+      FusePoses(Map(TrackingState::kLost, TrackingCause::kFewValidRays, 0.0), Odometry(true, 2.0),
+                PoseFusionOptions()));
+  EXPECT_EQ(unmapped.state, SlamState::kDegraded);
+  EXPECT_FALSE(unmapped.may_be_keyframe);
+  EXPECT_TRUE(unmapped.confirm);
+  // A LOST frame is a prediction, not a pose to confirm: unchanged.
+  const FusedPose lost = ChainedToUnconfirmedPose(FusePoses(
+      Map(TrackingState::kLost, TrackingCause::kFewValidRays, 1.0), std::nullopt,
+      PoseFusionOptions()));
+  EXPECT_EQ(lost.state, SlamState::kLost);
+  EXPECT_FALSE(lost.confirm);
+}
+
 TEST(PoseFusionTest, WithoutATrustedOdometryTheMapDecidesAlone) {
   const FusedPose degraded =
       FusePoses(Map(TrackingState::kDegraded, TrackingCause::kFewValidRays, 1.0),

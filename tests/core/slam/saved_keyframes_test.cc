@@ -17,6 +17,7 @@
 #include "core/slam/slam_session.h"
 #include "core/slam/slam_tracker.h"
 #include "gmock/gmock.h"
+#include "tests/core/slam/run_mapping_out.h"
 #include "tests/core/slam/slam_test_options.h"
 #include "tests/synthetic_room.h"
 #include "tests/test_util.h"
@@ -35,14 +36,6 @@ constexpr int kFirstRun = 30;  // frames the first session maps
 constexpr int kSecondStart = 24;
 constexpr int kFrames = 45;
 
-void RunOut(SlamCoordinator& coordinator) {
-  for (;;) {
-    absl::StatusOr<SlamStepResult> step = coordinator.Step(SlamStepMode::kMap);
-    ASSERT_TRUE(step.ok()) << step.status();
-    if (step->out_of_work) return;
-  }
-}
-
 // One frame, as the daemon's stream does it: tracked in the view, its keyframe handed over and
 // (lock-step) mapped before the next frame.
 SlamFrameResult Process(SlamTracker& tracker, SlamCoordinator& coordinator,
@@ -53,7 +46,7 @@ SlamFrameResult Process(SlamTracker& tracker, SlamCoordinator& coordinator,
   if (r->keyframe) {
     int segment = 0;
     EXPECT_TRUE(coordinator.Accept(frame, k, &*r, &segment).ok());
-    RunOut(coordinator);
+    testing::RunMappingOut(coordinator);
   }
   return *r;
 }

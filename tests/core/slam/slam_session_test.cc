@@ -440,6 +440,10 @@ TEST_F(SlamSessionTest, BadInputIsRejected) {
   bad.relocalisation_keyframes = -1;
   EXPECT_EQ(SlamSession::Create(bad, backend_.get(), CpuFactory()).status().code(),
             absl::StatusCode::kInvalidArgument);
+  bad = TestOptions();  // lock-step
+  bad.live_source = true;  // a live camera's frames never wait: lock-step waits for each keyframe
+  EXPECT_EQ(SlamSession::Create(bad, backend_.get(), CpuFactory()).status().code(),
+            absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(SlamSession::Create(TestOptions(), nullptr, CpuFactory()).status().code(),
             absl::StatusCode::kInvalidArgument);
 
