@@ -50,7 +50,10 @@ KeyframeDecision DecideKeyframe(const KeyframePolicy& p,
   if (nearest_turn > p.max_rotation_rad) {
     d.reason = absl::StrFormat("turned %.1f deg from every keyframe", nearest_turn * 180.0 / M_PI);
   } else if (nearest > p.max_translation_m) {
-    d.reason = absl::StrFormat("%.3f m from every keyframe", nearest);
+    // Only keyframes that look the same way count (a view's coverage), so the distance can be
+    // metres where keyframes nearby face elsewhere: the reason says so.
+    d.reason = absl::StrFormat("%.3f m from every keyframe facing within %.0f deg", nearest,
+                               p.max_rotation_rad * 180.0 / M_PI);
   } else if (unmapped_fraction > p.max_unmapped_fraction) {
     d.reason = absl::StrFormat("%.0f%% of the view unmapped", 100.0 * unmapped_fraction);
   } else if (p.max_interval_s > 0.0 && time - keyframes.back().timestamp > p.max_interval_s) {

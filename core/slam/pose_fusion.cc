@@ -1,6 +1,9 @@
 #include "core/slam/pose_fusion.h"
 
+#include <cmath>
+
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 
 namespace plx {
 
@@ -13,9 +16,17 @@ const char* PoseSourceName(PoseSource source) {
   return "?";
 }
 
+namespace {
+
+bool WithinTolerance(const SE3& a, const SE3& b, double translation_m, double rotation_rad) {
+  return (a.translation() - b.translation()).norm() <= translation_m &&
+         RotationAngleBetween(a, b) <= rotation_rad;
+}
+
+}  // namespace
+
 bool PosesAgree(const SE3& a, const SE3& b, const PoseFusionOptions& options) {
-  return (a.translation() - b.translation()).norm() <= options.agree_translation_m &&
-         RotationAngleBetween(a, b) <= options.agree_rotation_rad;
+  return WithinTolerance(a, b, options.agree_translation_m, options.agree_rotation_rad);
 }
 
 CheckedPose ApplyFeatureCheck(const FusedPose& fused, bool features_found,
@@ -55,6 +66,18 @@ FusedPose FusePoses(const TrackingResult& map, const std::optional<OdometryPose>
                     const PoseFusionOptions& options) {
   FusedPose out;
   const bool odometry_ok = odometry && odometry->ok;
+  if (map.state == TrackingState::kOk && odometry_ok &&
+      !WithinTolerance(map.pose, odometry->pose, options.max_map_jump_m,
+                       options.max_map_jump_rad)) {
+    out.pose = odometry->pose;
+    out.state = SlamState::kDegraded;
+    out.source = PoseSource::kOdometry;
+    out.reason = absl::StrFormat(
+        "the map's pose jumped %.2f m / %.1f deg from the odometry's; pose from odometry",
+        (map.pose.translation() - odometry->pose.translation()).norm(),
+        RotationAngleBetween(map.pose, odometry->pose) * 180.0 / M_PI);
+    return out;
+  }
   if (map.state == TrackingState::kOk) {
     out.pose = map.pose;
     out.state = SlamState::kOk;

@@ -6,6 +6,8 @@
 //
 //   map tracker        odometry   pose              state     may be a keyframe
 //   OK                 OK or none map               OK        yes (keyframe policy)
+//   OK, jumped away    OK         odometry          DEGRADED  no: as "diverged" below
+//   from the odometry
 //   OK                 failed     map               OK        only once confirmed: the motion
 //                                                             is unknown (a jump, a blur), and
 //                                                             the map tracker can settle on a
@@ -43,6 +45,16 @@ const char* PoseSourceName(PoseSource source);
 struct PoseFusionOptions {
   double agree_translation_m = 0.05;
   double agree_rotation_rad = 0.05;  // ~3 degrees
+  // An OK map pose further than this from a trusted odometry's (which started the map
+  // tracker) is a jump to another basin, not the drift the map corrects: the odometry's
+  // relative motion is good to millimetres, its drift over the frames it carried alone
+  // centimetres. In a live-camera replay of the two rooms, after 17 frames the map tracker
+  // diverged on, it came back OK 26 cm from the odometry's pose, 33 cm from the truth, and
+  // took a keyframe there (docs/BENCHMARKS.md). Such a frame is the odometry's, DEGRADED, and
+  // the keyframes' features decide (SlamTracker): they move it where they and the map agree
+  // (a real snap back after a long carry), or confirm the odometry's pose.
+  double max_map_jump_m = 0.10;
+  double max_map_jump_rad = 0.10;  // ~6 degrees
 };
 
 // The odometry's estimate of the frame's pose in the world (previous pose times the relative

@@ -22,8 +22,9 @@ TrackingResult Map(TrackingState state, TrackingCause cause, double x) {
 OdometryPose Odometry(bool ok, double x) { return OdometryPose{At(x), ok, ok ? "" : "blind"}; }
 
 TEST(PoseFusionTest, AnOkMapWinsAndMayMakeAKeyframe) {
+  // 6 cm apart: the drift the map corrects (not a jump: AnOkMapThatJumpedAway...).
   const FusedPose f = FusePoses(Map(TrackingState::kOk, TrackingCause::kNone, 1.0),
-                                Odometry(true, 1.2), PoseFusionOptions());
+                                Odometry(true, 1.06), PoseFusionOptions());
   EXPECT_EQ(f.state, SlamState::kOk);
   EXPECT_EQ(f.source, PoseSource::kMap);
   EXPECT_EQ(f.pose.translation().x(), 1.0);
@@ -34,6 +35,33 @@ TEST(PoseFusionTest, AnOkMapWinsAndMayMakeAKeyframe) {
                                     std::nullopt, PoseFusionOptions());
   EXPECT_TRUE(alone.may_be_keyframe);
   EXPECT_FALSE(alone.confirm);
+}
+
+TEST(PoseFusionTest, AnOkMapThatJumpedAwayFromTheOdometryIsNotTaken) {
+  // The map tracker started at the odometry's pose and came back OK 26 cm away: another basin.
+  const FusedPose jumped = FusePoses(Map(TrackingState::kOk, TrackingCause::kNone, 1.26),
+                                     Odometry(true, 1.0), PoseFusionOptions());
+  EXPECT_EQ(jumped.state, SlamState::kDegraded);
+  EXPECT_EQ(jumped.source, PoseSource::kOdometry);
+  EXPECT_EQ(jumped.pose.translation().x(), 1.0);
+  EXPECT_FALSE(jumped.may_be_keyframe);
+  EXPECT_FALSE(jumped.confirm);
+  EXPECT_NE(jumped.reason.find("jumped 0.26 m"), std::string::npos) << jumped.reason;
+  // The features agree with the odometry: the map lags the view, a keyframe may fix it.
+  EXPECT_TRUE(ApplyFeatureCheck(jumped, true, true).may_be_keyframe);
+  // A turn away from the odometry's counts too.
+  const SE3 turned(Eigen::Quaterniond(Eigen::AngleAxisd(0.2, Eigen::Vector3d::UnitY())),
+                   Eigen::Vector3d(1.0, 0, 0));
+  TrackingResult map = Map(TrackingState::kOk, TrackingCause::kNone, 1.0);
+  map.pose = turned;
+  EXPECT_EQ(FusePoses(map, Odometry(true, 1.0), PoseFusionOptions()).source,
+            PoseSource::kOdometry);
+  // The drift the map corrects after a carry (8 cm here) is the map's to correct: OK.
+  const FusedPose corrected = FusePoses(Map(TrackingState::kOk, TrackingCause::kNone, 1.08),
+                                        Odometry(true, 1.0), PoseFusionOptions());
+  EXPECT_EQ(corrected.state, SlamState::kOk);
+  EXPECT_EQ(corrected.source, PoseSource::kMap);
+  EXPECT_TRUE(corrected.may_be_keyframe);
 }
 
 TEST(PoseFusionTest, AnOkMapAfterTheOdometryFailedWaitsForConfirmation) {
