@@ -23,7 +23,8 @@ void AddSlamFlags(FlagSet& flags, const std::string& voxel_help) {
            "")
       .AddSwitch("realtime",
                  "replay at the frames' timestamps; frames the tracker cannot keep up with are "
-                 "dropped (latest wins), as from a live sensor")
+                 "dropped (latest wins), as from a live sensor, and no frame waits for mapping "
+                 "(a keyframe stays deferred while mapping is behind)")
       .Add("speed", "X", "realtime replay speed (2 = twice as fast as recorded)", "1")
       .AddSwitch("deterministic",
                  "map in lock-step after each keyframe (CPU mapping on one thread): "
