@@ -31,7 +31,11 @@ SlamSplitOptions SplitSlamOptions(const SlamOptions& o) {
   // Lock-step maps every keyframe before the next frame: nothing is ever left pending.
   out.tracker.max_pending_keyframes = o.deterministic ? 0 : o.max_pending_keyframes;
   out.tracker.initial_pose = o.initial_pose;
-  if (o.live_source) out.tracker.max_deferred_frames = 0;  // never makes a frame wait
+  if (o.live_source) {
+    // No frame waits for mapping: not for a keyframe's room, not for the first version.
+    out.tracker.max_deferred_frames = 0;
+    out.tracker.carry_until_version = true;
+  }
   // A pixel helps the bootstrap only if the tracker uses it and the mapper maps it.
   out.tracker.bootstrap_max_depth =
       std::min(o.tracker.params.max_depth, o.mapping.mapper.allocation.max_depth);

@@ -79,7 +79,9 @@ struct SlamOptions {
   // At most kMaxPendingKeyframes; lock-step (deterministic) ignores it (nothing is pending).
   int max_pending_keyframes = 1;
   // The frames come at the sensor's pace whatever the tracker does (a live camera, a realtime
-  // replay, a daemon stream with realtime): a frame never waits for mapping. A keyframe that
+  // replay, a daemon stream with realtime): a frame never waits for mapping. Until the map's
+  // first version is out the odometry carries the camera however long it takes
+  // (SlamTrackerOptions::carry_until_version). A keyframe that
   // mapping has no room for stays deferred for as long as mapping is behind, instead of being
   // taken after SlamTrackerOptions::max_deferred_frames with its frame waiting: meanwhile the
   // sensor's frames are dropped, and the next frame tracked comes after a jump (seconds, on 2

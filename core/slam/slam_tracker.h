@@ -158,6 +158,12 @@ struct SlamTrackerOptions {
   // (carried on, teddy at 3x the motion left keyframe 0's view before the first version and
   // added no keyframe for 25 frames).
   double max_seconds_without_map = 1.0;
+  // A live source (SlamOptions::live_source): the odometry carries the camera until the
+  // version is out, however long and far, instead of the frame waiting for it. A live camera's
+  // frames keep coming meanwhile: keyframe 0's version took 1.3-1.7 s at 320x240 on 2 cores,
+  // and the frame after the wait needed relocalising (docs/BENCHMARKS.md). A camera LOST
+  // during the carry still waits (nothing carries it).
+  bool carry_until_version = false;
   OdometryPyramidOptions odometry_pyramid;
   OdometryOptions odometry_options;
   PoseFusionOptions fusion;
@@ -279,11 +285,12 @@ class SlamTracker {
 
   // Whether the odometry can carry the pose while the map has no version: the camera started
   // the map (or a segment), the previous frame has a pose, and it is within
-  // max_seconds_without_map of keyframe 0.
+  // max_seconds_without_map of keyframe 0 (or carry_until_version).
   bool CarriesWithoutMap() const {
     return started_ && !lost_ && options_.odometry && previous_ && previous_->pose &&
-           previous_->timestamp - carry_start_ < options_.max_seconds_without_map &&
-           NearCarryStart(*previous_->pose);
+           (options_.carry_until_version ||
+            (previous_->timestamp - carry_start_ < options_.max_seconds_without_map &&
+             NearCarryStart(*previous_->pose)));
   }
 
   const SlamTrackerCounts& counts() const { return counts_; }
