@@ -191,10 +191,27 @@ def read_meta(dataset):
 # One case
 # ----------------------------------------------------------------------------------------
 
-def read_states(csv_path):
-    """[(frame, state, ms)] of `plenox slam --frames-out`."""
+def source_frames(dataset):
+    """{timestamp rounded to 0.1 ms: index} of the sequence's frames (associations.txt), or
+    None when it has no such list. A realtime run (`--slam-arg=--realtime`) drops frames, so
+    its processed frame numbers are not the sequence's: the covered span and the kidnap's jump
+    are in the sequence's numbers."""
+    path = os.path.join(dataset, "associations.txt")
+    if not os.path.exists(path):
+        return None
+    return {round(float(r[0]), 4): i for i, r in enumerate(read_rows(path))}
+
+
+def read_states(csv_path, sources=None):
+    """[(frame, state, ms)] of `plenox slam --frames-out`; `frame` is the sequence's frame
+    number when `sources` (source_frames) knows the frame's timestamp."""
     with open(csv_path) as f:
-        return [(int(r["frame"]), r["state"], float(r["ms"])) for r in csv.DictReader(f)]
+        rows = list(csv.DictReader(f))
+    def frame_of(r):
+        if sources is None:
+            return int(r["frame"])
+        return sources.get(round(float(r["timestamp"]), 4), int(r["frame"]))
+    return [(frame_of(r), r["state"], float(r["ms"])) for r in rows]
 
 
 def first_back(states, start, errors=None, tolerance=None):
@@ -204,17 +221,17 @@ def first_back(states, start, errors=None, tolerance=None):
     for frame, state, _ in states:
         if frame < start or state not in RELOCALISED_STATES:
             continue
-        if errors is not None and not (frame < len(errors) and errors[frame] is not None and
+        if errors is not None and not (errors.get(frame) is not None and
                                        errors[frame] <= tolerance):
             continue
         return frame - start
     return None
 
 
-def position_errors(traj_path, dataset):
-    """|estimated - ground-truth position| (m, no alignment: the run starts at frame 0's
-    ground truth) per trajectory pose (None where ground truth has no pose), or None when the
-    sequence has no ground truth or numpy is missing."""
+def position_errors(traj_path, dataset, sources=None):
+    """{frame: |estimated - ground-truth position|} (m, no alignment: the run starts at frame
+    0's ground truth; None where ground truth has no pose), frames numbered as read_states
+    numbers them, or None when the sequence has no ground truth or numpy is missing."""
     gt_path = os.path.join(dataset, "groundtruth.txt")
     if not os.path.exists(gt_path):
         return None
@@ -224,11 +241,12 @@ def position_errors(traj_path, dataset):
     except ImportError:
         return None
     gt = GroundTruth(gt_path)
-    errors = []
-    for r in read_rows(traj_path):
+    errors = {}
+    for i, r in enumerate(read_rows(traj_path)):
         pose = gt.pose(float(r[0]), max_dt=1e-3)
-        errors.append(None if pose is None else
-                      float(np.linalg.norm(np.array([float(x) for x in r[1:4]]) - pose[:3, 3])))
+        frame = i if sources is None else sources.get(round(float(r[0]), 4), i)
+        errors[frame] = (None if pose is None else
+                         float(np.linalg.norm(np.array([float(x) for x in r[1:4]]) - pose[:3, 3])))
     return errors
 
 
@@ -281,7 +299,8 @@ def run_case(args, key, name, dataset, work):
             problems.append(str(exc))
 
     try:
-        states = read_states(frames_csv)
+        sources = source_frames(dataset)
+        states = read_states(frames_csv, sources)
     except (OSError, KeyError, ValueError) as exc:
         problems.append("%s: cannot read `plenox slam --frames-out` %s: %s"
                         % (name, frames_csv, exc))
@@ -303,14 +322,16 @@ def run_case(args, key, name, dataset, work):
     lost = [f for f, s, _ in states if s == "LOST"]
     row["lost_frames"] = lost
     row["lost_outside"] = [f for f in lost if f not in allowed]
-    if back_from is not None and back_from >= len(states):
+    # The sequence's last frame the run reached (frames are the sequence's numbers).
+    last_frame = states[-1][0] if states else -1
+    if back_from is not None and back_from > last_frame:
         row["reloc"] = None  # the run ended first (--max-frames): n/a
         row["span"] += " (not reached)"
     elif back_from is not None:
         # A frame reported OK far from the truth (the tracker did not notice the jump) is not
         # relocalised: with ground truth, only a tracked frame near it counts.
         try:
-            errors = position_errors(traj, dataset)
+            errors = position_errors(traj, dataset, sources)
         except (OSError, ValueError, IndexError) as exc:
             problems.append("%s: cannot compare the trajectory with ground truth: %s"
                             % (name, exc))
@@ -318,11 +339,11 @@ def run_case(args, key, name, dataset, work):
         back = first_back(states, back_from, errors, RELOCALISED_TOLERANCE_M)
         row["reloc"] = back if back is not None else float("inf")
         if errors is not None:
-            end = back_from + back if back is not None else len(states)
+            end = back_from + back if back is not None else last_frame + 1
             row["wrong_ok"] = [f for f, st, _ in states if back_from <= f < end and
                                st in RELOCALISED_STATES]
             if back is not None:
-                row["reloc_error_m"] = errors[back_from + back]
+                row["reloc_error_m"] = errors.get(back_from + back)
     return row, problems
 
 

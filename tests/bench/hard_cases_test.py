@@ -231,6 +231,16 @@ def check_bench(plenox, work, covered, kidnapped, f):
               (4, "OK", 1.0)]
     f.check(bench.first_back(states, 1) == 2 and bench.first_back(states, 0) == 0 and
             bench.first_back(states, 5) is None, "first_back")
+    # A realtime run drops frames: its states are numbered as the sequence's frames.
+    dropped = os.path.join(work, "dropped_frames.csv")
+    with open(dropped, "w") as fh:
+        fh.write("frame,timestamp,state,ms\n0,0.000000,OK,1\n1,0.100000,LOST,2\n"
+                 "2,0.166667,OK,3\n")
+    sources = {0.0: 0, 0.0333: 1, 0.0667: 2, 0.1: 3, 0.1333: 4, 0.1667: 5}
+    f.check(bench.read_states(dropped, sources) == [(0, "OK", 1.0), (3, "LOST", 2.0),
+                                                    (5, "OK", 3.0)] and
+            [x[0] for x in bench.read_states(dropped)] == [0, 1, 2],
+            "read_states: sequence frame numbers of a realtime run")
     args = argparse.Namespace(plenox=plenox, prefix=[], timeout=300, slam_arg=[
         "--voxel-size=0.08", "--iterations-per-keyframe=2", "--threads=1", "--quiet",
         "--max-frames=24"], data=work)
