@@ -35,6 +35,7 @@ CheckedPose ApplyFeatureCheck(const FusedPose& fused, bool features_found,
   const bool agree = features_found && features_agree;
   if (fused.confirm) {
     out.may_be_keyframe = agree;
+    out.unconfirmed = !agree;
     if (agree) {
       absl::StrAppend(&out.reason, "; the keyframes' features confirm the map's pose");
     } else {

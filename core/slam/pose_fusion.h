@@ -94,6 +94,9 @@ struct CheckedPose {
   SlamState state = SlamState::kDegraded;
   bool may_be_keyframe = false;
   std::string reason;
+  // A pose to confirm that the features did not: the next frames' poses, which follow from
+  // it, need confirming too (ChainedToUnconfirmedPose).
+  bool unconfirmed = false;
 };
 CheckedPose ApplyFeatureCheck(const FusedPose& fused, bool features_found, bool features_agree);
 

@@ -81,12 +81,12 @@ struct SlamOptions {
   // The frames come at the sensor's pace whatever the tracker does (a live camera, a realtime
   // replay, a daemon stream with realtime): a frame never waits for mapping. Until the map's
   // first version is out the odometry carries the camera however long it takes
-  // (SlamTrackerOptions::carry_until_version). A keyframe that
-  // mapping has no room for stays deferred for as long as mapping is behind, instead of being
-  // taken after SlamTrackerOptions::max_deferred_frames with its frame waiting: meanwhile the
-  // sensor's frames are dropped, and the next frame tracked comes after a jump (seconds, on 2
-  // cores) that neither the odometry nor the map tracker's basin bridges (docs/BENCHMARKS.md,
-  // "A live camera never waits for mapping"). A replay as fast as the engine goes (false) waits
+  // (SlamTrackerOptions::carry_until_version). A keyframe that mapping has no room for stays
+  // deferred for as long as mapping is behind, instead of being taken after
+  // SlamTrackerOptions::max_deferred_frames with its frame waiting: meanwhile the sensor's
+  // frames are dropped, and the next frame tracked comes after a jump (seconds, on 2 cores)
+  // that neither the odometry nor the map tracker's basin bridges (docs/BENCHMARKS.md, "A live
+  // camera never waits for mapping"). A replay as fast as the engine goes (false) waits
   // instead, or it would outrun mapping for the whole run. Not with deterministic; with
   // max_pending_keyframes 0 each keyframe's frame still waits for its integration (asked for).
   bool live_source = false;

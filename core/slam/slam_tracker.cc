@@ -641,7 +641,7 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
           out.state = checked.state;
           out.reason = checked.reason;
           may_be_keyframe = checked.may_be_keyframe;
-          unconfirmed_pose = fused.confirm && !(found && !elsewhere);
+          unconfirmed_pose = checked.unconfirmed;
         }
       }
     }
@@ -682,9 +682,8 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
   // The next frames' poses follow from this one (the odometry's reference, the map tracker's
   // start): they stay unconfirmed with it (ChainedToUnconfirmedPose) until the features place
   // one of them. A LOST frame ends the chain (relocalisation verifies its place), so does a
-  // new segment (a frame of its own) or a join (verified).
-  // Without feature relocalisation nothing could confirm the chain: the rule is the frame's
-  // own (FusedPose::confirm), as it was.
+  // new segment (a frame of its own) or a join (verified). Without feature relocalisation
+  // nothing could confirm the chain: the rule is the frame's own (FusedPose::confirm).
   unconfirmed_chain_ = options_.feature_relocalisation && unconfirmed_pose &&
                        out.state != SlamState::kLost && !out.new_segment && !out.main_T_segment;
   if (out.state == SlamState::kLost) {

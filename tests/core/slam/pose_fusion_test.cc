@@ -154,9 +154,11 @@ TEST(PoseFusionTest, APoseChainedToAnUnconfirmedOneNeedsConfirmingAndIsNoKeyfram
   const CheckedPose agreed = ApplyFeatureCheck(f, true, true);
   EXPECT_EQ(agreed.state, SlamState::kOk);
   EXPECT_TRUE(agreed.may_be_keyframe);
+  EXPECT_FALSE(agreed.unconfirmed) << "confirmed: the chain ends";
   const CheckedPose refused = ApplyFeatureCheck(f, false, false);
   EXPECT_EQ(refused.state, SlamState::kDegraded);
   EXPECT_FALSE(refused.may_be_keyframe);
+  EXPECT_TRUE(refused.unconfirmed) << "the chain goes on";
   // An unmapped view carried by the odometry (a keyframe otherwise): no keyframe either.
   const FusedPose unmapped = ChainedToUnconfirmedPose(
       FusePoses(Map(TrackingState::kLost, TrackingCause::kFewValidRays, 0.0), Odometry(true, 2.0),
