@@ -51,6 +51,10 @@ void AddInProcessSlamFlags(FlagSet& flags) {
            "LOST frames with depth after which the camera starts a new map segment, joined to "
            "the map when it finds it again (0 = never: LOST until relocalised)",
            absl::StrCat(d.new_segment_after_lost_frames))
+      .Add("new-segment-after-unconfirmed", "N",
+           "frames chained to a map pose the keyframes' features did not confirm (never "
+           "keyframes) after which the camera starts a new map segment (0 = never)",
+           absl::StrCat(d.new_segment_after_unconfirmed_frames))
       .AddSwitch("no-odometry",
                  "track against the map alone, without the map-free odometry (to measure it)")
       .AddSwitch("no-feature-relocalisation",
@@ -66,6 +70,8 @@ absl::StatusOr<SlamDatasetOptions> OptionsFromFlags(const FlagSet& flags) {
   PLX_ASSIGN_OR_RETURN(s.mapping_nice, flags.GetInt("mapping-nice", 0, 19));
   PLX_ASSIGN_OR_RETURN(s.new_segment_after_lost_frames,
                        flags.GetInt("new-segment-after", 0, 1000000));
+  PLX_ASSIGN_OR_RETURN(s.new_segment_after_unconfirmed_frames,
+                       flags.GetInt("new-segment-after-unconfirmed", 0, 1000000));
   s.odometry = !flags.GetSwitch("no-odometry");
   s.feature_relocalisation = !flags.GetSwitch("no-feature-relocalisation");
   PLX_RETURN_IF_ERROR(ValidateSlamOptions(s));

@@ -25,6 +25,7 @@ SlamSplitOptions SplitSlamOptions(const SlamOptions& o) {
   out.tracker.odometry = o.odometry;
   out.tracker.feature_relocalisation = o.feature_relocalisation;
   out.tracker.new_segment_after_lost_frames = o.new_segment_after_lost_frames;
+  out.tracker.new_segment_after_unconfirmed_frames = o.new_segment_after_unconfirmed_frames;
   out.tracker.segment_join_interval = o.segment_join_interval;
   // Lock-step maps keyframe 0 before the next frame: nothing to carry (and no timing).
   if (o.deterministic) out.tracker.max_seconds_without_map = 0.0;

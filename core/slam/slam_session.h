@@ -107,8 +107,10 @@ struct SlamOptions {
   bool odometry = true;
   bool feature_relocalisation = true;
   // Map segments (SlamTrackerOptions): LOST frames with depth before a camera starts a segment
-  // of its own (0: never), and frames between its attempts to find the main map again.
+  // of its own (0: never), the same for frames chained to a map pose the features did not
+  // confirm, and frames between its attempts to find the main map again.
   int new_segment_after_lost_frames = 10;
+  int new_segment_after_unconfirmed_frames = 30;
   int segment_join_interval = 5;
 
   // Where keyframe 0 sits (world_T_camera); the frame's prior wins, else the identity.

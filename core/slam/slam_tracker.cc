@@ -79,6 +79,11 @@ absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& o) {
     return absl::InvalidArgumentError(absl::StrCat(
         "new_segment_after_lost_frames must be >= 0, got ", o.new_segment_after_lost_frames));
   }
+  if (o.new_segment_after_unconfirmed_frames < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("new_segment_after_unconfirmed_frames must be >= 0, got ",
+                     o.new_segment_after_unconfirmed_frames));
+  }
   if (!(o.max_seconds_without_map >= 0.0) || !std::isfinite(o.max_seconds_without_map)) {
     return absl::InvalidArgumentError(absl::StrCat(
         "max_seconds_without_map must be >= 0, got ", o.max_seconds_without_map));
@@ -357,7 +362,8 @@ absl::StatusOr<TrackingResult> SlamTracker::CarryWithoutMap(const OdometryPyrami
   return r;
 }
 
-void SlamTracker::StartSegment(const SE3& pose, double timestamp, SlamFrameResult* out) {
+void SlamTracker::StartSegment(const SE3& pose, double timestamp, std::string reason,
+                               SlamFrameResult* out) {
   // The prior, else where the camera was last seen, becomes the new segment's origin: nothing
   // ties the two frames (the odometry lost the motion; the motion model's extrapolation over
   // the lost frames is worth less), but a camera that did not move far keeps roughly the same
@@ -365,9 +371,7 @@ void SlamTracker::StartSegment(const SE3& pose, double timestamp, SlamFrameResul
   out->new_segment = true;
   out->state = SlamState::kOk;
   out->source = PoseSource::kPrediction;
-  out->reason = absl::StrFormat(
-      "new map segment: relocalisation failed on %d frames that had depth to map",
-      lost_with_depth_);
+  out->reason = std::move(reason);
   out->keyframe = true;
   out->keyframes = 1;
   tracker_.set_map(nullptr);
@@ -375,6 +379,7 @@ void SlamTracker::StartSegment(const SE3& pose, double timestamp, SlamFrameResul
   tracker_.Reset(pose, timestamp);
   lost_ = false;
   lost_with_depth_ = 0;
+  unconfirmed_with_depth_ = 0;
   relocalisation_cursor_ = 0;
   frames_in_segment_ = 0;
   carry_start_ = timestamp;
@@ -534,7 +539,11 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       const int segment_after = options_.new_segment_after_lost_frames;
       if (segment_after > 0 && depth.enough() && ++lost_with_depth_ >= segment_after) {
         result->pose = prior.value_or(last_good_pose_.value_or(result->pose));
-        StartSegment(result->pose, frame.timestamp, &out);
+        StartSegment(result->pose, frame.timestamp,
+                     absl::StrFormat("new map segment: relocalisation failed on %d frames "
+                                     "that had depth to map",
+                                     lost_with_depth_),
+                     &out);
         result->state = TrackingState::kOk;
         result->reason.clear();
       }
@@ -645,6 +654,26 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
         }
       }
     }
+  }
+  // A chain of poses the features never confirm maps nothing (no keyframes): past a bound the
+  // camera maps on in a segment of its own from where the chain put it, which joins the main
+  // map once a place there is found and verified (what a confirmation would have needed too).
+  const int segment_after_unconfirmed = options_.new_segment_after_unconfirmed_frames;
+  if (!unconfirmed_pose || segment_after_unconfirmed == 0) {
+    unconfirmed_with_depth_ = 0;
+  } else if (CountBootstrapDepth(frame.depth, options_.bootstrap_max_depth).enough() &&
+             ++unconfirmed_with_depth_ >= segment_after_unconfirmed) {
+    const PoseSource source = out.source;  // the pose is the fused one, not a prediction
+    StartSegment(result->pose, frame.timestamp,
+                 absl::StrFormat("new map segment: the keyframes' features confirmed none of "
+                                 "%d frames chained to an unconfirmed map pose",
+                                 unconfirmed_with_depth_),
+                 &out);
+    out.source = source;
+    result->state = TrackingState::kOk;
+    result->reason.clear();
+    may_be_keyframe = false;  // keyframe 0 of the segment already
+    unconfirmed_pose = false;
   }
   // In a segment, tracked there: now and then, look for the main map (bounded: the features
   // and a match; a dense check only where they find a place).

@@ -31,7 +31,9 @@
 //   - Map segments (docs/SLAM.md, "Map segments"): a camera whose relocalisation failed on
 //     new_segment_after_lost_frames frames that had depth to map (it left the map and the
 //     odometry lost it too: a covered lens, a jump into space the map never saw) starts a new
-//     segment: a map of its own, in a frame of its own, whose keyframe 0 is the frame. In a
+//     segment: a map of its own, in a frame of its own, whose keyframe 0 is the frame. So does
+//     a camera whose poses followed, for new_segment_after_unconfirmed_frames frames, from a
+//     map pose the features never confirmed (frames that may not map). In a
 //     segment, every segment_join_interval frames the frame's features are matched against
 //     the main map's keyframes; a place found there and verified densely in the main map joins
 //     the segment to it (SlamFrameResult::main_T_segment; the coordinator moves the segment's
@@ -138,6 +140,13 @@ struct SlamTrackerOptions {
   // segment (0: never; the camera stays LOST until relocalised). At 30 frames/s, 10 is a third
   // of a second of relocalisation attempts against the map first.
   int new_segment_after_lost_frames = 10;
+  // Frames in a row chained to a map pose the keyframes' features did not confirm
+  // (ChainedToUnconfirmedPose), with enough depth to map, after which the camera starts a new
+  // map segment at its pose (0: never). Such frames are never keyframes, so without a bound a
+  // camera the features cannot place again (it walked where no keyframe looks) tracks on, but
+  // maps nothing, for as long as that lasts. A segment maps from there and joins the main map
+  // by the same verified place a confirmation needs. At 30 frames/s, 30 is a second.
+  int new_segment_after_unconfirmed_frames = 30;
   // In a segment, frames between attempts to find the main map by features (each costs the
   // frame's features and a match against the main map's keyframes; a dense check when found).
   int segment_join_interval = 5;
@@ -307,8 +316,9 @@ class SlamTracker {
                                                  const RgbdFrame& frame,
                                                  const std::optional<SE3>& prior,
                                                  SlamFrameResult* out);
-  // A LOST frame that starts a new segment (new_segment_after_lost_frames): keyframe 0 there.
-  void StartSegment(const SE3& pose, double timestamp, SlamFrameResult* out);
+  // A frame that starts a new segment (new_segment_after_lost_frames LOST frames, or
+  // new_segment_after_unconfirmed_frames unconfirmed ones): keyframe 0 there, `reason` why.
+  void StartSegment(const SE3& pose, double timestamp, std::string reason, SlamFrameResult* out);
   // In a segment, every segment_join_interval frames: the frame's place in the main map by
   // features, verified densely there (none: not found or not verified). `reason` says how.
   absl::StatusOr<std::optional<TrackingResult>> TryJoinMain(const RgbdFrame& frame,
@@ -388,6 +398,8 @@ class SlamTracker {
   std::optional<SE3> last_good_pose_;
   int relocalisation_cursor_ = 0;  // the next attempt near the last good pose
   int lost_with_depth_ = 0;  // LOST frames in a row that had depth to start a segment
+  // Frames in a row chained to an unconfirmed map pose that had depth to start a segment.
+  int unconfirmed_with_depth_ = 0;
   int checks_to_skip_ = 0;  // skip_checks_after_failed_check, counting down
   // The last frame's pose was a map pose the features did not confirm, or chained to one
   // (core/slam/pose_fusion.h, ChainedToUnconfirmedPose): the next frame's needs confirming.
