@@ -1,17 +1,40 @@
 #include "core/common/unified_allocator.h"
 
+#include <sys/mman.h>
+
 #include <atomic>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 
 namespace plx {
 namespace {
 
+// Blocks of at least a huge page are aligned to one and advised to be backed by huge pages.
+// The grid, its optimiser state and each copy-on-write clone are hundreds of megabytes of fresh
+// memory (glibc maps blocks that large anew each time and unmaps them when freed): touched for
+// the first time, 4 KiB pages cost a page fault each, which in a virtual machine made most of
+// keyframe 0's integration (docs/BENCHMARKS.md). With transparent huge pages "never" the advice
+// does nothing.
+constexpr size_t kHugePageBytes = size_t{2} << 20;
+
 void* DefaultAllocate(size_t bytes, void*) {
+  if (bytes >= kHugePageBytes) {
+    if (bytes > SIZE_MAX - kHugePageBytes) return nullptr;  // no size rounds up to it
+    const size_t rounded = (bytes + kHugePageBytes - 1) / kHugePageBytes * kHugePageBytes;
+    void* block = std::aligned_alloc(kHugePageBytes, rounded);
+    if (block != nullptr) madvise(block, rounded, MADV_HUGEPAGE);  // advice: failure is harmless
+    return block;
+  }
   return ::operator new(bytes, std::align_val_t{kUnifiedAlignment}, std::nothrow);
 }
 
-void DefaultDeallocate(void* block, size_t, void*) {
+// `bytes` is what DefaultAllocate was asked for, so the block is freed the way it was made.
+void DefaultDeallocate(void* block, size_t bytes, void*) {
+  if (bytes >= kHugePageBytes) {
+    std::free(block);
+    return;
+  }
   ::operator delete(block, std::align_val_t{kUnifiedAlignment});
 }
 

@@ -1,9 +1,10 @@
 // Memory that every backend can read: the large arrays kernels touch (grid, gradients,
 // optimiser state, training frames and rays, images, tracking and render buffers) are
 // UnifiedVector<T> rather than std::vector<T>. Allocation goes through process-wide hooks:
-// by default plain aligned new/delete (the CPU backend sees ordinary memory, same speed as
-// std::vector); the CUDA backend installs cudaMallocManaged/cudaFree when its first instance is
-// created, so data allocated from then on is readable and writable by host and GPU alike.
+// by default aligned new/delete, blocks of 2 MB and more on transparent huge pages where the
+// kernel allows it (the CPU backend sees ordinary memory); the CUDA backend installs
+// cudaMallocManaged/cudaFree when its first instance is created, so data allocated from then
+// on is readable and writable by host and GPU alike.
 //
 // Blocks remember which hooks made them (a small header in front of the data), so a block that
 // was allocated before other hooks were installed is still freed by its own deallocator: mixing
