@@ -362,16 +362,18 @@ absl::StatusOr<TrackingResult> SlamTracker::CarryWithoutMap(const OdometryPyrami
   return r;
 }
 
-void SlamTracker::StartSegment(const SE3& pose, double timestamp, std::string reason,
+void SlamTracker::StartSegment(double timestamp, std::string reason, TrackingResult* result,
                                SlamFrameResult* out) {
+  const SE3& pose = result->pose;
   // The prior, else where the camera was last seen, becomes the new segment's origin: nothing
   // ties the two frames (the odometry lost the motion; the motion model's extrapolation over
   // the lost frames is worth less), but a camera that did not move far keeps roughly the same
   // axes for the client until the segment joins the main map.
   out->new_segment = true;
   out->state = SlamState::kOk;
-  out->source = PoseSource::kPrediction;
   out->reason = std::move(reason);
+  result->state = TrackingState::kOk;
+  result->reason.clear();
   out->keyframe = true;
   out->keyframes = 1;
   tracker_.set_map(nullptr);
@@ -539,13 +541,11 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       const int segment_after = options_.new_segment_after_lost_frames;
       if (segment_after > 0 && depth.enough() && ++lost_with_depth_ >= segment_after) {
         result->pose = prior.value_or(last_good_pose_.value_or(result->pose));
-        StartSegment(result->pose, frame.timestamp,
+        StartSegment(frame.timestamp,
                      absl::StrFormat("new map segment: relocalisation failed on %d frames "
                                      "that had depth to map",
                                      lost_with_depth_),
-                     &out);
-        result->state = TrackingState::kOk;
-        result->reason.clear();
+                     &*result, &out);  // out.source stays the prediction's
       }
     }
   } else if (!options_.odometry) {
@@ -663,15 +663,11 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
     unconfirmed_with_depth_ = 0;
   } else if (CountBootstrapDepth(frame.depth, options_.bootstrap_max_depth).enough() &&
              ++unconfirmed_with_depth_ >= segment_after_unconfirmed) {
-    const PoseSource source = out.source;  // the pose is the fused one, not a prediction
-    StartSegment(result->pose, frame.timestamp,
+    StartSegment(frame.timestamp,
                  absl::StrFormat("new map segment: the keyframes' features confirmed none of "
                                  "%d frames chained to an unconfirmed map pose",
                                  unconfirmed_with_depth_),
-                 &out);
-    out.source = source;
-    result->state = TrackingState::kOk;
-    result->reason.clear();
+                 &*result, &out);
     may_be_keyframe = false;  // keyframe 0 of the segment already
     unconfirmed_pose = false;
   }

@@ -317,8 +317,10 @@ class SlamTracker {
                                                  const std::optional<SE3>& prior,
                                                  SlamFrameResult* out);
   // A frame that starts a new segment (new_segment_after_lost_frames LOST frames, or
-  // new_segment_after_unconfirmed_frames unconfirmed ones): keyframe 0 there, `reason` why.
-  void StartSegment(const SE3& pose, double timestamp, std::string reason, SlamFrameResult* out);
+  // new_segment_after_unconfirmed_frames unconfirmed ones) at result->pose: keyframe 0 there,
+  // OK, `reason` why (out->source is left as the caller set it).
+  void StartSegment(double timestamp, std::string reason, TrackingResult* result,
+                    SlamFrameResult* out);
   // In a segment, every segment_join_interval frames: the frame's place in the main map by
   // features, verified densely there (none: not found or not verified). `reason` says how.
   absl::StatusOr<std::optional<TrackingResult>> TryJoinMain(const RgbdFrame& frame,
