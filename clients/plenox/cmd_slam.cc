@@ -55,6 +55,11 @@ void AddInProcessSlamFlags(FlagSet& flags) {
            "frames chained to a map pose the keyframes' features did not confirm (never "
            "keyframes) after which the camera starts a new map segment (0 = never)",
            absl::StrCat(d.new_segment_after_unconfirmed_frames))
+      .Add("map-time-budget", "X",
+           "hold the map tracker's time on a frame to X times its median over the last frames "
+           "(fewer iterations on a costly view instead of a longer frame; 0 = off; off with "
+           "--deterministic)",
+           absl::StrCat(d.map_time_budget))
       .AddSwitch("no-odometry",
                  "track against the map alone, without the map-free odometry (to measure it)")
       .AddSwitch("no-feature-relocalisation",
@@ -72,6 +77,7 @@ absl::StatusOr<SlamDatasetOptions> OptionsFromFlags(const FlagSet& flags) {
                        flags.GetInt("new-segment-after", 0, 1000000));
   PLX_ASSIGN_OR_RETURN(s.new_segment_after_unconfirmed_frames,
                        flags.GetInt("new-segment-after-unconfirmed", 0, 1000000));
+  PLX_ASSIGN_OR_RETURN(s.map_time_budget, flags.GetDouble("map-time-budget", 0.0, 100.0));
   s.odometry = !flags.GetSwitch("no-odometry");
   s.feature_relocalisation = !flags.GetSwitch("no-feature-relocalisation");
   PLX_RETURN_IF_ERROR(ValidateSlamOptions(s));

@@ -29,6 +29,7 @@ SlamSplitOptions SplitSlamOptions(const SlamOptions& o) {
   out.tracker.segment_join_interval = o.segment_join_interval;
   // Lock-step maps keyframe 0 before the next frame: nothing to carry (and no timing).
   if (o.deterministic) out.tracker.max_seconds_without_map = 0.0;
+  out.tracker.map_time_budget = o.deterministic ? 0.0 : o.map_time_budget;
   // Lock-step maps every keyframe before the next frame: nothing is ever left pending.
   out.tracker.max_pending_keyframes = o.deterministic ? 0 : o.max_pending_keyframes;
   out.tracker.initial_pose = o.initial_pose;

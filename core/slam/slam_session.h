@@ -112,6 +112,8 @@ struct SlamOptions {
   int new_segment_after_lost_frames = 10;
   int new_segment_after_unconfirmed_frames = 30;
   int segment_join_interval = 5;
+  // The map tracker's time per frame against its running median (SlamTrackerOptions; 0: off).
+  double map_time_budget = 1.3;
 
   // Where keyframe 0 sits (world_T_camera); the frame's prior wins, else the identity.
   std::optional<SE3> initial_pose;

@@ -7,6 +7,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/common/percentile.h"
 #include "core/common/status_macros.h"
 
 namespace plx {
@@ -69,6 +70,11 @@ absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& o) {
   if (!(o.relocalisation_radius_m > 0.0) || !std::isfinite(o.relocalisation_radius_m)) {
     return absl::InvalidArgumentError(absl::StrCat(
         "relocalisation_radius_m must be positive, got ", o.relocalisation_radius_m));
+  }
+  // Below 1 the budget would cut most frames short of the schedule, not the costly ones.
+  if (!(o.map_time_budget == 0.0 || (o.map_time_budget >= 1.0 && o.map_time_budget <= 100.0))) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "map_time_budget must be 0 (off) or in [1, 100], got ", o.map_time_budget));
   }
   if (!(o.odometry_start_iteration_share > 0.0 && o.odometry_start_iteration_share <= 1.0)) {
     return absl::InvalidArgumentError(
@@ -221,6 +227,24 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::TryRelocalisationFrom
   PLX_ASSIGN_OR_RETURN(TrackingResult check, verify.Track(frame, k, r.pose));
   if (check.state != TrackingState::kOk) return std::optional<TrackingResult>();
   return std::optional<TrackingResult>(std::move(r));
+}
+
+namespace {
+// Frames whose map tracking times make the median of map_time_budget: a few seconds of frames,
+// so a room's far side or a rebuild on the other core sets its own pace; no budget before a
+// quarter of them.
+constexpr size_t kMapTimeWindow = 64;
+}  // namespace
+
+double SlamTracker::MapTimeBudgetMs() const {
+  if (options_.map_time_budget <= 0.0 || map_times_ms_.size() < kMapTimeWindow / 4) return 0.0;
+  return options_.map_time_budget *
+         Percentile(std::vector<double>(map_times_ms_.begin(), map_times_ms_.end()), 0.5);
+}
+
+void SlamTracker::RecordMapTime(double milliseconds) {
+  map_times_ms_.push_back(milliseconds);
+  if (map_times_ms_.size() > kMapTimeWindow) map_times_ms_.pop_front();
 }
 
 absl::StatusOr<std::optional<FeatureRelocalisation>> SlamTracker::FindByFeatures(
@@ -600,8 +624,10 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
       stage = Clock::now();
       tracker_.set_iterations(
           from_odometry ? OdometryStartIterations(options_) : options_.tracker.iterations);
+      tracker_.set_time_budget_ms(from_odometry ? MapTimeBudgetMs() : 0.0);
       PLX_ASSIGN_OR_RETURN(TrackingResult tracked, tracker_.Track(frame, k, map_start));
       out.timings.map_ms += MillisecondsSince(stage);
+      if (from_odometry) RecordMapTime(tracked.milliseconds);
       FusedPose fused = FusePoses(tracked, odometry, options_.fusion);
       if (unconfirmed_chain_) fused = ChainedToUnconfirmedPose(std::move(fused));
       // The map tracker's motion model follows the pose given out when it is not its own.

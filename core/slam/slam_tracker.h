@@ -43,6 +43,7 @@
 #pragma once
 
 #include <cstdint>
+#include <deque>
 #include <memory>
 #include <optional>
 #include <string>
@@ -136,6 +137,12 @@ struct SlamTrackerOptions {
   // motion model's can be centimetres off, so half the coarse-to-fine schedule converges
   // (docs/BENCHMARKS.md, issue 21's speed section). At least 2 iterations (one per level).
   double odometry_start_iteration_share = 0.5;
+  // The map tracker's time on a frame it starts from the odometry's pose is held to this
+  // multiple of its median over the last such frames (TrackerOptions::time_budget_ms, set per
+  // frame): a view that puts many samples on each ray, or a CPU shared with mapping, then
+  // shortens the schedule instead of the frame. 0: the iterations alone bound it. Off in
+  // lock-step runs (SplitSlamOptions): a time bound makes a run depend on the machine.
+  double map_time_budget = 1.3;
   // LOST frames with enough depth to map (BootstrapDepth) after which a camera starts a new map
   // segment (0: never; the camera stays LOST until relocalised). At 30 frames/s, 10 is a third
   // of a second of relocalisation attempts against the map first.
@@ -386,6 +393,11 @@ class SlamTracker {
     double timestamp = 0.0;
   };
 
+  // The map tracker's time budget for the next frame it starts from the odometry (0: none
+  // yet, or map_time_budget off), and the record of a frame's time.
+  double MapTimeBudgetMs() const;
+  void RecordMapTime(double milliseconds);
+
   const SlamTrackerOptions options_;
   Backend* const backend_;
   std::optional<PreviousFrame> previous_;
@@ -403,6 +415,8 @@ class SlamTracker {
   // Frames in a row chained to an unconfirmed map pose that had depth to start a segment.
   int unconfirmed_with_depth_ = 0;
   int checks_to_skip_ = 0;  // skip_checks_after_failed_check, counting down
+  // The map tracker's last times on frames it started from the odometry (map_time_budget).
+  std::deque<double> map_times_ms_;
   // The last frame's pose was a map pose the features did not confirm, or chained to one
   // (core/slam/pose_fusion.h, ChainedToUnconfirmedPose): the next frame's needs confirming.
   bool unconfirmed_chain_ = false;

@@ -49,6 +49,10 @@ absl::Status Tracker::ValidateOptions(const TrackerOptions& o) {
   if (!(o.huber_k > 0) || !(o.params.color_sigma > 0) || o.coarse_divisor < 1) {
     return absl::InvalidArgumentError("huber_k, colour sigma and coarse divisor must be positive");
   }
+  if (!(o.time_budget_ms >= 0.0) || !std::isfinite(o.time_budget_ms)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("time_budget_ms must be 0 (none) or positive, got ", o.time_budget_ms));
+  }
   if (!o.params.use_color && !o.params.use_depth) {
     return absl::InvalidArgumentError("tracking needs colour, depth or both");
   }
@@ -120,6 +124,11 @@ absl::Status Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrin
   const int coarse_rays = std::max(16, total / options_.coarse_divisor);
   const int coarse_iterations = options_.coarse_divisor > 1 ? options_.iterations / 2 : 0;
   int iteration = 0;
+  const auto start = std::chrono::steady_clock::now();
+  auto elapsed_ms = [&start] {
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+        .count();
+  };
   for (int level = 0; level < 2; ++level) {
     const int rays = level == 0 ? coarse_rays : total;
     const int budget = level == 0 ? coarse_iterations : options_.iterations - coarse_iterations;
@@ -130,7 +139,18 @@ absl::Status Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrin
     TrackingSums accepted_sums;
     bool have_accepted = false;
     double lambda = 1e-4;
+    double iteration_ms = 0.0;  // the level's last iteration, the pace of the next
     for (int it = 0; it < budget; ++it, ++iteration) {
+      if (options_.time_budget_ms > 0.0 && it > 0) {
+        // The coarse level keeps room for the fine level's first iteration (its rays are
+        // coarse_divisor times as many).
+        const double next = iteration_ms * (level == 0 ? 1 + options_.coarse_divisor : 1);
+        if (elapsed_ms() + next > options_.time_budget_ms) {
+          result->out_of_time = true;
+          break;
+        }
+      }
+      const double iteration_start = elapsed_ms();
       PLX_ASSIGN_OR_RETURN(TrackingSums sums,
                            Evaluate(*pose, frame, k, rays, TrackingLoss::kHuber, scale,
                                     options_.adaptive_scale && it == 0));
@@ -161,6 +181,7 @@ absl::Status Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrin
       const Vector6d delta = H.ldlt().solve(-g);
       if (!delta.allFinite()) break;
       *pose = accepted * SE3::Exp(delta);
+      iteration_ms = elapsed_ms() - iteration_start;
       if (delta.head<3>().norm() < options_.converged_translation &&
           delta.tail<3>().norm() < options_.converged_rotation) {
         ++iteration;

@@ -58,6 +58,13 @@ struct TrackerOptions {
   bool adaptive_scale = true;
   float converged_translation = 1e-4f;  // metres: stop when a step is smaller than this ...
   float converged_rotation = 1e-4f;     // ... and this (radians)
+  // Bounds a frame's Gauss-Newton by time as well as by iterations: no iteration starts that
+  // would end past this many milliseconds at the pace of the level's last one, except the fine
+  // level's first (its evaluation classifies the frame at the sensor's noise). A view that puts
+  // many samples on each ray, or a CPU shared with mapping, then costs fewer iterations instead
+  // of a longer frame. 0: the iterations alone bound the work. Time-based: off wherever runs
+  // must repeat bit for bit.
+  double time_budget_ms = 0.0;
   bool constant_velocity = true;
   TrackingParams params;
 
@@ -95,6 +102,7 @@ struct TrackingResult {
   std::string reason;       // why DEGRADED or LOST
   TrackingCause cause = TrackingCause::kNone;
   int iterations = 0;
+  bool out_of_time = false;  // TrackerOptions::time_budget_ms ended the iterations early
   int rays = 0;             // asked for
   int valid_rays = 0;       // rendered by the map with a valid measurement
   double residual_rms = 0;  // noise-scaled
@@ -117,6 +125,8 @@ class Tracker {
   // The iteration count for the next frames (at least 1): a caller whose starting guess is
   // better than the motion model's (SLAM's odometry) needs less of the schedule.
   void set_iterations(int iterations) { options_.iterations = std::max(1, iterations); }
+  // TrackerOptions::time_budget_ms for the next frames (0: none).
+  void set_time_budget_ms(double ms) { options_.time_budget_ms = std::max(0.0, ms); }
 
   // Starts from a known pose (e.g. the first frame's ground truth) at `timestamp`.
   void Reset(const SE3& world_T_camera, double timestamp);

@@ -71,6 +71,7 @@ TEST_F(SlamCoordinatorTest, SplitAppliesTheLockStepPolicyOnlyWhenDeterministic) 
   EXPECT_EQ(free.gate.max_pending_keyframes, 2);
   EXPECT_EQ(free.tracker.max_pending_keyframes, 2);  // the tracker defers beyond the same bound
   EXPECT_EQ(free.tracker.tracker.rays, 512);
+  EXPECT_EQ(free.tracker.map_time_budget, o.map_time_budget);
 
   // Lock-step leaves nothing pending: the bound (here not the default) is ignored, not refused.
   o.deterministic = true;
@@ -78,12 +79,18 @@ TEST_F(SlamCoordinatorTest, SplitAppliesTheLockStepPolicyOnlyWhenDeterministic) 
   const SlamSplitOptions locked = SplitSlamOptions(o);
   EXPECT_EQ(locked.gate.max_pending_keyframes, 0);
   EXPECT_EQ(locked.tracker.max_pending_keyframes, 0);
+  EXPECT_EQ(locked.tracker.map_time_budget, 0.0);  // a time bound would depend on the machine
   SlamMapperOptions expected = free.mapper;
   ApplyLockStepMappingPolicy(&expected);
   EXPECT_EQ(locked.mapper.mapping.min_publish_interval_s,
             expected.mapping.min_publish_interval_s);
   EXPECT_EQ(locked.mapper.mapping.max_clones_per_iteration, 0);
   EXPECT_TRUE(locked.gate.lock_step);
+
+  // A budget under the median would cut most frames, not the costly ones.
+  o.deterministic = false;
+  o.map_time_budget = 0.5;
+  EXPECT_FALSE(ValidateSlamOptions(o).ok());
 }
 
 TEST_F(SlamCoordinatorTest, KeyframesBeforeTheMapperAreSeenAndHandedOver) {

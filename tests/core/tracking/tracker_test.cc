@@ -39,6 +39,13 @@ class TrackerTest : public ::testing::Test {
     return tracker.Track(f, dataset_->calibration().pinhole, start).value();
   }
 
+  // Frame `frame`'s true pose moved 5.4 cm and 3.1 degrees.
+  static SE3 PerturbedPose(int frame) {
+    Vector6d offset;
+    offset << 0.03, -0.04, 0.02, 0.03, -0.02, 0.04;
+    return *dataset_->frames()[frame].ground_truth * SE3::Exp(offset);
+  }
+
   static InMemoryDataset* dataset_;
   static Backend* backend_;
   static PlenoxelMap* map_;
@@ -53,11 +60,9 @@ PlenoxelMap* TrackerTest::map_ = nullptr;
 // 4096, chosen or uniform, reached 0.4-0.8 mm): 16 leave the schedule room.
 TEST_F(TrackerTest, RecoversAPerturbedPose) {
   const SE3 truth = *dataset_->frames()[10].ground_truth;
-  Vector6d offset;
-  offset << 0.03, -0.04, 0.02, 0.03, -0.02, 0.04;
   TrackerOptions options;
   options.iterations = 16;
-  const TrackingResult r = TrackFrom(truth * SE3::Exp(offset), 10, options);
+  const TrackingResult r = TrackFrom(PerturbedPose(10), 10, options);
   EXPECT_EQ(r.state, TrackingState::kOk) << r.reason;
   const SE3 error = truth.Inverse() * r.pose;
   EXPECT_LT(error.translation().norm(), 1e-3);
@@ -129,12 +134,32 @@ TEST_F(TrackerTest, TracksTheWholeSequenceWithConstantVelocity) {
   EXPECT_LT(worst, 5e-3);
 }
 
+// A time budget shorter than any iteration leaves the schedule's two iterations that always
+// run (the coarse level's first, the fine level's first, which classifies the frame) and says
+// the budget ended it; without one the same frame runs the schedule (it starts 5 cm off, so it
+// does not converge in two steps) and is not marked.
+TEST_F(TrackerTest, ATimeBudgetEndsTheScheduleAfterEachLevelsFirstIteration) {
+  TrackerOptions options;
+  options.iterations = 16;
+  const TrackingResult full = TrackFrom(PerturbedPose(10), 10, options);
+  EXPECT_FALSE(full.out_of_time);
+  EXPECT_GT(full.iterations, 4);
+  options.time_budget_ms = 1e-6;
+  const TrackingResult cut = TrackFrom(PerturbedPose(10), 10, options);
+  EXPECT_TRUE(cut.out_of_time);
+  EXPECT_EQ(cut.iterations, 2);
+  EXPECT_EQ(cut.rays, full.rays);
+}
+
 TEST(TrackerOptionsTest, RejectsBadOptions) {
   TrackerOptions o;
   o.rays = 3;
   EXPECT_FALSE(Tracker::ValidateOptions(o).ok());
   o = TrackerOptions();
   o.params.use_color = o.params.use_depth = false;
+  EXPECT_FALSE(Tracker::ValidateOptions(o).ok());
+  o = TrackerOptions();
+  o.time_budget_ms = -1.0;
   EXPECT_FALSE(Tracker::ValidateOptions(o).ok());
 }
 
