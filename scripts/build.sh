@@ -17,6 +17,9 @@ if command -v ccache > /dev/null; then
   # Paths relative to the checkout, so every clone of the project (CI's, a worktree) shares
   # cache entries.
   export CCACHE_BASEDIR="${CCACHE_BASEDIR:-$PWD}"
+  # The test binaries' precompiled headers (tests/CMakeLists.txt): without these, ccache
+  # compiles every file that uses one instead of caching it.
+  export CCACHE_SLOPPINESS="${CCACHE_SLOPPINESS:-pch_defines,time_macros}"
 fi
 if [[ "${PLX_CMAKE_ARGS:-}" != *PLX_CUDA_ARCHITECTURES* ]]; then
   PLX_CMAKE_ARGS="${PLX_CMAKE_ARGS:-} -DPLX_CUDA_ARCHITECTURES=86"

@@ -16,6 +16,7 @@ cd "$(dirname "$0")/.."
 if [[ "${1:-}" == "--asan" ]]; then
   bash scripts/install_deps.sh
   export CCACHE_BASEDIR="${CCACHE_BASEDIR:-$PWD}"  # see scripts/build.sh
+  export CCACHE_SLOPPINESS="${CCACHE_SLOPPINESS:-pch_defines,time_macros}"
   if [[ ! -f build-asan/build.ninja ]]; then
     # -fno-sanitize-recover: a UBSan report aborts like an ASan one instead of only printing.
     flags="-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all"
@@ -39,6 +40,7 @@ fi
 if [[ "${1:-}" == "--tsan" ]]; then
   bash scripts/install_deps.sh
   export CCACHE_BASEDIR="${CCACHE_BASEDIR:-$PWD}"  # see scripts/build.sh
+  export CCACHE_SLOPPINESS="${CCACHE_SLOPPINESS:-pch_defines,time_macros}"
   if [[ ! -f build-tsan/build.ninja ]]; then
     cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPLX_WITH_CUDA=OFF \
       -DPLX_BUILD_BENCH=OFF -DCMAKE_CXX_FLAGS="-fsanitize=thread" \
