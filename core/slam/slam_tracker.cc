@@ -7,6 +7,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/common/elapsed.h"
 #include "core/common/percentile.h"
 #include "core/common/status_macros.h"
 
@@ -14,10 +15,6 @@ namespace plx {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double MillisecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
 
 // The map tracker's iterations from the odometry's pose: a share of the schedule, one
 // iteration per level at least.

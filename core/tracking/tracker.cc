@@ -7,6 +7,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/common/elapsed.h"
 #include "core/common/status_macros.h"
 #include "core/geometry/kernel_camera.h"
 #include "core/kernels/refresh_occupancy.h"
@@ -119,16 +120,12 @@ void Tracker::RobustScales(int rays, float scale[2]) {
 }
 
 absl::Status Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrinsics& k,
-                                     SE3* pose, TrackingResult* result, TrackingSums* last) {
+                                     std::chrono::steady_clock::time_point start, SE3* pose,
+                                     TrackingResult* result, TrackingSums* last) {
   const int total = static_cast<int>(pixels_.size());
   const int coarse_rays = std::max(16, total / options_.coarse_divisor);
   const int coarse_iterations = options_.coarse_divisor > 1 ? options_.iterations / 2 : 0;
   int iteration = 0;
-  const auto start = std::chrono::steady_clock::now();
-  auto elapsed_ms = [&start] {
-    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-        .count();
-  };
   for (int level = 0; level < 2; ++level) {
     const int rays = level == 0 ? coarse_rays : total;
     const int budget = level == 0 ? coarse_iterations : options_.iterations - coarse_iterations;
@@ -145,12 +142,12 @@ absl::Status Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrin
         // The coarse level keeps room for the fine level's first iteration (its rays are
         // coarse_divisor times as many).
         const double next = iteration_ms * (level == 0 ? 1 + options_.coarse_divisor : 1);
-        if (elapsed_ms() + next > options_.time_budget_ms) {
+        if (MillisecondsSince(start) + next > options_.time_budget_ms) {
           result->out_of_time = true;
           break;
         }
       }
-      const double iteration_start = elapsed_ms();
+      const double iteration_start = MillisecondsSince(start);
       PLX_ASSIGN_OR_RETURN(TrackingSums sums,
                            Evaluate(*pose, frame, k, rays, TrackingLoss::kHuber, scale,
                                     options_.adaptive_scale && it == 0));
@@ -181,7 +178,7 @@ absl::Status Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrin
       const Vector6d delta = H.ldlt().solve(-g);
       if (!delta.allFinite()) break;
       *pose = accepted * SE3::Exp(delta);
-      iteration_ms = elapsed_ms() - iteration_start;
+      iteration_ms = MillisecondsSince(start) - iteration_start;
       if (delta.head<3>().norm() < options_.converged_translation &&
           delta.tail<3>().norm() < options_.converged_rotation) {
         ++iteration;
@@ -289,7 +286,9 @@ absl::StatusOr<TrackingResult> Tracker::Track(const RgbdFrame& frame,
     if (options_.mode == TrackingMode::kGaussNewton) {
       SamplePixels(frame, options_.rays, options_.sampling);
       ++frame_counter_;
-      if (!pixels_.empty()) PLX_RETURN_IF_ERROR(RunGaussNewton(frame, k, &pose, &result, &last));
+      if (!pixels_.empty()) {
+        PLX_RETURN_IF_ERROR(RunGaussNewton(frame, k, start, &pose, &result, &last));
+      }
     } else {
       PLX_RETURN_IF_ERROR(RunAdam(frame, k, &pose, &result, &last));
     }
@@ -305,8 +304,7 @@ absl::StatusOr<TrackingResult> Tracker::Track(const RgbdFrame& frame,
     last_pose_ = result.pose;
     last_timestamp_ = frame.timestamp;
   }
-  result.milliseconds =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  result.milliseconds = MillisecondsSince(start);
   return result;
 }
 

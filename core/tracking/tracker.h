@@ -6,6 +6,7 @@
 #pragma once
 
 #include <algorithm>
+#include <chrono>
 #include <optional>
 #include <string>
 #include <vector>
@@ -59,11 +60,11 @@ struct TrackerOptions {
   float converged_translation = 1e-4f;  // metres: stop when a step is smaller than this ...
   float converged_rotation = 1e-4f;     // ... and this (radians)
   // Bounds a frame's Gauss-Newton by time as well as by iterations: no iteration starts that
-  // would end past this many milliseconds at the pace of the level's last one, except the fine
-  // level's first (its evaluation classifies the frame at the sensor's noise). A view that puts
-  // many samples on each ray, or a CPU shared with mapping, then costs fewer iterations instead
-  // of a longer frame. 0: the iterations alone bound the work. Time-based: off wherever runs
-  // must repeat bit for bit.
+  // would end past this many milliseconds after Track began (at the pace of the level's last
+  // iteration), except the fine level's first (its evaluation classifies the frame at the
+  // sensor's noise). A view that puts many samples on each ray, or a CPU shared with mapping,
+  // then costs fewer iterations instead of a longer frame. 0: the iterations alone bound the
+  // work. Time-based: off wherever runs must repeat bit for bit.
   double time_budget_ms = 0.0;
   bool constant_velocity = true;
   TrackingParams params;
@@ -152,7 +153,10 @@ class Tracker {
   absl::StatusOr<TrackingSums> Evaluate(const SE3& pose, const RgbdFrame& frame,
                                         const PinholeIntrinsics& k, int rays, TrackingLoss loss,
                                         float scale[2], bool estimate_scale);
-  absl::Status RunGaussNewton(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* pose,
+  // `start`: when Track began; the time budget counts from there (the pixel selection too), as
+  // TrackingResult::milliseconds does.
+  absl::Status RunGaussNewton(const RgbdFrame& frame, const PinholeIntrinsics& k,
+                              std::chrono::steady_clock::time_point start, SE3* pose,
                               TrackingResult* result, TrackingSums* last);
   absl::Status RunAdam(const RgbdFrame& frame, const PinholeIntrinsics& k, SE3* pose,
                        TrackingResult* result, TrackingSums* last);
