@@ -57,6 +57,11 @@ BootstrapDepth CountBootstrapDepth(const DepthImage& depth, float max_depth) {
   return out;
 }
 
+int OnPathCheckRays(const SlamTrackerOptions& o) {
+  const int share = static_cast<int>(std::lround(o.tracker.rays * o.on_path_check_ray_share));
+  return std::min(o.tracker.rays, std::max(256, share));
+}
+
 absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& o) {
   PLX_RETURN_IF_ERROR(Tracker::ValidateOptions(o.tracker));
   PLX_RETURN_IF_ERROR(ValidateKeyframePolicy(o.keyframes));
@@ -98,6 +103,10 @@ absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& o) {
   if (o.segment_join_interval < 1) {
     return absl::InvalidArgumentError(
         absl::StrCat("segment_join_interval must be >= 1, got ", o.segment_join_interval));
+  }
+  if (!(o.on_path_check_ray_share > 0.0 && o.on_path_check_ray_share <= 1.0)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "on_path_check_ray_share must be in (0, 1], got ", o.on_path_check_ray_share));
   }
   if (o.skip_checks_after_failed_check < 0) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -198,7 +207,7 @@ absl::StatusOr<std::shared_ptr<const FrameFeatures>> SlamTracker::FeaturesOf(
 
 absl::StatusOr<std::optional<TrackingResult>> SlamTracker::TryRelocalisationFrom(
     const SE3& start, int iterations, const RgbdFrame& frame, const PinholeIntrinsics& k,
-    const PlenoxelMap* map) {
+    const PlenoxelMap* map, int rays) {
   if (map == nullptr) map = tracked_map_.get();
   // An attempt counts when it tracks OK without wandering far from where it started. The
   // adaptive noise scale makes a residual test weak evidence on its own (it stretches to
@@ -206,6 +215,7 @@ absl::StatusOr<std::optional<TrackingResult>> SlamTracker::TryRelocalisationFrom
   // match, not a relocalisation.
   TrackerOptions attempt_options = options_.tracker;
   attempt_options.iterations = iterations;
+  if (rays > 0) attempt_options.rays = rays;
   attempt_options.constant_velocity = false;
   Tracker attempt(map, backend_, attempt_options);
   attempt.Reset(start, frame.timestamp);
@@ -261,11 +271,11 @@ absl::StatusOr<std::optional<FeatureRelocalisation>> SlamTracker::FindByFeatures
 
 absl::StatusOr<std::optional<TrackingResult>> SlamTracker::VerifyFeaturePose(
     const FeatureRelocalisation& found, const RgbdFrame& frame, const PinholeIntrinsics& k,
-    std::string* reason, const PlenoxelMap* map, int iterations) {
+    std::string* reason, const PlenoxelMap* map, int iterations, int rays) {
   // PnP lands within a few centimetres: the tracker's own iteration count refines it.
   if (iterations <= 0) iterations = options_.tracker.iterations;
   PLX_ASSIGN_OR_RETURN(std::optional<TrackingResult> verified,
-                       TryRelocalisationFrom(found.pose, iterations, frame, k, map));
+                       TryRelocalisationFrom(found.pose, iterations, frame, k, map, rays));
   if (verified) {
     *reason = absl::StrFormat("relocalised by features (keyframe %d: %d of %d matches)",
                               found.keyframe, found.inliers, found.matches);
@@ -657,9 +667,11 @@ absl::StatusOr<SlamFrameResult> SlamTracker::Track(const RgbdFrame& frame,
           if (checks_to_skip_ > 0) {
             --checks_to_skip_;  // a check just failed: the stretch the map contradicts goes on
           } else {
-            // On a tracked frame's path: the odometry start's share of the schedule, as above.
+            // On a tracked frame's path, after its map tracking: the odometry start's share of
+            // the schedule, as above, and on_path_check_ray_share of the rays.
             PLX_ASSIGN_OR_RETURN(moved, VerifyFeaturePose(*found, frame, k, &how, nullptr,
-                                                          OdometryStartIterations(options_)));
+                                                          OdometryStartIterations(options_),
+                                                          OnPathCheckRays(options_)));
             if (!moved) checks_to_skip_ = options_.skip_checks_after_failed_check;
           }
         }

@@ -164,6 +164,12 @@ struct SlamTrackerOptions {
   // not follow is unaffected (the features look first there); one it followed with
   // confidence is found at most this many frames later.
   int skip_checks_after_failed_check = 5;
+  // The share of tracker.rays that check casts (both its passes): the frame has already paid
+  // its map tracking, so a check at the full count made the frame about 2.5 times the median
+  // and was the whole run's tail outside a correction's rebuild (docs/BENCHMARKS.md, "A
+  // bounded tracking tail"). PnP has put the start within centimetres, and the second pass
+  // judges the place at the sensor's noise over every ray cast; at least 256 rays.
+  double on_path_check_ray_share = 0.5;
   // How long (the frames' own clock, from keyframe 0 of the map or the segment) the odometry
   // may carry the camera while the map has no version yet; a frame after that waits for it
   // (NeedsVersion). A second covers keyframe 0's integration at 640x480 on 2 cores when frames
@@ -186,6 +192,10 @@ struct SlamTrackerOptions {
 };
 
 absl::Status ValidateSlamTrackerOptions(const SlamTrackerOptions& options);
+
+// The rays a dense check of a feature place casts on a frame whose map tracking ran already:
+// on_path_check_ray_share of tracker.rays, at least 256 and at most all of them.
+int OnPathCheckRays(const SlamTrackerOptions& options);
 
 // What a camera sees of the map when it tracks a frame (SlamMapper's accessors, read once).
 struct SlamMapView {
@@ -350,20 +360,21 @@ class SlamTracker {
                                                                       const PinholeIntrinsics& k,
                                                                       const SlamMapView& view);
   // That pose, verified and refined densely (TryRelocalisationFrom in `map`, the tracked map
-  // when null) with `iterations` (0: the tracker's); `reason` says how.
+  // when null) with `iterations` and `rays` (0: the tracker's); `reason` says how.
   absl::StatusOr<std::optional<TrackingResult>> VerifyFeaturePose(
       const FeatureRelocalisation& found, const RgbdFrame& frame, const PinholeIntrinsics& k,
-      std::string* reason, const PlenoxelMap* map = nullptr, int iterations = 0);
+      std::string* reason, const PlenoxelMap* map = nullptr, int iterations = 0, int rays = 0);
   // Gives out a place the features found and the map verified on a tracked frame: the map
   // tracker's motion model restarts there, and `out` says `state` (OK or RELOCALISED), the map
   // as its source and `reason`. Returns `place` as the frame's result.
   TrackingResult AdoptVerifiedPlace(TrackingResult place, SlamState state, std::string reason,
                                     double timestamp, SlamFrameResult* out);
-  // A dense attempt of `iterations` from `start` in `map` (the tracked map when null): tracks
-  // OK, ends within relocalisation_radius_m of it and explains the frame at the sensor's noise.
+  // A dense attempt of `iterations` from `start` in `map` (the tracked map when null), casting
+  // `rays` (0: the tracker's): tracks OK, ends within relocalisation_radius_m of it and explains
+  // the frame at the sensor's noise.
   absl::StatusOr<std::optional<TrackingResult>> TryRelocalisationFrom(
       const SE3& start, int iterations, const RgbdFrame& frame, const PinholeIntrinsics& k,
-      const PlenoxelMap* map = nullptr);
+      const PlenoxelMap* map = nullptr, int rays = 0);
   // This frame's features, extracted once (null when feature relocalisation is off).
   absl::StatusOr<std::shared_ptr<const FrameFeatures>> FeaturesOf(const RgbdFrame& frame,
                                                                    const PinholeIntrinsics& k);
