@@ -93,6 +93,11 @@ class SlamJob : public std::enable_shared_from_this<SlamJob> {
     return coordinator_->MayCameraProceed(max_pending_keyframes, segment, needs_version);
   }
   SlamJobStatus Status() const;
+  // The main map's corrections after `generation`, oldest first
+  // (SlamCoordinator::CorrectionsAfter).
+  std::vector<std::shared_ptr<const SlamCorrection>> CorrectionsAfter(int generation) const {
+    return coordinator_->CorrectionsAfter(generation);
+  }
   // Keyframes the map had when the job started (its file's, or an earlier job's), seeded into
   // the coordinator (SlamCoordinator::SeedSavedKeyframes).
   int saved_keyframes() const { return saved_keyframes_; }

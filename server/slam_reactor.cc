@@ -146,7 +146,17 @@ void SlamReactor::AdvanceLocked() {
   // it, mapping goes on for them.
   if (!s.finished && s.streams == 0) return;
   done_sent_ = true;
-  WriteLocked(SlamDoneToProto(MappingToProto(s)));
+  pb::SlamUpdate done = SlamDoneToProto(MappingToProto(s));
+  if (processed_ > 0 && last_segment_ == 0) {
+    // What the map corrected after the last frame reaches the client here or never.
+    const std::vector<std::shared_ptr<const SlamCorrection>> after =
+        job_->CorrectionsAfter(last_generation_);
+    const std::vector<SE3> changes = FrameChangesAlong(after, last_pose_);
+    for (size_t i = 0; i < after.size(); ++i) {
+      *done.add_corrections_after() = SlamCorrectionToProto(*after[i], changes[i]);
+    }
+  }
+  WriteLocked(std::move(done));
   MaybeFinishLocked();
 }
 
@@ -244,6 +254,9 @@ void SlamReactor::RunTask(Backend* backend, bool cancelled) {
   }
   job_->trajectory().Record(camera_, camera_label, result.timestamp, result.pose, result.state);
   ++processed_;
+  last_pose_ = result.pose;
+  last_segment_ = result.segment;
+  last_generation_ = result.correction_generation;
   pb::SlamUpdate update = SlamUpdateToProto(result, work->index, 1000.0 * seconds, dropped_,
                                             MappingToProto(job_->Status()));
   dropped_ = 0;

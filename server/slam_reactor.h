@@ -82,6 +82,11 @@ class SlamReactor final : public StreamReactor<plenoxd::v1::SlamRequest, plenoxd
   uint32_t processed_ = 0;  // updates sent
   int keyframes_ = 0;
   std::optional<SlamState> last_state_;  // logged when it changes
+  // The last update's pose, its segment and the corrections it followed: where the done
+  // message's corrections_after start.
+  SE3 last_pose_;
+  int last_segment_ = 0;
+  int last_generation_ = 0;
 
   // Owned by the tracking task (one at a time).
   SlamTrackerOptions tracker_options_;

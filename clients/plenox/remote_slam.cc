@@ -132,6 +132,7 @@ struct SlamStream {
   pb::SlamMapping mapping{};  // as of the last update (the done message's at the end)
   bool done = false;
   absl::Time done_at{};
+  int corrections_after_last_frame = 0;  // of `corrections`, those the done messages carried
   FrameStreamResult result{};  // records: each update's frame, times and state [keyframe]
 
   // Failovers: each stream's first result in `given` and first correction (segments and
@@ -249,6 +250,13 @@ FrameStreamResult RunStream(SlamStream& s, int first, const std::optional<SE3>& 
         }
         s.done = true;
         s.done_at = absl::Now();
+        // The corrections the map made after the last frame (its finishing mapping): the
+        // corrected trajectory follows them like those the frames' updates carried.
+        for (const pb::SlamCorrection& after : update.corrections_after()) {
+          PLX_ASSIGN_OR_RETURN(SlamCorrection correction, SlamCorrectionFromProto(after));
+          s.corrections.push_back(std::move(correction));
+          ++s.corrections_after_last_frame;
+        }
         return absl::OkStatus();
       },
   });
@@ -454,7 +462,9 @@ void PrintRemoteSlamResult(const FlagSet& flags, const SlamDatasetOptions& optio
       .AddBool("saved", saved.has_value())
       .Add("reconnects", s.reconnects)
       .Add("frames_lost_in_failover", s.frames_lost)
-      .Add("failover_resume_s", s.resume_s);
+      .Add("failover_resume_s", s.resume_s)
+      .Add("corrections_received", static_cast<int64_t>(s.corrections.size()))
+      .Add("corrections_after_last_frame", s.corrections_after_last_frame);
   PrintSlamResult(report, flags.GetSwitch("json"), more);
 }
 

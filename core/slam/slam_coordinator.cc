@@ -532,7 +532,7 @@ absl::Status SlamCoordinator::CorrectInPlace(SlamMapper* mapper, const SlamCorre
   correction->generation = main.correction != nullptr ? main.correction->generation + 1 : 1;
   correction->map_version = number;
   correction->after = mapper->all_keyframe_poses();
-  main.correction = std::move(correction);
+  RecordCorrectionLocked(main, std::move(correction));
   AdoptCorrectedVersionLocked(main, *mapper, latest, number);
   ++loop_counts_.corrections;
   ++loop_counts_.in_place;
@@ -644,7 +644,7 @@ absl::StatusOr<SlamStepResult> SlamCoordinator::SwapInRebuild() {
     // (both were given each one), the old one refined as mapping went on meanwhile.
     correction->before = main.mapper->all_keyframe_poses();
     correction->after = rebuild->all_keyframe_poses();
-    main.correction = std::move(correction);
+    RecordCorrectionLocked(main, std::move(correction));
     old = std::move(main.mapper);
     main.mapper = std::move(main.rebuild);
     main.rebuild_solve.reset();
@@ -748,6 +748,27 @@ std::vector<LoopEdge> SlamCoordinator::loops() const {
 std::shared_ptr<const SlamCorrection> SlamCoordinator::correction() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return segments_[0]->correction;
+}
+
+std::vector<std::shared_ptr<const SlamCorrection>> SlamCoordinator::CorrectionsAfter(
+    int generation) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const std::deque<std::shared_ptr<const SlamCorrection>>& kept = segments_[0]->corrections;
+  if (kept.empty() || kept.front()->generation > generation + 1) return {};
+  std::vector<std::shared_ptr<const SlamCorrection>> after;
+  for (const std::shared_ptr<const SlamCorrection>& c : kept) {
+    if (c->generation > generation) after.push_back(c);
+  }
+  return after;
+}
+
+void SlamCoordinator::RecordCorrectionLocked(Segment& main,
+                                             std::shared_ptr<const SlamCorrection> correction) {
+  main.corrections.push_back(correction);
+  if (main.corrections.size() > static_cast<size_t>(kKeptCorrections)) {
+    main.corrections.pop_front();
+  }
+  main.correction = std::move(correction);
 }
 
 SlamMapView SlamCoordinator::ViewLocked(int segment) const {

@@ -45,6 +45,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <deque>
 #include <memory>
 #include <mutex>
 #include <unordered_map>
@@ -191,6 +192,13 @@ class SlamCoordinator {
   SlamSegmentCounts segments() const;
   // The main map's latest loop-closure correction (null: none).
   std::shared_ptr<const SlamCorrection> correction() const;
+  // The main map's corrections after `generation` (a camera's SlamFrameResult::
+  // correction_generation), oldest first: what a camera whose last frame was tracked in that
+  // frame has not followed, such as the corrections of a map finishing after a stream's last
+  // frame. The newest kKeptCorrections are kept; a camera further behind gets none (empty)
+  // rather than a chain with a gap.
+  static constexpr int kKeptCorrections = 64;
+  std::vector<std::shared_ptr<const SlamCorrection>> CorrectionsAfter(int generation) const;
   // The loop edges in the main map's pose graph now (keyframe indices; the viewer draws them).
   std::vector<LoopEdge> loops() const;
   // The odometry edge into each keyframe of the main map's pose graph (the keyframes accepted
@@ -253,9 +261,13 @@ class SlamCoordinator {
     bool rebuild_collecting = false;       // the rebuild is being filled outside the lock...
     std::vector<EarlyKeyframe> rebuild_backlog;  // ...and these came meanwhile
     std::shared_ptr<const SlamCorrection> correction;  // the latest published
+    // The last kKeptCorrections published, oldest first (the last is `correction`).
+    std::deque<std::shared_ptr<const SlamCorrection>> corrections;
   };
 
   bool IdleLocked(const Segment& segment) const;
+  // Makes `correction` the main map's latest and keeps it among its recent ones.
+  void RecordCorrectionLocked(Segment& main, std::shared_ptr<const SlamCorrection> correction);
   // After a correction: the main segment now serves `latest` of `mapper` as version `number`
   // (the published map, the version numbering and the progress follow it). Under mutex_.
   void AdoptCorrectedVersionLocked(Segment& main, const SlamMapper& mapper,

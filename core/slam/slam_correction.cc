@@ -31,6 +31,16 @@ int AnchorAmong(size_t n, const KeyframePose& keyframe, const SE3& pose) {
 
 }  // namespace
 
+std::vector<SE3> FrameChangesAlong(
+    const std::vector<std::shared_ptr<const SlamCorrection>>& corrections, SE3 pose) {
+  std::vector<SE3> changes;
+  for (const std::shared_ptr<const SlamCorrection>& c : corrections) {
+    changes.push_back(c->FrameChangeAt(pose));
+    pose = changes.back() * pose;
+  }
+  return changes;
+}
+
 int AnchorKeyframe(const std::vector<StampedPose>& keyframes, const SE3& pose) {
   return AnchorAmong(
       keyframes.size(), [&](size_t i) -> const SE3& { return keyframes[i].pose; }, pose);

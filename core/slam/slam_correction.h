@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "core/geometry/se3.h"
@@ -34,6 +35,12 @@ struct SlamCorrection {
   // new_T_old at `pose`: what Move left-multiplies it by.
   SE3 FrameChangeAt(const SE3& pose) const;
 };
+
+// The new_T_old each of `corrections` (in order, each after the one before) makes at a pose
+// that starts as `pose` in the frame before the first and is moved by each in turn: the
+// camera_new_T_old of each for a camera whose last pose was `pose` and that followed none.
+std::vector<SE3> FrameChangesAlong(
+    const std::vector<std::shared_ptr<const SlamCorrection>>& corrections, SE3 pose);
 
 // The same rule over a map's keyframes as they are now (SlamMapView::keyframe_poses): the
 // keyframe a pose tracked now is anchored to, should a later correction move it (-1: none).

@@ -270,6 +270,15 @@ def main():
         failures.check(np.allclose(near_second, [1.8, 0.5, 0]) and np.allclose(at_start,
                                                                                [0, 0.2, 0]),
                        "correct_pose moves a pose with its anchor keyframe")
+        # The done message's corrections (the map's, made after the last frame while its
+        # mapping finished) join those the frames' updates carried, after them.
+        offline = plenoxd_client.SlamStream(None, "m", [], None, True, None, False, None)
+        offline._accept(pb.SlamUpdate(correction_generation=1, correction=correction))
+        offline._accept(pb.SlamUpdate(done=True, corrections_after=[
+            pb.SlamCorrection(generation=2), pb.SlamCorrection(generation=3)]))
+        failures.check([c.generation for c in offline.corrections] == [1, 2, 3]
+                       and offline.done is not None and offline.received == 1,
+                       "a done message's corrections_after join the stream's corrections")
         t_back, q_back = convert.pose_from_proto(convert.pose_to_proto(frames[0].pose))
         failures.check(np.allclose(t_back, frames[0].pose[0], atol=1e-12)
                        and abs(abs(np.dot(q_back, frames[0].pose[1])) - 1.0) < 1e-12,

@@ -307,8 +307,10 @@ class SlamStream(_FrameStream[pb.SlamUpdate]):
     those states; WAITING: the map has no keyframe yet and the frame had too little depth to
     start it); mapping: the SlamMapping of the latest message (its loops_accepted,
     loops_rejected, corrections and last_solve_ms: the map's loop closure); corrections: every
-    SlamCorrection the stream carried, in order (a loop closure moved the map's keyframes: move
-    what you hold in the old frame with correct_pose()). cancel() ends the call early."""
+    SlamCorrection the stream carried, in order, those of the done message (corrections the map
+    made after the last frame, as its mapping finished) last (a loop closure moved the map's
+    keyframes: move what you hold in the old frame with correct_pose()). cancel() ends the call
+    early."""
 
     _method = "Slam"
     _request_type = pb.SlamRequest
@@ -333,6 +335,7 @@ class SlamStream(_FrameStream[pb.SlamUpdate]):
         self.mapping = update.mapping
         if update.done:
             self.done = update
+            self.corrections.extend(update.corrections_after)
             return False
         self.received += 1
         self.dropped += update.dropped

@@ -475,6 +475,13 @@ TEST_F(LoopClosureTest, TheCoordinatorClosesTheLoopAndPublishesTheCorrectedMap) 
   EXPECT_EQ(coordinator.latest().version, p.map_version);
   EXPECT_GE(coordinator.latest().version, correction->map_version);
   EXPECT_EQ(coordinator.View().correction, correction);
+  // Every correction is kept, oldest first: a camera whose last frame was tracked before them
+  // all gets each (the daemon's done message), one that followed the last gets none.
+  const std::vector<std::shared_ptr<const SlamCorrection>> kept = coordinator.CorrectionsAfter(0);
+  ASSERT_EQ(kept.size(), static_cast<size_t>(p.loops.corrections));
+  for (size_t g = 0; g < kept.size(); ++g) EXPECT_EQ(kept[g]->generation, static_cast<int>(g + 1));
+  EXPECT_EQ(kept.back(), correction);
+  EXPECT_TRUE(coordinator.CorrectionsAfter(correction->generation).empty());
   EXPECT_TRUE(seen_rebuilding);
   EXPECT_FALSE(coordinator.View().map_rebuilding);
   // Refinement's window is off here: only the rebuild's alignment of every keyframe moved any.
@@ -581,6 +588,34 @@ TEST(SlamCorrectionTest, APoseMovesWithItsNearestKeyframe) {
   c.before.push_back(SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0.1, 0, 0)));
   c.after.push_back(c.before.back());
   EXPECT_EQ(c.NearestKeyframe(SE3::Identity()), 2);
+}
+
+TEST(SlamCorrectionTest, ACameraThatFollowedNoneMovesThroughEachInTurn) {
+  // Two corrections after a camera's last pose: the first lifts the keyframe at 2 m, the
+  // second (in the lifted frame) shifts it along x. Each frame change is taken where the
+  // ones before moved the pose, so their product is both moves.
+  const SE3 at(Eigen::Quaterniond::Identity(), Eigen::Vector3d(2, 0, 0));
+  auto first = std::make_shared<SlamCorrection>();
+  first->generation = 1;
+  first->before = {SE3::Identity(), at};
+  first->after = {SE3::Identity(),
+                  SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0.5, 0)) * at};
+  auto second = std::make_shared<SlamCorrection>();
+  second->generation = 2;
+  second->before = first->after;
+  second->after = {SE3::Identity(),
+                   SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0.25, 0, 0)) *
+                       first->after[1]};
+  const SE3 camera(Eigen::Quaterniond::Identity(), Eigen::Vector3d(1.8, 0, 0));
+  const std::vector<SE3> changes = FrameChangesAlong({first, second}, camera);
+  ASSERT_EQ(changes.size(), 2u);
+  EXPECT_TRUE((changes[0] * camera).translation().isApprox(Eigen::Vector3d(1.8, 0.5, 0)));
+  EXPECT_TRUE(
+      (changes[1] * changes[0] * camera).translation().isApprox(Eigen::Vector3d(2.05, 0.5, 0)));
+  EXPECT_TRUE((changes[1] * changes[0] * camera)
+                  .translation()
+                  .isApprox(second->Move(first->Move(camera)).translation()));
+  EXPECT_TRUE(FrameChangesAlong({}, camera).empty());
 }
 
 TEST(CorrectedPosesTest, AFrameKeepsItsPoseRelativeToItsKeyframe) {
