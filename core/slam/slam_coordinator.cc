@@ -144,8 +144,9 @@ absl::Status SlamCoordinator::AddKeyframeLocked(const RgbdFrame& frame, const SE
                                                 int generation) {
   SE3 pose = given_pose;
   const bool main = to == segments_[0].get();
-  if (main && to->correction != nullptr && generation < to->correction->generation) {
-    pose = to->correction->Move(pose);  // tracked before the camera saw the correction
+  const std::shared_ptr<const SlamCorrection> latest_correction = to->correction();
+  if (main && latest_correction != nullptr && generation < latest_correction->generation) {
+    pose = latest_correction->Move(pose);  // tracked before the camera saw the correction
   }
   if (to->mapper == nullptr) {
     // A mapper is made by the step-runner, with its backend (the daemon's first task).
@@ -529,7 +530,6 @@ absl::Status SlamCoordinator::CorrectInPlace(SlamMapper* mapper, const SlamCorre
   }
   std::lock_guard<std::mutex> lock(mutex_);
   auto correction = std::make_shared<SlamCorrection>(solve);
-  correction->generation = main.correction != nullptr ? main.correction->generation + 1 : 1;
   correction->map_version = number;
   correction->after = mapper->all_keyframe_poses();
   RecordCorrectionLocked(main, std::move(correction));
@@ -638,7 +638,6 @@ absl::StatusOr<SlamStepResult> SlamCoordinator::SwapInRebuild() {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     auto correction = std::make_shared<SlamCorrection>(*main.rebuild_solve);
-    correction->generation = main.correction != nullptr ? main.correction->generation + 1 : 1;
     correction->map_version = number;
     // Exactly how every keyframe moved between the frames: each mapper has every keyframe
     // (both were given each one), the old one refined as mapping went on meanwhile.
@@ -725,7 +724,8 @@ bool SlamCoordinator::IdleLocked(const Segment& segment) const {
 
 int SlamCoordinator::CurrentGenerationLocked() const {
   const Segment& main = *segments_[0];
-  return main.correction != nullptr ? main.correction->generation : 0;
+  const std::shared_ptr<const SlamCorrection> latest = main.correction();
+  return latest != nullptr ? latest->generation : 0;
 }
 
 std::vector<SequentialLink> SlamCoordinator::sequential_links() const {
@@ -747,7 +747,7 @@ std::vector<LoopEdge> SlamCoordinator::loops() const {
 
 std::shared_ptr<const SlamCorrection> SlamCoordinator::correction() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return segments_[0]->correction;
+  return segments_[0]->correction();
 }
 
 std::vector<std::shared_ptr<const SlamCorrection>> SlamCoordinator::CorrectionsAfter(
@@ -763,12 +763,12 @@ std::vector<std::shared_ptr<const SlamCorrection>> SlamCoordinator::CorrectionsA
 }
 
 void SlamCoordinator::RecordCorrectionLocked(Segment& main,
-                                             std::shared_ptr<const SlamCorrection> correction) {
-  main.corrections.push_back(correction);
+                                             std::shared_ptr<SlamCorrection> correction) {
+  correction->generation = CurrentGenerationLocked() + 1;
+  main.corrections.push_back(std::move(correction));
   if (main.corrections.size() > static_cast<size_t>(kKeptCorrections)) {
     main.corrections.pop_front();
   }
-  main.correction = std::move(correction);
 }
 
 SlamMapView SlamCoordinator::ViewLocked(int segment) const {
@@ -797,7 +797,7 @@ SlamMapView SlamCoordinator::ViewLocked(int segment) const {
   }
   view.pending_keyframes = s.progress.pending_keyframes;
   view.map_rebuilding = s.rebuild != nullptr || s.rebuild_collecting;
-  if (segment == 0) view.correction = s.correction;
+  if (segment == 0) view.correction = s.correction();
   return view;
 }
 

@@ -44,8 +44,8 @@
 #pragma once
 
 #include <cstdint>
-#include <functional>
 #include <deque>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <unordered_map>
@@ -260,14 +260,18 @@ class SlamCoordinator {
     std::shared_ptr<const SlamCorrection> rebuild_solve;
     bool rebuild_collecting = false;       // the rebuild is being filled outside the lock...
     std::vector<EarlyKeyframe> rebuild_backlog;  // ...and these came meanwhile
-    std::shared_ptr<const SlamCorrection> correction;  // the latest published
-    // The last kKeptCorrections published, oldest first (the last is `correction`).
+    // The last kKeptCorrections published, oldest first.
     std::deque<std::shared_ptr<const SlamCorrection>> corrections;
+    // The latest published (null: none).
+    std::shared_ptr<const SlamCorrection> correction() const {
+      return corrections.empty() ? nullptr : corrections.back();
+    }
   };
 
   bool IdleLocked(const Segment& segment) const;
-  // Makes `correction` the main map's latest and keeps it among its recent ones.
-  void RecordCorrectionLocked(Segment& main, std::shared_ptr<const SlamCorrection> correction);
+  // Numbers `correction` after the main map's latest, makes it the latest and keeps it among
+  // its recent ones.
+  void RecordCorrectionLocked(Segment& main, std::shared_ptr<SlamCorrection> correction);
   // After a correction: the main segment now serves `latest` of `mapper` as version `number`
   // (the published map, the version numbering and the progress follow it). Under mutex_.
   void AdoptCorrectedVersionLocked(Segment& main, const SlamMapper& mapper,

@@ -6,14 +6,11 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/common/allocation_guard.h"
-#include "core/common/status_macros.h"
 #include "core/common/elapsed.h"
+#include "core/common/status_macros.h"
 #include "core/common/thread_priority.h"
 
 namespace plx {
-namespace {
-
-}  // namespace
 
 SlamOptions DefaultSlamOptions() {
   SlamOptions o;
