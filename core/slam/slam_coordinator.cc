@@ -14,6 +14,13 @@ namespace plx {
 void ApplyLockStepMappingPolicy(SlamMapperOptions* options) {
   options->mapping.min_publish_interval_s = 1e9;
   options->mapping.max_clones_per_iteration = 0;
+  // A chunk cut by wall time holds a different number of iterations on a loaded machine, and a
+  // rebuild's keyframes interleave with its chunks and swap in after a count of iterations: the
+  // map would differ run to run. Lock-step chunks by iterations only.
+  options->mapping.chunk_seconds = kLockStepUnreachedSeconds;
+  // Likewise the pose-graph solve stops at its iteration bound only (a loaded CI run stopped
+  // early by wall time replaced 2 sequential edges where an idle run replaces none).
+  options->loop_closure.graph.max_solve_seconds = kLockStepUnreachedSeconds;
 }
 
 SlamSplitOptions SplitSlamOptions(const SlamOptions& o) {

@@ -85,8 +85,10 @@ struct SlamSplitOptions {
   SlamGateOptions gate;
 };
 
-// Lock-step mapping publishes only when the camera's frame waits for it (out of work), and
-// clones every brick it needs: neither may depend on the clock, or runs would differ.
+// Lock-step mapping publishes only when the camera's frame waits for it (out of work), clones
+// every brick it needs, and bounds its chunks and pose-graph solves by iterations, not wall
+// time (kLockStepUnreachedSeconds): none may depend on the clock, or runs would differ.
+inline constexpr double kLockStepUnreachedSeconds = 600.0;
 void ApplyLockStepMappingPolicy(SlamMapperOptions* options);
 
 // The halves' options: the fields copied as they are, then (deterministic) the lock-step

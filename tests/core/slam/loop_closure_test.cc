@@ -461,6 +461,10 @@ TEST_F(LoopClosureTest, TheCoordinatorClosesTheLoopAndPublishesTheCorrectedMap) 
   const std::shared_ptr<const SlamCorrection> correction = coordinator.correction();
   ASSERT_NE(correction, nullptr);
   const SlamMapperProgress p = coordinator.progress();
+  std::printf("%d loops accepted, %d corrections, %d links measured, %d used by the last solve "
+              "(%.1f ms)\n",
+              p.loops.accepted, p.loops.corrections, p.loops.links_measured,
+              p.loops.last_measured_edges, p.loops.last_solve_ms);
   EXPECT_GE(p.loops.accepted, 1);
   EXPECT_GE(p.loops.corrections, 1);
   // Each keyframe's edge from the one before was measured from the images (60 edges; a pair
@@ -512,7 +516,8 @@ TEST_F(LoopClosureTest, TheCoordinatorClosesTheLoopAndPublishesTheCorrectedMap) 
               mesh_after.within, 1000 * mesh_after.median_m);
   ASSERT_GT(mesh_after.vertices, 1000);
   // On the room's surfaces within what 5 iterations a keyframe and the correction's residual
-  // pose error leave (measured: 0.569 of the vertices within 3 cm, median 28.8 mm) ...
+  // pose error leave (measured: 0.576 of the vertices within 3 cm, median 27.3 mm; lock-step
+  // runs are alike however loaded the machine) ...
   EXPECT_GT(mesh_after.within, 0.5);
   EXPECT_LT(mesh_after.median_m, MeshFit::kTolerance);
   // ... and they are the corrected ones: the drifted version's are not (0.342, median 60 mm).

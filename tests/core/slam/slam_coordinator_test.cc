@@ -85,6 +85,11 @@ TEST_F(SlamCoordinatorTest, SplitAppliesTheLockStepPolicyOnlyWhenDeterministic) 
   EXPECT_EQ(locked.mapper.mapping.min_publish_interval_s,
             expected.mapping.min_publish_interval_s);
   EXPECT_EQ(locked.mapper.mapping.max_clones_per_iteration, 0);
+  // Wall time bounds neither a chunk nor a solve (concurrently it bounds both).
+  EXPECT_EQ(locked.mapper.mapping.chunk_seconds, kLockStepUnreachedSeconds);
+  EXPECT_EQ(locked.mapper.loop_closure.graph.max_solve_seconds, kLockStepUnreachedSeconds);
+  EXPECT_LT(free.mapper.mapping.chunk_seconds, 1.0);
+  EXPECT_LT(free.mapper.loop_closure.graph.max_solve_seconds, 1.0);
   EXPECT_TRUE(locked.gate.lock_step);
 
   // A budget under the median would cut most frames, not the costly ones.
