@@ -126,26 +126,10 @@ absl::Status Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrin
   const int coarse_rays = std::max(16, total / options_.coarse_divisor);
   const int coarse_iterations = options_.coarse_divisor > 1 ? options_.iterations / 2 : 0;
   int iteration = 0;
-  double coarse_ms_per_ray = 0.0;  // the coarse level's pace
   for (int level = 0; level < 2; ++level) {
-    int rays = level == 0 ? coarse_rays : total;
+    const int rays = level == 0 ? coarse_rays : total;
     const int budget = level == 0 ? coarse_iterations : options_.iterations - coarse_iterations;
     if (budget <= 0) continue;
-    if (level == 1 && options_.time_budget_ms > 0.0 && coarse_ms_per_ray > 0.0) {
-      // The fine level's first iteration always runs. Where the coarse level's pace says a
-      // whole one would end past the budget (a view that meets more of the map than the
-      // budget's median, the other core busy), it casts the rays that fit, at least the coarse
-      // level's: the frame ends near its budget, not at twice it.
-      const double left = options_.time_budget_ms - MillisecondsSince(start);
-      const double fit = left / coarse_ms_per_ray;
-      if (fit < total) {
-        rays = std::max(coarse_rays, static_cast<int>(fit));
-        result->out_of_time = true;
-        // Valid rays are counted against the rays cast (Classify, the unmapped share).
-        result->rays = static_cast<int>(
-            std::lround(static_cast<double>(result->rays) * rays / total));
-      }
-    }
     const float color_stretch = level == 0 ? options_.coarse_color_scale : 1.0f;
     float scale[2] = {color_stretch, 1.0f};
     SE3 accepted = *pose;
@@ -195,7 +179,6 @@ absl::Status Tracker::RunGaussNewton(const RgbdFrame& frame, const PinholeIntrin
       if (!delta.allFinite()) break;
       *pose = accepted * SE3::Exp(delta);
       iteration_ms = MillisecondsSince(start) - iteration_start;
-      if (level == 0) coarse_ms_per_ray = iteration_ms / rays;
       if (delta.head<3>().norm() < options_.converged_translation &&
           delta.tail<3>().norm() < options_.converged_rotation) {
         ++iteration;
