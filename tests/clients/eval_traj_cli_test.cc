@@ -12,7 +12,7 @@
 #include "tests/clients/cli_runner.h"
 
 namespace plx {
-namespace {
+namespace eval_traj_cli_test {
 
 using plx::testing::CommandResult;
 using plx::testing::FlatJson;
@@ -193,5 +193,5 @@ TEST_F(EvalTrajCliTest, BadFilesExitOneWithFileAndLine) {
   EXPECT_THAT(r.err, HasSubstr("no poses"));
 }
 
-}  // namespace
+}  // namespace eval_traj_cli_test
 }  // namespace plx

@@ -26,7 +26,7 @@
 #include "tests/test_util.h"
 
 namespace plx {
-namespace {
+namespace plenox_cli_test {
 
 namespace fs = std::filesystem;
 using plx::testing::CommandResult;
@@ -1157,5 +1157,5 @@ TEST(CliRunnerTest, CapturesStreamsExitCodeAndTimeout) {
   EXPECT_LT(slow.seconds, 10.0);
 }
 
-}  // namespace
+}  // namespace plenox_cli_test
 }  // namespace plx

@@ -27,7 +27,7 @@
 #include "tests/test_util.h"
 
 namespace plx {
-namespace {
+namespace remote_cli_test {
 
 namespace fs = std::filesystem;
 using plx::testing::CommandResult;
@@ -689,5 +689,5 @@ TEST(RemoteCliTest, NeedsPlenoxd) {
 
 #endif  // PLENOXD_BINARY
 
-}  // namespace
+}  // namespace remote_cli_test
 }  // namespace plx

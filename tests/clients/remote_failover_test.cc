@@ -36,7 +36,7 @@
 #endif
 
 namespace plx {
-namespace {
+namespace remote_failover_test {
 
 #ifdef PLX_WITH_SERVER
 
@@ -360,5 +360,5 @@ TEST_F(RemoteFailoverTest, UnaryCallsAreRetriedAcrossARestart) {
 
 #endif  // PLENOXD_BINARY && PLX_WITH_SERVER
 
-}  // namespace
+}  // namespace remote_failover_test
 }  // namespace plx

@@ -24,7 +24,7 @@
 #include "tests/test_util.h"
 
 namespace plx {
-namespace {
+namespace remote_slam_cli_test {
 
 namespace fs = std::filesystem;
 using plx::testing::CommandResult;
@@ -490,5 +490,5 @@ TEST_F(RemoteSlamCliTest, TheDaemonsRefusalsAreReportedAndWriteNothing) {
 
 #endif  // PLENOXD_BINARY
 
-}  // namespace
+}  // namespace remote_slam_cli_test
 }  // namespace plx

@@ -15,7 +15,7 @@
 #include "core/mapping/mapper.h"
 
 namespace plx {
-namespace {
+namespace map_codec_test {
 
 using ::testing::StartsWith;
 
@@ -91,5 +91,5 @@ TEST(MapStatusTest, TheGridsNumbersComeFromTheMap) {
   EXPECT_FALSE(s.mapping);
 }
 
-}  // namespace
+}  // namespace map_codec_test
 }  // namespace plx

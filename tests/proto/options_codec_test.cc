@@ -17,7 +17,7 @@
 #include "proto/track_codec.h"
 
 namespace plx {
-namespace {
+namespace options_codec_test {
 
 using ::testing::HasSubstr;
 using ::testing::StartsWith;
@@ -265,5 +265,5 @@ TEST(IntegrateCodecTest, VoxelSizeOutsideCoresRangeIsRefused) {
                   .ok());
 }
 
-}  // namespace
+}  // namespace options_codec_test
 }  // namespace plx

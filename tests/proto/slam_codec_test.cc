@@ -22,7 +22,7 @@
 #include "proto/pose_codec.h"
 
 namespace plx {
-namespace {
+namespace slam_codec_test {
 
 using ::testing::HasSubstr;
 using ::testing::StartsWith;
@@ -408,5 +408,5 @@ TEST(SlamCodecTest, DoneCarriesOnlyTheMapping) {
   EXPECT_EQ(done.mapping().keyframes_integrated(), 5u);
 }
 
-}  // namespace
+}  // namespace slam_codec_test
 }  // namespace plx

@@ -20,7 +20,7 @@
 #include "tests/test_util.h"
 
 namespace plx::server {
-namespace {
+namespace map_store_handoff_test {
 
 namespace fs = std::filesystem;
 using ::testing::AllOf;
@@ -31,7 +31,7 @@ constexpr float kVoxel = 0.05f;
 
 // A map as a mapping job publishes it (tests/server/published_map.h), at this file's voxel size.
 std::shared_ptr<const PlenoxelMap> MapWithBricks(int bricks, bool refresh = true) {
-  return testing::MapWithBricks(kVoxel, bricks, refresh);
+  return plx::testing::MapWithBricks(kVoxel, bricks, refresh);
 }
 
 class MapHandoffTest : public ::testing::Test {
@@ -64,7 +64,7 @@ class MapHandoffTest : public ::testing::Test {
     return store.HandOffWanted();
   }
 
-  const std::string dir_ = testing::MakeTempDir("plx_handoff_store");
+  const std::string dir_ = plx::testing::MakeTempDir("plx_handoff_store");
   absl::Time now_ = absl::FromUnixSeconds(1000000);
   std::unique_ptr<MapStore> a_ = Store("A-1-01");
   std::unique_ptr<MapStore> b_ = Store("B-2-02");
@@ -189,5 +189,5 @@ TEST_F(MapHandoffTest, AStoreThatLostAMapAnswersWithTheLossForTwoTermsThenAsksAg
   EXPECT_EQ(Lease().wanted_by, "A-1-01");
 }
 
-}  // namespace
+}  // namespace map_store_handoff_test
 }  // namespace plx::server

@@ -21,7 +21,7 @@
 #include "tests/test_util.h"
 
 namespace plx::server {
-namespace {
+namespace map_store_lease_test {
 
 namespace fs = std::filesystem;
 using ::testing::AllOf;
@@ -32,7 +32,7 @@ constexpr float kVoxel = 0.05f;
 
 // A map as a mapping job publishes it (tests/server/published_map.h), at this file's voxel size.
 std::shared_ptr<const PlenoxelMap> MapWithBricks(int bricks, bool refresh = true) {
-  return testing::MapWithBricks(kVoxel, bricks, refresh);
+  return plx::testing::MapWithBricks(kVoxel, bricks, refresh);
 }
 
 std::string ReadAll(const std::string& path) {
@@ -73,7 +73,7 @@ class SharedMapStoreTest : public ::testing::Test {
     return lease.ok() ? *lease : LeaseRecord{};
   }
 
-  const std::string dir_ = testing::MakeTempDir("plx_shared_store");
+  const std::string dir_ = plx::testing::MakeTempDir("plx_shared_store");
   absl::Time now_ = absl::FromUnixSeconds(1000000);
   std::unique_ptr<MapStore> a_ = Store("A-1-01");
   std::unique_ptr<MapStore> b_ = Store("B-2-02");
@@ -236,5 +236,5 @@ TEST_F(SharedMapStoreTest, OnlyTheOwnerDeletes) {
   EXPECT_EQ(Lease().token, 3u);
 }
 
-}  // namespace
+}  // namespace map_store_lease_test
 }  // namespace plx::server

@@ -23,7 +23,7 @@
 #include "tests/test_util.h"
 
 namespace plx::server {
-namespace {
+namespace map_store_test {
 
 using ::testing::AllOf;
 using ::testing::ElementsAre;
@@ -472,5 +472,5 @@ TEST(MapStoreTest, SaveDirtyTriesEveryMap) {
   std::filesystem::remove_all(dir);
 }
 
-}  // namespace
+}  // namespace map_store_test
 }  // namespace plx::server

@@ -26,7 +26,7 @@
 #include "tests/synthetic_room.h"
 
 namespace plx::server {
-namespace {
+namespace slam_job_test {
 
 using ::testing::HasSubstr;
 
@@ -139,7 +139,7 @@ class WorkerGate {
 
 class SlamJobTest : public ::testing::Test {
  protected:
-  static void SetUpTestSuite() { room_ = testing::MakeSyntheticRoom(80, 60, 12).release(); }
+  static void SetUpTestSuite() { room_ = plx::testing::MakeSyntheticRoom(80, 60, 12).release(); }
   static void TearDownTestSuite() {
     delete room_;
     room_ = nullptr;
@@ -517,5 +517,5 @@ TEST_F(SlamJobTest, JoinsAndLeavesRacingTheJobsEnd) {
   EXPECT_TRUE(Eventually([&] { return worker().streams() == 0; }));
 }
 
-}  // namespace
+}  // namespace slam_job_test
 }  // namespace plx::server

@@ -16,7 +16,7 @@
 #include "tests/test_util.h"
 
 namespace plx {
-namespace {
+namespace tum_dataset_test {
 
 using ::testing::ElementsAre;
 using ::testing::HasSubstr;
@@ -491,5 +491,5 @@ TEST(TumDatasetTest, RealTeddyInterpolatedGroundTruthIsCloseToNearestSample) {
   EXPECT_GT(largest_step, 0.0);  // interpolation did change something
 }
 
-}  // namespace
+}  // namespace tum_dataset_test
 }  // namespace plx

@@ -36,7 +36,7 @@
 #include "tests/test_util.h"
 
 namespace plx {
-namespace {
+namespace map_file_test {
 
 namespace fs = std::filesystem;
 using ::testing::ElementsAre;
@@ -617,5 +617,5 @@ TEST(MapFileChecksumTest, PiecewiseUpdateEqualsOneShot) {
   EXPECT_EQ(crc.value(), Crc64Of(data.data(), data.size()));
 }
 
-}  // namespace
+}  // namespace map_file_test
 }  // namespace plx

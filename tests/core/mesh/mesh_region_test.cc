@@ -21,7 +21,7 @@
 #include "core/mesh/iso_surface.h"
 
 namespace plx {
-namespace {
+namespace mesh_region_test {
 
 constexpr float kVoxel = 0.05f;
 constexpr float kIso = 25.0f;
@@ -238,5 +238,5 @@ TEST(MeshRegionTest, AnEmptyBoxRegionIsAnEmptyMeshAndABadBoxIsRefused) {
   }
 }
 
-}  // namespace
+}  // namespace mesh_region_test
 }  // namespace plx

@@ -19,7 +19,7 @@
 #include "tests/mesh_checks.h"
 
 namespace plx {
-namespace {
+namespace mesh_simplify_test {
 
 constexpr float kRadius = 0.5f;  // metres: a ball a room might hold
 
@@ -294,5 +294,5 @@ TEST(MeshSimplifyTest, BadInputIsInvalidAndCancellingStops) {
   EXPECT_EQ(cancelled.status().code(), absl::StatusCode::kCancelled) << cancelled.status();
 }
 
-}  // namespace
+}  // namespace mesh_simplify_test
 }  // namespace plx

@@ -26,7 +26,7 @@
 #include "tests/synthetic_room.h"
 
 namespace plx {
-namespace {
+namespace map_segment_test {
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr int kWidth = 160;
@@ -340,5 +340,5 @@ TEST(SlamMapSegmentTest, ALostCameraInUnseenSpaceStartsASegmentAndJoinsTheMapWhe
   EXPECT_EQ(camera.counts().segments_joined, 1);
 }
 
-}  // namespace
+}  // namespace map_segment_test
 }  // namespace plx

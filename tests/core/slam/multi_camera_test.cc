@@ -20,7 +20,7 @@
 #include "tests/synthetic_room.h"
 
 namespace plx {
-namespace {
+namespace multi_camera_test {
 
 SlamOptions TestOptions() { return testing::SmallLockStepSlamOptions(); }
 
@@ -424,5 +424,5 @@ TEST(SlamMultiCameraTest, AKeyframeDeferredTooLongIsTakenAndTheCameraWaitsForMap
   EXPECT_TRUE(map.MayCameraProceed());
 }
 
-}  // namespace
+}  // namespace multi_camera_test
 }  // namespace plx

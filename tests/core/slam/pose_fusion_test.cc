@@ -6,7 +6,7 @@
 #include <utility>
 
 namespace plx {
-namespace {
+namespace pose_fusion_test {
 
 SE3 At(double x) { return SE3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(x, 0, 0)); }
 
@@ -190,5 +190,5 @@ TEST(PoseFusionTest, WithoutATrustedOdometryTheMapDecidesAlone) {
   EXPECT_FALSE(lost.may_be_keyframe);
 }
 
-}  // namespace
+}  // namespace pose_fusion_test
 }  // namespace plx

@@ -17,7 +17,7 @@
 #include "tests/test_util.h"
 
 namespace plx {
-namespace {
+namespace handoff_policy_test {
 
 namespace fs = std::filesystem;
 using ::testing::AllOf;
@@ -173,5 +173,5 @@ TEST_F(HandoffStorageTest, RecordsWithoutARequestReadAsBefore) {
   EXPECT_EQ(a_.ReadLease("n").status().code(), absl::StatusCode::kDataLoss);
 }
 
-}  // namespace
+}  // namespace handoff_policy_test
 }  // namespace plx

@@ -11,7 +11,7 @@
 #include "core/synthetic/synthetic_scene.h"
 
 namespace plx {
-namespace {
+namespace synthetic_sequence_test {
 
 // Camera-to-world pose at `eye` looking along `forward` with world +z up (OpenCV axes).
 // Written independently of the generator's look-at so the tests do not share its mistakes.
@@ -519,5 +519,5 @@ TEST(SyntheticSequenceTest, InvalidOptionsAreRejected) {
   EXPECT_FALSE(rejected([](SyntheticOptions& o) { o.num_frames = 1; }));
 }
 
-}  // namespace
+}  // namespace synthetic_sequence_test
 }  // namespace plx
