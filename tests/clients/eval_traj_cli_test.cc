@@ -9,10 +9,14 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "clients/plenox/cli_common.h"
 #include "tests/clients/cli_runner.h"
 
 namespace plx {
 namespace eval_traj_cli_test {
+using cli::kExitOk;
+using cli::kExitFailure;
+using cli::kExitUsage;
 
 using plx::testing::CommandResult;
 using plx::testing::FlatJson;
@@ -25,9 +29,6 @@ using plx::testing::WriteStringToFile;
 using ::testing::HasSubstr;
 using ::testing::IsEmpty;
 
-constexpr int kExitOk = 0;
-constexpr int kExitFailure = 1;
-constexpr int kExitUsage = 2;
 
 // A TUM trajectory along x at 1 m/s, 8 Hz (0.125 m steps, exact in binary so path sums reach
 // 1 m exactly), `n` poses from t = 1000 s, shifted sideways (y) by `dy` and in time by `dt`.

@@ -19,6 +19,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "clients/plenox/cli_common.h"
 #include "core/formats/map_file.h"
 #include "tests/clients/cli_runner.h"
 #include "tests/clients/depthless_dataset.h"
@@ -27,6 +28,9 @@
 
 namespace plx {
 namespace plenox_cli_test {
+using cli::kExitOk;
+using cli::kExitFailure;
+using cli::kExitUsage;
 
 namespace fs = std::filesystem;
 using plx::testing::CommandResult;
@@ -49,9 +53,6 @@ using ::testing::IsEmpty;
 using ::testing::Not;
 using ::testing::StartsWith;
 
-constexpr int kExitOk = 0;
-constexpr int kExitFailure = 1;
-constexpr int kExitUsage = 2;
 
 // Mapping is multithreaded; pinning the thread count keeps the numbers reproducible on machines
 // with different core counts (and keeps the suite within the 2 cores CI has).

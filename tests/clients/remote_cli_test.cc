@@ -21,6 +21,7 @@
 
 #include "absl/strings/str_format.h"
 #include "app/make_backend.h"
+#include "clients/plenox/cli_common.h"
 #include "tests/clients/cli_runner.h"
 #include "tests/clients/mesh_output.h"
 #include "tests/clients/remote_daemon.h"
@@ -28,6 +29,9 @@
 
 namespace plx {
 namespace remote_cli_test {
+using cli::kExitOk;
+using cli::kExitFailure;
+using cli::kExitUsage;
 
 namespace fs = std::filesystem;
 using plx::testing::CommandResult;
@@ -54,9 +58,6 @@ using ::testing::IsEmpty;
 using ::testing::Not;
 using ::testing::StartsWith;
 
-constexpr int kExitOk = 0;
-constexpr int kExitFailure = 1;
-constexpr int kExitUsage = 2;
 
 
 TEST(RemoteCliBadInputTest, ServerWithoutPortIsUsageError) {

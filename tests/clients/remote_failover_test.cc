@@ -25,6 +25,7 @@
 #include "absl/strings/numbers.h"
 #include "absl/time/clock.h"
 #include "absl/time/time.h"
+#include "clients/plenox/cli_common.h"
 #include "core/formats/map_file.h"
 #include "tests/clients/cli_runner.h"
 #include "tests/clients/remote_daemon.h"
@@ -37,6 +38,8 @@
 
 namespace plx {
 namespace remote_failover_test {
+using cli::kExitOk;
+using cli::kExitFailure;
 
 #ifdef PLX_WITH_SERVER
 
@@ -84,8 +87,6 @@ using plx::testing::RunPlenox;
 using plx::testing::ScopedTempDir;
 using ::testing::HasSubstr;
 
-constexpr int kExitOk = 0;
-constexpr int kExitFailure = 1;
 
 // A longer walk than the other remote tests' (60 frames, two seconds of the circle) so that the
 // daemon can be killed in the middle with keyframes on disk and frames still to come.

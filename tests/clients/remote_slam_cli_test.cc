@@ -18,6 +18,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "clients/plenox/cli_common.h"
 #include "tests/clients/cli_runner.h"
 #include "tests/clients/depthless_dataset.h"
 #include "tests/clients/remote_daemon.h"
@@ -25,6 +26,9 @@
 
 namespace plx {
 namespace remote_slam_cli_test {
+using cli::kExitOk;
+using cli::kExitFailure;
+using cli::kExitUsage;
 
 namespace fs = std::filesystem;
 using plx::testing::CommandResult;
@@ -44,9 +48,6 @@ using ::testing::IsEmpty;
 using ::testing::Not;
 using ::testing::StartsWith;
 
-constexpr int kExitOk = 0;
-constexpr int kExitFailure = 1;
-constexpr int kExitUsage = 2;
 
 constexpr int kFrames = 30;
 constexpr int kWidth = 96;
