@@ -19,16 +19,25 @@ inline double BoxSurfaceDistance(const Eigen::Vector3d& q, const Eigen::Vector3d
   return excess.cwiseMax(0.0).norm();
 }
 
+// p in the frame of `box` (its centre, rotated by -yaw about z).
+inline Eigen::Vector3d InBoxFrame(const SyntheticBox& box, const Eigen::Vector3d& p) {
+  const Eigen::Vector3d d = p - box.center;
+  const double c = std::cos(box.yaw), s = std::sin(box.yaw);
+  return {c * d.x() + s * d.y(), -s * d.x() + c * d.y(), d.z()};
+}
+
+// Signed distance from p to the surface of `box` (negative inside).
+inline double SignedDistanceToBox(const SyntheticBox& box, const Eigen::Vector3d& p) {
+  const Eigen::Vector3d q = InBoxFrame(box, p).cwiseAbs() - box.half_extents;
+  return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
+}
+
 inline double DistanceToSyntheticRoom(const Eigen::Vector3d& p) {
   const SyntheticScene& scene = SyntheticRoom();
   const Eigen::Vector3d center = 0.5 * (scene.room_min + scene.room_max);
   double best = BoxSurfaceDistance(p - center, 0.5 * (scene.room_max - scene.room_min));
   for (const SyntheticBox& box : scene.boxes) {
-    const Eigen::Vector3d d = p - box.center;
-    const double c = std::cos(box.yaw), s = std::sin(box.yaw);
-    // Into the box's frame: rotate by -yaw about z.
-    const Eigen::Vector3d q(c * d.x() + s * d.y(), -s * d.x() + c * d.y(), d.z());
-    best = std::min(best, BoxSurfaceDistance(q, box.half_extents));
+    best = std::min(best, BoxSurfaceDistance(InBoxFrame(box, p), box.half_extents));
   }
   return best;
 }

@@ -8,6 +8,7 @@
 
 #include "core/synthetic/synthetic_scene.h"
 #include "core/synthetic/synthetic_sequence.h"
+#include "tests/synthetic_distance.h"
 
 namespace plx {
 namespace {
@@ -34,15 +35,6 @@ std::vector<double> YawRates(SyntheticPath path, int frames) {
     rates.push_back(step * kFps * kRadToDeg);
   }
   return rates;
-}
-
-// Distance from a point to the surface of an oriented box (negative inside).
-double DistanceToBox(const SyntheticBox& box, const Eigen::Vector3d& p) {
-  const Eigen::Vector3d d = p - box.center;
-  const double c = std::cos(box.yaw), s = std::sin(box.yaw);
-  const Eigen::Vector3d local(c * d.x() + s * d.y(), -s * d.x() + c * d.y(), d.z());
-  const Eigen::Vector3d q = local.cwiseAbs() - box.half_extents;
-  return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
 }
 
 TEST(SyntheticPathTest, DefaultPathIsTheCircleAsBefore) {
@@ -226,7 +218,9 @@ TEST(SyntheticPathTest, EveryPathIsSmoothLevelAndKeepsClearOfTheScene) {
       EXPECT_NEAR(a.rotation_matrix().col(0).z(), 0.0, 1e-9) << i;       // no roll
       const Eigen::Vector3d p = a.translation();
       EXPECT_GT(std::min((p - room.room_min).minCoeff(), (room.room_max - p).minCoeff()), 0.5);
-      for (const SyntheticBox& box : room.boxes) EXPECT_GT(DistanceToBox(box, p), 0.5) << i;
+      for (const SyntheticBox& box : room.boxes) {
+        EXPECT_GT(plx::testing::SignedDistanceToBox(box, p), 0.5) << i;
+      }
       if (i % 3 == 0) {
         // Nothing in view closer than 0.5 m (coarse wide-angle render).
         const RgbdFrame frame = RenderSyntheticView(a, wide, 1, scene);

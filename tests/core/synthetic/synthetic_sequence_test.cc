@@ -9,9 +9,10 @@
 #include <gtest/gtest.h>
 
 #include "core/synthetic/synthetic_scene.h"
+#include "tests/synthetic_distance.h"
 
 namespace plx {
-namespace synthetic_sequence_test {
+namespace {
 
 // Camera-to-world pose at `eye` looking along `forward` with world +z up (OpenCV axes).
 // Written independently of the generator's look-at so the tests do not share its mistakes.
@@ -31,15 +32,6 @@ Eigen::Vector3d PixelRay(const PinholeIntrinsics& k, double u, double v) {
 }
 
 float Depth(const RgbdFrame& frame, int u, int v) { return frame.depth.pixel(u, v)[0]; }
-
-// Distance from a point to the surface of an oriented box (negative inside).
-double DistanceToBox(const SyntheticBox& box, const Eigen::Vector3d& p) {
-  const Eigen::Vector3d d = p - box.center;
-  const double c = std::cos(box.yaw), s = std::sin(box.yaw);
-  const Eigen::Vector3d local(c * d.x() + s * d.y(), -s * d.x() + c * d.y(), d.z());
-  const Eigen::Vector3d q = local.cwiseAbs() - box.half_extents;
-  return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
-}
 
 const InMemoryDataset& CleanSequence() {
   static const InMemoryDataset* dataset = [] {
@@ -283,7 +275,9 @@ TEST(SyntheticSequenceTest, CameraPathIsSmoothAndSweepsTheRoom) {
     const double to_walls =
         std::min((p - room.room_min).minCoeff(), (room.room_max - p).minCoeff());
     EXPECT_GT(to_walls, 0.5) << t;
-    for (const SyntheticBox& box : room.boxes) EXPECT_GT(DistanceToBox(box, p), 0.5) << t;
+    for (const SyntheticBox& box : room.boxes) {
+      EXPECT_GT(plx::testing::SignedDistanceToBox(box, p), 0.5) << t;
+    }
     EXPECT_NEAR(pose.rotation_matrix().col(0).z(), 0.0, 1e-9) << t;  // camera x stays horizontal
   }
   EXPECT_TRUE(SyntheticCameraPoseAtTime(12.0).matrix().isApprox(
@@ -519,5 +513,5 @@ TEST(SyntheticSequenceTest, InvalidOptionsAreRejected) {
   EXPECT_FALSE(rejected([](SyntheticOptions& o) { o.num_frames = 1; }));
 }
 
-}  // namespace synthetic_sequence_test
+}  // namespace
 }  // namespace plx
